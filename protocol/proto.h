@@ -1,0 +1,293 @@
+/*
+ * proto.h: the cvre wire codec, shared by server and client.
+ *
+ * Pure: no I/O and no allocation. Decoding reads from a buffer the caller
+ * owns and fills a message whose strings and snapshot entries point back into
+ * that buffer, so a decoded message is valid only while the buffer is.
+ * Encoding appends whole frames to a caller-supplied buffer through a
+ * proto_writer, whose error is sticky: one check after a run of puts is
+ * enough. The byte layout of every message is specified in PROTOCOL.md.
+ */
+#ifndef CVRE_PROTO_H
+#define CVRE_PROTO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define PROTO_VERSION 1
+#define PROTO_MAGIC 0x45525643u /* "CVRE" read as a little-endian u32 */
+
+/* Frame header: u32 length (bytes after the length field, i.e. the u16
+ * type plus the payload), then u16 type. */
+#define PROTO_HEADER_SIZE 6u
+#define PROTO_LEN_MIN 2u
+
+/* Largest length a peer may announce once joined. 64 KiB holds a snapshot of
+ * 4,000 avatars, far more than an area of interest ever shows, while one
+ * client's input buffer stays small. */
+#ifndef PROTO_MAX_LEN
+#define PROTO_MAX_LEN 65536u
+#endif
+/* Before join only hello and join are legal; both fit in 64 bytes. A small
+ * cap keeps unauthenticated peers cheap. */
+#ifndef PROTO_MAX_LEN_PREJOIN
+#define PROTO_MAX_LEN_PREJOIN 128u
+#endif
+#define PROTO_NAME_MAX 32u    /* display name, bytes of UTF-8 */
+#define PROTO_MESSAGE_MAX 200u /* error text, bytes */
+#define PROTO_TOKEN_SIZE 16u
+#define PROTO_BOX_MIN 0.1f /* avatar box edge, metres */
+#define PROTO_BOX_MAX 4.0f
+#define PROTO_SNAPSHOT_ENTRY_SIZE 16u /* u32 id + 3 x f32 */
+#define PROTO_SNAPSHOT_HEAD_SIZE 10u  /* u32 tick + u32 ack + u16 count */
+#define PROTO_SNAPSHOT_MAX_ENTRIES \
+    ((PROTO_MAX_LEN - 2u - PROTO_SNAPSHOT_HEAD_SIZE) / PROTO_SNAPSHOT_ENTRY_SIZE)
+
+_Static_assert(PROTO_MAX_LEN_PREJOIN >= 2u + 1u + PROTO_NAME_MAX + 12u,
+               "a join must fit before join");
+_Static_assert(PROTO_MAX_LEN <= 16u * 1024u * 1024u, "frames stay small");
+_Static_assert(PROTO_SNAPSHOT_MAX_ENTRIES <= 0xffffu, "count is a u16");
+
+/* Message types. Direction: C = client to server, S = server to client. */
+enum proto_type {
+    PROTO_HELLO = 1,         /* C */
+    PROTO_WELCOME = 2,       /* S */
+    PROTO_JOIN = 3,          /* C */
+    PROTO_JOIN_OK = 4,       /* S */
+    PROTO_MOVE = 5,          /* C */
+    PROTO_SNAPSHOT = 6,      /* S */
+    PROTO_AVATAR_JOINED = 7, /* S */
+    PROTO_AVATAR_LEFT = 8,   /* S */
+    PROTO_ERROR = 9,         /* S */
+    PROTO_PING = 10,         /* C or S; the other side answers pong */
+    PROTO_PONG = 11,         /* C or S */
+    PROTO_BYE = 12,          /* C or S */
+    /* Reserved for the issues that follow; not decodable yet. */
+    PROTO_RESERVED_FIRST = 32,
+    PROTO_OBJECT_UPLOAD_BEGIN = 32,
+    PROTO_OBJECT_UPLOAD_CHUNK = 33,
+    PROTO_OBJECT_UPLOAD_END = 34,
+    PROTO_OBJECT_PLACE = 35,
+    PROTO_OBJECT_MOVE = 36,
+    PROTO_OBJECT_REMOVE = 37,
+    PROTO_OBJECT_INFO = 38,
+    PROTO_OBJECT_REMOVED = 39,
+    PROTO_COLLISION = 48,
+    PROTO_ECM_UPDATE = 49,
+    PROTO_ADMIN_REQUEST = 64,
+    PROTO_ADMIN_REPLY = 65,
+    PROTO_RESERVED_LAST = 79
+};
+
+/* Status codes. 0 and 1 are local results; codes from 16 up are also error
+ * codes on the wire (proto_error.code). */
+enum proto_status {
+    PROTO_OK = 0,
+    PROTO_INCOMPLETE = 1, /* not a whole frame yet: read more */
+
+    PROTO_ERR_FRAME_EMPTY = 16,    /* length < 2: no room for the type */
+    PROTO_ERR_FRAME_TOO_LONG = 17, /* length over the cap in force */
+    PROTO_ERR_UNKNOWN_TYPE = 18,   /* type not defined, or reserved */
+    PROTO_ERR_SHORT = 19,          /* payload shorter than the layout */
+    PROTO_ERR_TRAILING = 20,       /* bytes left after the layout */
+    PROTO_ERR_BAD_STRING = 21,     /* string past the end, too long, or invalid */
+    PROTO_ERR_NOT_FINITE = 22,     /* NaN or infinite number */
+    PROTO_ERR_BAD_VALUE = 23,      /* a field out of its range */
+    PROTO_ERR_BAD_MAGIC = 24,      /* hello without "CVRE" */
+    PROTO_ERR_VERSION = 25,        /* protocol version not supported */
+    PROTO_ERR_UNEXPECTED = 26,     /* message not legal in this state or direction */
+    PROTO_ERR_ALREADY_JOINED = 27,
+    PROTO_ERR_TRUNCATED = 28,      /* peer closed in the middle of a frame */
+    PROTO_ERR_TIMEOUT = 29,        /* handshake, idle or partial-frame timeout */
+    PROTO_ERR_SERVER_FULL = 30,
+    PROTO_ERR_OVERLOADED = 31,     /* output backlog over the limit */
+    PROTO_ERR_BAD_SEQ = 32,        /* move sequence did not increase */
+    PROTO_ERR_NAME_TAKEN = 33,     /* display name in use by a connected user */
+    PROTO_ERR_INTERNAL = 34
+};
+
+/* Why an avatar left a client's view (proto_avatar_left.reason). */
+enum proto_left_reason { PROTO_LEFT_OUT_OF_RANGE = 0, PROTO_LEFT_DISCONNECTED = 1 };
+
+/* Why a side says bye (proto_bye.reason). */
+enum proto_bye_reason { PROTO_BYE_QUIT = 0, PROTO_BYE_SHUTDOWN = 1, PROTO_BYE_KICKED = 2 };
+
+/* A string inside a frame: len bytes at ptr, not NUL-terminated. */
+typedef struct proto_str {
+    const char *ptr;
+    uint32_t len;
+} proto_str;
+
+typedef struct proto_hello {
+    uint32_t magic;
+    uint16_t version;
+} proto_hello;
+
+typedef struct proto_welcome {
+    uint16_t version;
+    uint64_t session_id;
+    uint8_t token[PROTO_TOKEN_SIZE];
+    uint16_t tick_hz;
+    float aoi_radius;
+    float max_speed;
+    float world_min[3];
+    float world_max[3];
+} proto_welcome;
+
+typedef struct proto_join {
+    proto_str name;
+    float box[3]; /* avatar box size x, y, z in metres */
+} proto_join;
+
+typedef struct proto_join_ok {
+    uint32_t avatar_id;
+    float pos[3]; /* spawn position: centre of the box's bottom face */
+    float box[3];
+} proto_join_ok;
+
+typedef struct proto_move {
+    uint32_t seq; /* strictly increasing per connection */
+    float pos[3]; /* requested position */
+} proto_move;
+
+/* One snapshot entry: an avatar whose position changed. */
+typedef struct proto_avatar {
+    uint32_t id;
+    float pos[3];
+} proto_avatar;
+
+typedef struct proto_snapshot {
+    uint32_t tick;
+    uint32_t ack_seq; /* last move of the receiver the server applied */
+    uint16_t count;
+    const uint8_t *entries; /* count x PROTO_SNAPSHOT_ENTRY_SIZE bytes: proto_snapshot_entry() */
+} proto_snapshot;
+
+typedef struct proto_avatar_joined {
+    uint32_t id;
+    proto_str name;
+    float pos[3];
+    float box[3];
+} proto_avatar_joined;
+
+typedef struct proto_avatar_left {
+    uint32_t id;
+    uint8_t reason; /* enum proto_left_reason */
+} proto_avatar_left;
+
+typedef struct proto_error {
+    uint16_t code; /* enum proto_status, >= 16 */
+    proto_str message;
+} proto_error;
+
+typedef struct proto_ping {
+    uint64_t stamp; /* opaque; echoed in the pong */
+} proto_ping;
+
+typedef struct proto_bye {
+    uint8_t reason; /* enum proto_bye_reason */
+} proto_bye;
+
+typedef struct proto_msg {
+    uint16_t type;
+    union {
+        proto_hello hello;
+        proto_welcome welcome;
+        proto_join join;
+        proto_join_ok join_ok;
+        proto_move move;
+        proto_snapshot snapshot;
+        proto_avatar_joined avatar_joined;
+        proto_avatar_left avatar_left;
+        proto_error error;
+        proto_ping ping; /* also pong */
+        proto_bye bye;
+    } u;
+} proto_msg;
+
+/* A whole frame found at the start of a buffer. */
+typedef struct proto_frame {
+    uint16_t type;
+    const uint8_t *payload;
+    uint32_t payload_len;
+    size_t size; /* header + payload: bytes to consume */
+} proto_frame;
+
+/*
+ * Looks for one frame at the start of buf (avail bytes). max_len is the cap
+ * on the announced length in force for this peer (PROTO_MAX_LEN or
+ * PROTO_MAX_LEN_PREJOIN). Returns PROTO_OK and fills *f when a whole frame is
+ * there; PROTO_INCOMPLETE when more bytes are needed (the length is checked
+ * against max_len as soon as its 4 bytes are in, so an oversized frame is
+ * refused before it is buffered); PROTO_ERR_FRAME_EMPTY or
+ * PROTO_ERR_FRAME_TOO_LONG otherwise.
+ */
+int proto_frame_parse(const uint8_t *buf, size_t avail, uint32_t max_len, proto_frame *f);
+
+/*
+ * Decodes the payload of a frame into *m. Checks the exact layout (no short
+ * payload, no trailing bytes), string bounds and limits, finiteness of every
+ * float and the ranges PROTOCOL.md gives. Returns PROTO_OK or the status that
+ * names the first problem; *m is undefined on error. Pointers in *m point
+ * into f->payload.
+ */
+int proto_decode(const proto_frame *f, proto_msg *m);
+
+/* Entry i (< s->count) of a decoded snapshot. */
+void proto_snapshot_entry(const proto_snapshot *s, uint16_t i, proto_avatar *out);
+
+/* Short English description of a status code; never NULL. */
+const char *proto_strerror(int status);
+
+/* Name of a message type for logs ("hello", "move"...), or "unknown". */
+const char *proto_type_name(uint16_t type);
+
+/*
+ * Appends frames to buf[0..cap). On overflow err becomes PROTO_ERR_FRAME_TOO_LONG
+ * and stays so; len then keeps the end of the last frame that fit whole,
+ * so the buffer never holds a partial frame.
+ */
+typedef struct proto_writer {
+    uint8_t *buf;
+    size_t cap;
+    size_t len;
+    int err;
+} proto_writer;
+
+void proto_writer_init(proto_writer *w, uint8_t *buf, size_t cap);
+
+/* Each put appends one whole frame. Strings longer than their limit are
+ * truncated to it (at a UTF-8 character boundary for error messages). */
+void proto_put_hello(proto_writer *w, const proto_hello *m);
+void proto_put_welcome(proto_writer *w, const proto_welcome *m);
+void proto_put_join(proto_writer *w, const proto_join *m);
+void proto_put_join_ok(proto_writer *w, const proto_join_ok *m);
+void proto_put_move(proto_writer *w, const proto_move *m);
+void proto_put_avatar_joined(proto_writer *w, const proto_avatar_joined *m);
+void proto_put_avatar_left(proto_writer *w, const proto_avatar_left *m);
+void proto_put_error(proto_writer *w, uint16_t code, const char *message);
+void proto_put_ping(proto_writer *w, uint64_t stamp);
+void proto_put_pong(proto_writer *w, uint64_t stamp);
+void proto_put_bye(proto_writer *w, uint8_t reason);
+
+/* A snapshot is built in three steps: begin, one add per entry (at most
+ * PROTO_SNAPSHOT_MAX_ENTRIES), end, which patches the count and length.
+ * Returns from begin the offset of the frame in w->buf, to pass to add/end. */
+size_t proto_put_snapshot_begin(proto_writer *w, uint32_t tick, uint32_t ack_seq);
+void proto_put_snapshot_add(proto_writer *w, size_t frame_at, const proto_avatar *a);
+void proto_put_snapshot_end(proto_writer *w, size_t frame_at);
+
+/* Exact encoded sizes, for reserving output space. */
+#define PROTO_SIZE_HELLO (PROTO_HEADER_SIZE + 6u)
+#define PROTO_SIZE_WELCOME (PROTO_HEADER_SIZE + 2u + 8u + PROTO_TOKEN_SIZE + 2u + 4u + 4u + 24u)
+#define PROTO_SIZE_JOIN_MAX (PROTO_HEADER_SIZE + 1u + PROTO_NAME_MAX + 12u)
+#define PROTO_SIZE_JOIN_OK (PROTO_HEADER_SIZE + 4u + 12u + 12u)
+#define PROTO_SIZE_MOVE (PROTO_HEADER_SIZE + 4u + 12u)
+#define PROTO_SIZE_AVATAR_JOINED_MAX (PROTO_HEADER_SIZE + 4u + 1u + PROTO_NAME_MAX + 24u)
+#define PROTO_SIZE_AVATAR_LEFT (PROTO_HEADER_SIZE + 5u)
+#define PROTO_SIZE_ERROR_MAX (PROTO_HEADER_SIZE + 2u + 1u + PROTO_MESSAGE_MAX)
+#define PROTO_SIZE_PING (PROTO_HEADER_SIZE + 8u)
+#define PROTO_SIZE_BYE (PROTO_HEADER_SIZE + 1u)
+#define PROTO_SIZE_SNAPSHOT(n) (PROTO_HEADER_SIZE + PROTO_SNAPSHOT_HEAD_SIZE + (n) * PROTO_SNAPSHOT_ENTRY_SIZE)
+
+#endif

@@ -1,0 +1,106 @@
+#include "conn.h"
+
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "alloc.h"
+#include "limits.h"
+
+int conn_init(conn *c, int fd)
+{
+    memset(c, 0, sizeof *c);
+    c->in = cvre_malloc(SRV_INBUF_INITIAL);
+    if (!c->in)
+        return -ENOMEM;
+    c->in_cap = SRV_INBUF_INITIAL;
+    c->fd = fd;
+    return 0;
+}
+
+void conn_free(conn *c)
+{
+    if (c->fd >= 0)
+        close(c->fd);
+    free(c->in);
+    free(c->out);
+    memset(c, 0, sizeof *c);
+    c->fd = -1;
+}
+
+ssize_t conn_read(conn *c, size_t cap, size_t budget)
+{
+    if (c->in_len == c->in_cap) {
+        if (c->in_cap >= cap)
+            return -ENOBUFS;
+        size_t ncap = c->in_cap * 2 < cap ? c->in_cap * 2 : cap;
+        uint8_t *in = cvre_realloc(c->in, ncap);
+        if (!in)
+            return -ENOMEM;
+        c->in = in;
+        c->in_cap = ncap;
+    }
+    size_t room = c->in_cap - c->in_len;
+    ssize_t n = read(c->fd, c->in + c->in_len, room < budget ? room : budget);
+    if (n < 0)
+        return errno == EINTR ? -EAGAIN : -errno;
+    c->in_len += (size_t)n;
+    return n;
+}
+
+void conn_consume(conn *c, size_t n)
+{
+    memmove(c->in, c->in + n, c->in_len - n);
+    c->in_len -= n;
+}
+
+size_t conn_out_pending(const conn *c) { return c->out_tail - c->out_head; }
+
+int conn_out_begin(conn *c, size_t need, proto_writer *w)
+{
+    size_t pending = conn_out_pending(c);
+    if (pending + need > SRV_OUTBUF_HARD)
+        return -ENOBUFS;
+    if (c->out_cap - c->out_tail < need) {
+        if (c->out_head) { /* slide pending bytes to the front first */
+            memmove(c->out, c->out + c->out_head, pending);
+            c->out_head = 0;
+            c->out_tail = pending;
+        }
+        if (c->out_cap - c->out_tail < need) {
+            size_t ncap = c->out_cap ? c->out_cap : 4096;
+            while (ncap < pending + need)
+                ncap *= 2;
+            if (ncap > SRV_OUTBUF_HARD)
+                ncap = SRV_OUTBUF_HARD;
+            uint8_t *out = cvre_realloc(c->out, ncap);
+            if (!out)
+                return -ENOMEM;
+            c->out = out;
+            c->out_cap = ncap;
+        }
+    }
+    proto_writer_init(w, c->out + c->out_tail, c->out_cap - c->out_tail);
+    return 0;
+}
+
+void conn_out_end(conn *c, const proto_writer *w) { c->out_tail += w->len; }
+
+ssize_t conn_flush(conn *c)
+{
+    while (c->out_head < c->out_tail) {
+        ssize_t n = write(c->fd, c->out + c->out_head, c->out_tail - c->out_head);
+        if (n < 0) {
+            if (errno == EINTR)
+                continue;
+            if (errno == EAGAIN)
+                break;
+            return -errno;
+        }
+        c->out_head += (size_t)n;
+    }
+    if (c->out_head == c->out_tail)
+        c->out_head = c->out_tail = 0;
+    return (ssize_t)conn_out_pending(c);
+}

@@ -1,0 +1,41 @@
+#include "alloc.h"
+
+#include <stdlib.h>
+
+#include "log.h"
+
+static long fail_countdown = -1;
+
+/* True when the test hook says this allocation must fail. */
+static int should_fail(void)
+{
+    if (fail_countdown < 0)
+        return 0;
+    if (fail_countdown == 0)
+        return 1;
+    fail_countdown--;
+    return 0;
+}
+
+void alloc_fail_after(long n) { fail_countdown = n; }
+
+void *cvre_malloc(size_t size) { return should_fail() ? NULL : malloc(size ? size : 1); }
+
+void *cvre_calloc(size_t n, size_t size) { return should_fail() ? NULL : calloc(n ? n : 1, size ? size : 1); }
+
+void *cvre_realloc(void *p, size_t size) { return should_fail() ? NULL : realloc(p, size ? size : 1); }
+
+static void *or_abort(void *p, size_t size)
+{
+    if (!p) {
+        log_error("out of memory allocating %zu bytes", size);
+        abort();
+    }
+    return p;
+}
+
+void *xmalloc(size_t size) { return or_abort(cvre_malloc(size), size); }
+
+void *xcalloc(size_t n, size_t size) { return or_abort(cvre_calloc(n, size), n * size); }
+
+void *xrealloc(void *p, size_t size) { return or_abort(cvre_realloc(p, size), size); }

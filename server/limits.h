@@ -1,0 +1,78 @@
+/*
+ * limits.h: every server limit in one place, each with the reason for its
+ * value. All can be overridden at build time (-DSRV_...=N); the asserts keep
+ * overrides sane. Runtime flags (main.c) override the ones marked "default".
+ */
+#ifndef CVRE_LIMITS_H
+#define CVRE_LIMITS_H
+
+#include "proto.h"
+
+/* Avatar ids are slot | generation << 16 (world.c), so slots fit in 16 bits. */
+#ifndef SRV_MAX_CLIENTS_LIMIT
+#define SRV_MAX_CLIENTS_LIMIT 65535
+#endif
+/* Default --max-clients: the benchmark's stretch goal is 10,000 avatars. */
+#ifndef SRV_MAX_CLIENTS_DEFAULT
+#define SRV_MAX_CLIENTS_DEFAULT 10000
+#endif
+
+/* Input buffer: a client never needs more than one whole frame buffered, so
+ * the cap is one maximal frame; before join the frame cap is tiny. It starts
+ * at SRV_INBUF_INITIAL and doubles on demand, because real traffic (moves,
+ * pings) is a few dozen bytes and 10,000 clients x 64 KiB would be 640 MiB. */
+#define SRV_INBUF_INITIAL 128u
+#define SRV_INBUF_CAP (PROTO_HEADER_SIZE + PROTO_MAX_LEN)
+#define SRV_INBUF_CAP_PREJOIN (PROTO_HEADER_SIZE + PROTO_MAX_LEN_PREJOIN)
+
+/* Output buffer: one tick for one client is at most a few snapshots' worth
+ * (<= 64 KiB each). A client that lets more than the soft limit pile up for
+ * SRV_OUTBUF_SOFT_MS is not reading and is disconnected; the hard limit
+ * disconnects at once, so a stalled reader can never grow memory. */
+#ifndef SRV_OUTBUF_SOFT
+#define SRV_OUTBUF_SOFT (256u * 1024u)
+#endif
+#ifndef SRV_OUTBUF_HARD
+#define SRV_OUTBUF_HARD (2u * 1024u * 1024u)
+#endif
+#define SRV_OUTBUF_SOFT_MS 5000u
+
+/* Per-wakeup budget so that one busy client cannot starve the others: at most
+ * this many bytes are read per readable event, and only the frames they
+ * complete are handled before the loop moves on. */
+#define SRV_READ_BUDGET (64u * 1024u)
+
+/* Default timeouts (flags override, in ms). A join takes one round trip;
+ * 5 s forgives slow links but not a slowloris. Clients ping every 10 s. */
+#define SRV_HANDSHAKE_TIMEOUT_MS 5000u
+#define SRV_IDLE_TIMEOUT_MS 30000u
+/* After an error frame or bye, how long a connection may take to flush. */
+#define SRV_CLOSE_LINGER_MS 1000u
+
+/* Simulation defaults. 20 Hz is the usual rate for walking avatars. */
+#define SRV_TICK_HZ_DEFAULT 20
+#define SRV_TICK_HZ_MAX 240
+/* A move is limited to max speed x elapsed time; elapsed is capped so that a
+ * client silent for a minute cannot jump a minute's worth of distance. */
+#define SRV_MAX_SPEED_DEFAULT 5.0f /* m/s: a brisk run */
+#define SRV_MOVE_MAX_DT 0.25f      /* s */
+/* World: 1 km x 1 km, 256 m tall, floor at y = 0. */
+#define SRV_WORLD_SIZE_DEFAULT 1000.0f
+#define SRV_WORLD_HEIGHT 256.0f
+#define SRV_AOI_RADIUS_DEFAULT 64.0f
+#define SRV_AOI_RADIUS_MAX 1000.0f
+#define SRV_SPAWN_RADIUS_DEFAULT 8.0f
+/* Largest area of interest result per client per tick; more than a snapshot
+ * frame can carry is cut (nearest first is not guaranteed). */
+#define SRV_AOI_MAX PROTO_SNAPSHOT_MAX_ENTRIES
+
+/* listen(2) backlog: the bot swarm connects 1,000 per second. */
+#define SRV_LISTEN_BACKLOG 4096
+
+_Static_assert(SRV_MAX_CLIENTS_DEFAULT <= SRV_MAX_CLIENTS_LIMIT, "default within limit");
+_Static_assert(SRV_MAX_CLIENTS_LIMIT <= 65535, "avatar ids keep the slot in 16 bits");
+_Static_assert(SRV_OUTBUF_SOFT < SRV_OUTBUF_HARD, "soft below hard");
+_Static_assert(SRV_OUTBUF_HARD >= 4u * PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES), "a tick must fit");
+_Static_assert(SRV_INBUF_INITIAL <= SRV_INBUF_CAP_PREJOIN, "initial within prejoin cap");
+
+#endif

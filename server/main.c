@@ -1,0 +1,140 @@
+/* cvre-server: flags, start-up and the one line that says it is ready. */
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+
+#include "limits.h"
+#include "log.h"
+#include "server.h"
+
+static const char usage[] =
+    "usage: cvre-server [options]\n"
+    "\n"
+    "Serves a shared 3D world over TCP (protocol/PROTOCOL.md) and records\n"
+    "sessions in an SQLite database.\n"
+    "\n"
+    "  --host HOST               address to listen on (default 127.0.0.1)\n"
+    "  --port PORT               TCP port; 0 picks a free one (default 7878)\n"
+    "  --db FILE                 SQLite database, created if missing (default cvre.db)\n"
+    "  --tick-hz N               simulation ticks per second, 1..240 (default 20)\n"
+    "  --max-clients N           connections at once, 1..65535 (default 10000)\n"
+    "  --aoi-radius M            area-of-interest radius in metres (default 64)\n"
+    "  --max-speed M             avatar speed limit in m/s (default 5)\n"
+    "  --world-size M            world extent in x and z, centred on 0 (default 1000)\n"
+    "  --spawn-radius M          avatars spawn within M of the centre (default 8)\n"
+    "  --handshake-timeout MS    hello and join must arrive within MS (default 5000)\n"
+    "  --idle-timeout MS         close clients silent for MS (default 30000)\n"
+    "  --seed N                  seed for spawn points (default 1)\n"
+    "  --stats-file FILE         append per-interval figures as JSON lines\n"
+    "  --stats-interval S        seconds between stats lines (default 10)\n"
+    "  --log-level LEVEL         debug, info, warn or error (default info)\n"
+    "  --help                    show this help\n"
+    "  --version                 show the version\n"
+    "\n"
+    "When ready it prints one line, \"listening on HOST:PORT\", on stdout.\n"
+    "SIGINT or SIGTERM: clients get bye, sessions are closed, the database too.\n";
+
+/* Parses a number in [lo, hi] or exits with a message naming the flag. */
+static double number(const char *flag, const char *text, double lo, double hi)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(text, &end);
+    if (errno || end == text || *end || !isfinite(v) || v < lo || v > hi) {
+        fprintf(stderr, "cvre-server: --%s wants a number from %g to %g, not \"%s\"\n", flag, lo, hi, text);
+        exit(2);
+    }
+    return v;
+}
+
+static double integer(const char *flag, const char *text, double lo, double hi)
+{
+    double v = number(flag, text, lo, hi);
+    if (v != floor(v)) {
+        fprintf(stderr, "cvre-server: --%s wants a whole number, not \"%s\"\n", flag, text);
+        exit(2);
+    }
+    return v;
+}
+
+/* Lifts the soft limit on open files to the hard one: each client is a file. */
+static void raise_fd_limit(uint32_t max_clients)
+{
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0)
+        return;
+    rl.rlim_cur = rl.rlim_max;
+    setrlimit(RLIMIT_NOFILE, &rl);
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < (rlim_t)max_clients + 64)
+        log_warn("open-file limit %llu is below --max-clients %u; connections past it will be refused",
+                 (unsigned long long)rl.rlim_cur, max_clients);
+}
+
+int main(int argc, char **argv)
+{
+    enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
+           O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION };
+    static const struct option opts[] = {
+        {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
+        {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
+        {"max-clients", required_argument, 0, O_MAXC}, {"aoi-radius", required_argument, 0, O_AOI},
+        {"max-speed", required_argument, 0, O_SPEED}, {"world-size", required_argument, 0, O_WORLD},
+        {"spawn-radius", required_argument, 0, O_SPAWN}, {"handshake-timeout", required_argument, 0, O_HS},
+        {"idle-timeout", required_argument, 0, O_IDLE}, {"seed", required_argument, 0, O_SEED},
+        {"stats-file", required_argument, 0, O_STATS}, {"stats-interval", required_argument, 0, O_STATS_INT},
+        {"log-level", required_argument, 0, O_LOG}, {"help", no_argument, 0, O_HELP},
+        {"version", no_argument, 0, O_VERSION}, {0, 0, 0, 0}};
+    server_config cfg;
+    server_config_defaults(&cfg);
+    int o;
+    while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
+        switch (o) {
+        case O_HOST: cfg.host = optarg; break;
+        case O_PORT: cfg.port = (uint16_t)integer("port", optarg, 0, 65535); break;
+        case O_DB: cfg.db_path = optarg; break;
+        case O_TICK: cfg.tick_hz = (int)integer("tick-hz", optarg, 1, SRV_TICK_HZ_MAX); break;
+        case O_MAXC: cfg.max_clients = (uint32_t)integer("max-clients", optarg, 1, SRV_MAX_CLIENTS_LIMIT); break;
+        case O_AOI: cfg.aoi_radius = (float)number("aoi-radius", optarg, 1, SRV_AOI_RADIUS_MAX); break;
+        case O_SPEED: cfg.max_speed = (float)number("max-speed", optarg, 0.1, 10000); break;
+        case O_WORLD: cfg.world_size = (float)number("world-size", optarg, 10, 100000); break;
+        case O_SPAWN: cfg.spawn_radius = (float)number("spawn-radius", optarg, 0, 100000); break;
+        case O_HS: cfg.handshake_timeout_ms = (uint32_t)integer("handshake-timeout", optarg, 10, 3600000); break;
+        case O_IDLE: cfg.idle_timeout_ms = (uint32_t)integer("idle-timeout", optarg, 10, 86400000); break;
+        case O_SEED: cfg.seed = (uint64_t)integer("seed", optarg, 0, 9007199254740992.0); break;
+        case O_STATS: cfg.stats_file = optarg; break;
+        case O_STATS_INT: cfg.stats_interval_ms = (uint32_t)(number("stats-interval", optarg, 0.1, 86400) * 1000); break;
+        case O_LOG: {
+            int level = log_parse_level(optarg);
+            if (level < 0) {
+                fprintf(stderr, "cvre-server: --log-level wants debug, info, warn, error or off, not \"%s\"\n", optarg);
+                return 2;
+            }
+            log_set_level(level);
+            break;
+        }
+        case O_HELP: fputs(usage, stdout); return 0;
+        case O_VERSION: printf("cvre-server %s (protocol %d)\n", CVRE_VERSION, PROTO_VERSION); return 0;
+        default: fputs("cvre-server: try --help\n", stderr); return 2;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "cvre-server: unexpected argument \"%s\"; try --help\n", argv[optind]);
+        return 2;
+    }
+    raise_fd_limit(cfg.max_clients);
+    char err[512];
+    server *s = server_create(&cfg, err, sizeof err);
+    if (!s) {
+        log_error("cannot start: %s", err);
+        return 1;
+    }
+    printf("listening on %s\n", server_address(s));
+    fflush(stdout);
+    int rc = server_run(s);
+    server_destroy(s);
+    return rc == 0 ? 0 : 1;
+}

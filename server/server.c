@@ -1,0 +1,980 @@
+#define _GNU_SOURCE /* accept4 */
+#include "server.h"
+
+#include <errno.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/random.h>
+#include <sys/signalfd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "alloc.h"
+#include "conn.h"
+#include "db.h"
+#include "ev.h"
+#include "limits.h"
+#include "log.h"
+#include "proto.h"
+#include "world.h"
+
+#define NS_PER_MS ((uint64_t)1000000)
+/* Connections accepted per wakeup of the listening socket. */
+#define ACCEPT_BUDGET 256
+/* How often timeouts and slow readers are checked. */
+#define HOUSEKEEPING_MS 100u
+/* How long a shutdown waits for clients to take their bye. */
+#define SHUTDOWN_GRACE_MS 2000u
+
+typedef enum { ST_HELLO, ST_JOIN, ST_JOINED } client_state;
+
+typedef struct server server;
+
+typedef struct client {
+    conn c;
+    server *srv;
+    client_state state;
+    int closing;  /* no more input is handled; output is flushed, then closed */
+    int shut_wr;  /* output flushed and write side shut down */
+    int dead;     /* reaped at the next safe point */
+    int writing;  /* EV_WRITE armed */
+    int in_write_list;
+    uint32_t index; /* in server.clients */
+    int64_t session_id; /* 0 before hello */
+    uint8_t token[PROTO_TOKEN_SIZE];
+    char peer[64];
+    uint32_t avatar_id; /* 0 before join */
+    int has_seq;
+    uint32_t last_seq;
+    uint32_t sent_ack;
+    uint32_t last_sent_tick;
+    uint32_t *known; /* ids of the avatars this client has been told of, sorted */
+    uint32_t nknown, known_cap;
+    uint64_t connected_ns, last_frame_ns, close_deadline_ns, soft_since_ns;
+    char end_reason[PROTO_MESSAGE_MAX + 16];
+} client;
+
+enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE };
+
+/* A session change waiting to be written; the tick batches them into one
+ * transaction so that a burst of joins costs one commit. */
+typedef struct session_event {
+    int kind;
+    int64_t session;
+    double at;
+    uint32_t avatar;
+    char text[PROTO_MESSAGE_MAX + 16]; /* peer (open), name (join), reason (close) */
+    char token[2 * PROTO_TOKEN_SIZE + 1];
+} session_event;
+
+typedef struct stats {
+    uint64_t frames_in, moves_in, bytes_in, bytes_out;
+    uint64_t accepted, closed, protocol_errors, timeouts, slow_readers;
+    uint32_t *tick_us; /* durations of this interval's ticks */
+    uint32_t nticks, tick_cap;
+    uint64_t interval_start_ns;
+} stats;
+
+struct server {
+    server_config cfg;
+    ev_loop *loop;
+    int listen_fd, signal_fd, max_fd;
+    db *db;
+    world *world;
+    client **clients;
+    uint32_t nclients;
+    client **write_list;
+    uint32_t nwrite;
+    /* Per-tick scratch, sized for the largest area of interest. */
+    const world_avatar **vis, **joined, **snap;
+    uint32_t *left;
+    session_event *events;
+    uint32_t nevents, events_cap;
+    int64_t last_session_id;
+    int stopping;
+    uint64_t stop_deadline_ns;
+    stats st;
+    char address[80];
+};
+
+void server_config_defaults(server_config *cfg)
+{
+    *cfg = (server_config){
+        .host = "127.0.0.1",
+        .port = 7878,
+        .db_path = "cvre.db",
+        .tick_hz = SRV_TICK_HZ_DEFAULT,
+        .max_clients = SRV_MAX_CLIENTS_DEFAULT,
+        .aoi_radius = SRV_AOI_RADIUS_DEFAULT,
+        .max_speed = SRV_MAX_SPEED_DEFAULT,
+        .world_size = SRV_WORLD_SIZE_DEFAULT,
+        .spawn_radius = SRV_SPAWN_RADIUS_DEFAULT,
+        .handshake_timeout_ms = SRV_HANDSHAKE_TIMEOUT_MS,
+        .idle_timeout_ms = SRV_IDLE_TIMEOUT_MS,
+        .seed = 1,
+        .stats_file = NULL,
+        .stats_interval_ms = 10000,
+    };
+}
+
+const char *server_address(const server *s) { return s->address; }
+
+static uint64_t now_ns(const server *s) { return ev_now(s->loop); }
+
+/* ---- session log ------------------------------------------------------ */
+
+static session_event *event_push(server *s, int kind, int64_t session)
+{
+    if (s->nevents == s->events_cap) {
+        s->events_cap = s->events_cap ? s->events_cap * 2 : 64;
+        s->events = xrealloc(s->events, s->events_cap * sizeof *s->events);
+    }
+    session_event *e = &s->events[s->nevents++];
+    memset(e, 0, sizeof *e);
+    e->kind = kind;
+    e->session = session;
+    e->at = db_now();
+    return e;
+}
+
+/* Writes the queued session events in one transaction. A database error is
+ * logged and the batch dropped: the world goes on without its history rather
+ * than stopping. */
+static void events_flush(server *s)
+{
+    if (!s->nevents)
+        return;
+    int rc = db_begin(s->db);
+    for (uint32_t i = 0; rc == 0 && i < s->nevents; i++) {
+        const session_event *e = &s->events[i];
+        switch (e->kind) {
+        case EVT_OPEN: rc = db_session_open(s->db, e->session, e->token, e->text, e->at); break;
+        case EVT_JOIN: rc = db_session_join(s->db, e->session, e->text, e->avatar, e->at); break;
+        default: rc = db_session_close(s->db, e->session, e->text, e->at); break;
+        }
+    }
+    if (rc == 0)
+        rc = db_commit(s->db);
+    if (rc != 0) {
+        log_error("database: %s; %u session records lost", db_error(s->db), s->nevents);
+        sqlite3_exec(db_sqlite(s->db), "ROLLBACK", NULL, NULL, NULL);
+    }
+    s->nevents = 0;
+}
+
+/* ---- output ----------------------------------------------------------- */
+
+static void kill_client(server *s, client *c, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+
+static void want_write(server *s, client *c)
+{
+    if (!c->in_write_list) {
+        c->in_write_list = 1;
+        s->write_list[s->nwrite++] = c;
+    }
+}
+
+/* Reserves need bytes of output; a client whose backlog would pass the hard
+ * limit is disconnected and -1 returned. */
+static int out_begin(server *s, client *c, size_t need, proto_writer *w)
+{
+    if (c->dead)
+        return -1;
+    if (conn_out_begin(&c->c, need, w) < 0) {
+        s->st.slow_readers++;
+        kill_client(s, c, "output backlog over the hard limit (%zu bytes pending)", conn_out_pending(&c->c));
+        return -1;
+    }
+    return 0;
+}
+
+static void out_end(server *s, client *c, const proto_writer *w)
+{
+    conn_out_end(&c->c, w);
+    want_write(s, c);
+}
+
+/* Stops reading from c; its output is flushed and the socket closed within
+ * SRV_CLOSE_LINGER_MS. reason is kept for the session record. */
+static void begin_close(server *s, client *c, const char *reason)
+{
+    if (c->closing)
+        return;
+    c->closing = 1;
+    snprintf(c->end_reason, sizeof c->end_reason, "%s", reason);
+    c->close_deadline_ns = now_ns(s) + SRV_CLOSE_LINGER_MS * NS_PER_MS;
+    want_write(s, c);
+}
+
+static void kill_client(server *s, client *c, const char *fmt, ...)
+{
+    if (c->dead)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    char why[96];
+    vsnprintf(why, sizeof why, fmt, ap);
+    va_end(ap);
+    log_warn("%s (session %lld): %s; disconnecting", c->peer, (long long)c->session_id, why);
+    if (!c->closing)
+        snprintf(c->end_reason, sizeof c->end_reason, "%s", why);
+    c->closing = 1;
+    c->dead = 1;
+    (void)s;
+}
+
+/* Sends an error frame naming the problem and closes the connection. */
+static void protocol_error(server *s, client *c, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
+static void protocol_error(server *s, client *c, int code, const char *fmt, ...)
+{
+    char msg[PROTO_MESSAGE_MAX + 1];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    log_info("%s (session %lld): %s; closing", c->peer, (long long)c->session_id, msg);
+    if (code == PROTO_ERR_TIMEOUT)
+        s->st.timeouts++;
+    else
+        s->st.protocol_errors++;
+    proto_writer w;
+    if (out_begin(s, c, PROTO_SIZE_ERROR_MAX, &w) == 0) {
+        proto_put_error(&w, (uint16_t)code, msg);
+        out_end(s, c, &w);
+    }
+    char reason[sizeof c->end_reason];
+    snprintf(reason, sizeof reason, "error: %s", msg);
+    begin_close(s, c, reason);
+}
+
+/* ---- handshake and messages ------------------------------------------ */
+
+static void hex(const uint8_t *p, size_t n, char *out)
+{
+    static const char digits[] = "0123456789abcdef";
+    for (size_t i = 0; i < n; i++) {
+        out[2 * i] = digits[p[i] >> 4];
+        out[2 * i + 1] = digits[p[i] & 15];
+    }
+    out[2 * n] = 0;
+}
+
+static void on_hello(server *s, client *c, const proto_hello *m)
+{
+    if (m->version != PROTO_VERSION) {
+        protocol_error(s, c, PROTO_ERR_VERSION, "protocol version %u not supported; this server speaks %u",
+                       m->version, PROTO_VERSION);
+        return;
+    }
+    if (getrandom(c->token, sizeof c->token, 0) != (ssize_t)sizeof c->token) {
+        protocol_error(s, c, PROTO_ERR_INTERNAL, "cannot make a session token");
+        return;
+    }
+    c->session_id = ++s->last_session_id;
+    session_event *e = event_push(s, EVT_OPEN, c->session_id);
+    hex(c->token, sizeof c->token, e->token);
+    snprintf(e->text, sizeof e->text, "%s", c->peer);
+
+    proto_welcome wm = {.version = PROTO_VERSION, .session_id = (uint64_t)c->session_id,
+                        .tick_hz = (uint16_t)s->cfg.tick_hz, .aoi_radius = s->cfg.aoi_radius,
+                        .max_speed = s->cfg.max_speed};
+    memcpy(wm.token, c->token, sizeof wm.token);
+    float half = s->cfg.world_size * 0.5f;
+    wm.world_min[0] = wm.world_min[2] = -half;
+    wm.world_max[0] = wm.world_max[2] = half;
+    wm.world_max[1] = SRV_WORLD_HEIGHT;
+    proto_writer w;
+    if (out_begin(s, c, PROTO_SIZE_WELCOME, &w) < 0)
+        return;
+    proto_put_welcome(&w, &wm);
+    out_end(s, c, &w);
+    c->state = ST_JOIN;
+}
+
+static void on_join(server *s, client *c, const proto_join *m)
+{
+    const world_avatar *a = world_add(s->world, m->name.ptr, m->name.len, m->box);
+    if (!a) {
+        protocol_error(s, c, PROTO_ERR_SERVER_FULL, "the world is full (%u avatars)", world_count(s->world));
+        return;
+    }
+    c->avatar_id = a->id;
+    c->state = ST_JOINED;
+    session_event *e = event_push(s, EVT_JOIN, c->session_id);
+    e->avatar = a->id;
+    memcpy(e->text, a->name, sizeof a->name);
+    log_info("%s (session %lld) joined as \"%s\", avatar %u", c->peer, (long long)c->session_id, a->name, a->id);
+
+    proto_join_ok ok = {.avatar_id = a->id};
+    memcpy(ok.pos, a->pos, sizeof ok.pos);
+    memcpy(ok.box, a->box, sizeof ok.box);
+    proto_writer w;
+    if (out_begin(s, c, PROTO_SIZE_JOIN_OK, &w) < 0)
+        return;
+    proto_put_join_ok(&w, &ok);
+    out_end(s, c, &w);
+}
+
+static void on_move(server *s, client *c, const proto_move *m)
+{
+    if (c->has_seq && m->seq <= c->last_seq) {
+        protocol_error(s, c, PROTO_ERR_BAD_SEQ, "move seq %u does not follow %u", m->seq, c->last_seq);
+        return;
+    }
+    c->has_seq = 1;
+    c->last_seq = m->seq;
+    s->st.moves_in++;
+    world_request_move(s->world, c->avatar_id, m->seq, m->pos);
+}
+
+/* Whether clients may send this type at all. */
+static int from_client(uint16_t type)
+{
+    return type == PROTO_HELLO || type == PROTO_JOIN || type == PROTO_MOVE || type == PROTO_PING ||
+           type == PROTO_PONG || type == PROTO_BYE;
+}
+
+/* Which messages each state takes: before hello only hello; before join
+ * only join (or bye); after join everything a client may send but those. */
+static void on_message(server *s, client *c, const proto_msg *m)
+{
+    static const char *const state_names[] = {"before hello", "before join", "after join"};
+    int legal;
+    switch (m->type) {
+    case PROTO_HELLO: legal = c->state == ST_HELLO; break;
+    case PROTO_JOIN: legal = c->state == ST_JOIN; break;
+    case PROTO_BYE: legal = c->state != ST_HELLO; break;
+    case PROTO_MOVE:
+    case PROTO_PING:
+    case PROTO_PONG: legal = c->state == ST_JOINED; break;
+    default: return; /* server-to-client types never get here (handle_input) */
+    }
+    if (!legal) {
+        if (m->type == PROTO_JOIN && c->state == ST_JOINED)
+            protocol_error(s, c, PROTO_ERR_ALREADY_JOINED, "already joined as avatar %u", c->avatar_id);
+        else
+            protocol_error(s, c, PROTO_ERR_UNEXPECTED, "%s not allowed %s", proto_type_name(m->type),
+                           state_names[c->state]);
+        return;
+    }
+    proto_writer w;
+    switch (m->type) {
+    case PROTO_HELLO: on_hello(s, c, &m->u.hello); break;
+    case PROTO_JOIN: on_join(s, c, &m->u.join); break;
+    case PROTO_MOVE: on_move(s, c, &m->u.move); break;
+    case PROTO_PING:
+        if (out_begin(s, c, PROTO_SIZE_PING, &w) == 0) {
+            proto_put_pong(&w, m->u.ping.stamp);
+            out_end(s, c, &w);
+        }
+        break;
+    case PROTO_BYE: begin_close(s, c, "quit"); break;
+    default: break; /* pong: nothing to do */
+    }
+}
+
+static uint32_t get_u32le(const uint8_t *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+/* Handles every whole frame in c's input buffer, then drops them. */
+static void handle_input(server *s, client *c)
+{
+    uint32_t max_len = c->state == ST_JOINED ? PROTO_MAX_LEN : PROTO_MAX_LEN_PREJOIN;
+    size_t off = 0;
+    while (!c->closing) {
+        proto_frame f;
+        int rc = proto_frame_parse(c->c.in + off, c->c.in_len - off, max_len, &f);
+        if (rc == PROTO_INCOMPLETE)
+            break;
+        if (rc != PROTO_OK) {
+            uint32_t len = get_u32le(c->c.in + off);
+            if (rc == PROTO_ERR_FRAME_TOO_LONG)
+                protocol_error(s, c, rc, "frame length %u over the limit of %u%s", len, max_len,
+                               c->state == ST_JOINED ? "" : " before join");
+            else
+                protocol_error(s, c, rc, "frame length %u is below the minimum of %u", len, PROTO_LEN_MIN);
+            break;
+        }
+        off += f.size;
+        c->last_frame_ns = now_ns(s);
+        s->st.frames_in++;
+        proto_msg m;
+        rc = proto_decode(&f, &m);
+        if (rc != PROTO_ERR_UNKNOWN_TYPE && !from_client(f.type))
+            protocol_error(s, c, PROTO_ERR_UNEXPECTED, "%s is a server-to-client message", proto_type_name(f.type));
+        else if (rc == PROTO_ERR_UNKNOWN_TYPE)
+            protocol_error(s, c, rc, "unknown message type %u", f.type);
+        else if (rc != PROTO_OK)
+            protocol_error(s, c, rc, "bad %s frame: %s", proto_type_name(f.type), proto_strerror(rc));
+        else
+            on_message(s, c, &m);
+        /* The state may have changed the frame cap (join). */
+        max_len = c->state == ST_JOINED ? PROTO_MAX_LEN : PROTO_MAX_LEN_PREJOIN;
+    }
+    conn_consume(&c->c, c->closing ? c->c.in_len : off);
+}
+
+static void on_peer_eof(server *s, client *c)
+{
+    if (c->closing) {
+        c->dead = 1;
+        return;
+    }
+    if (c->c.in_len > 0) {
+        protocol_error(s, c, PROTO_ERR_TRUNCATED, "connection closed inside a frame (%zu bytes buffered)",
+                       c->c.in_len);
+        return;
+    }
+    snprintf(c->end_reason, sizeof c->end_reason, "closed without bye");
+    c->dead = 1;
+}
+
+static void set_writing(server *s, client *c, int on)
+{
+    if (c->writing == on)
+        return;
+    c->writing = on;
+    ev_io_mod(s->loop, c->c.fd, EV_READ | (on ? (unsigned)EV_WRITE : 0u));
+}
+
+/* Writes what c has pending. Arms EV_WRITE only when bytes remain; once a
+ * closing client's output is out, shuts down the write side so the peer
+ * reads the error before the close. */
+static void flush_client(server *s, client *c)
+{
+    if (c->dead)
+        return;
+    size_t before = conn_out_pending(&c->c);
+    ssize_t left = conn_flush(&c->c);
+    if (left < 0) {
+        snprintf(c->end_reason, sizeof c->end_reason, "%s", c->closing ? c->end_reason : "connection lost");
+        c->dead = 1;
+        return;
+    }
+    s->st.bytes_out += before - (size_t)left;
+    set_writing(s, c, left > 0);
+    if ((size_t)left > SRV_OUTBUF_SOFT) {
+        if (!c->soft_since_ns)
+            c->soft_since_ns = now_ns(s);
+    } else {
+        c->soft_since_ns = 0;
+    }
+    if (left == 0 && c->closing && !c->shut_wr) {
+        shutdown(c->c.fd, SHUT_WR);
+        c->shut_wr = 1;
+    }
+}
+
+static void on_client_io(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)loop;
+    (void)fd;
+    client *c = data;
+    server *s = c->srv;
+    if (c->dead)
+        return;
+    if (events & EV_WRITE)
+        flush_client(s, c);
+    if (c->dead || !(events & (EV_READ | EV_ERROR)))
+        return;
+    uint32_t cap = c->state == ST_JOINED ? SRV_INBUF_CAP : SRV_INBUF_CAP_PREJOIN;
+    ssize_t n = conn_read(&c->c, cap, SRV_READ_BUDGET);
+    if (n == -EAGAIN)
+        return;
+    if (n == 0) {
+        on_peer_eof(s, c);
+        return;
+    }
+    if (n < 0) {
+        snprintf(c->end_reason, sizeof c->end_reason, "read failed: %s", strerror((int)-n));
+        c->dead = 1;
+        return;
+    }
+    s->st.bytes_in += (uint64_t)n;
+    handle_input(s, c);
+}
+
+/* ---- the tick: movement and areas of interest ------------------------- */
+
+static int known_reserve(client *c, uint32_t n)
+{
+    if (n <= c->known_cap)
+        return 0;
+    uint32_t cap = c->known_cap ? c->known_cap : 16;
+    while (cap < n)
+        cap *= 2;
+    c->known = xrealloc(c->known, cap * sizeof *c->known);
+    c->known_cap = cap;
+    return 0;
+}
+
+/* Tells c what changed in its area of interest since its last update:
+ * avatars that came into view (joined), went out of view or disconnected
+ * (left), and the positions that changed (snapshot, with its own entry and
+ * the last move applied). Both lists are sorted by id, so one merge finds
+ * the differences. A client whose output is backed up is skipped; it gets
+ * the accumulated changes once it reads again. */
+static void update_view(server *s, client *c, uint32_t tick)
+{
+    if (conn_out_pending(&c->c) > SRV_OUTBUF_SOFT)
+        return;
+    const world_avatar *me = world_get(s->world, c->avatar_id);
+    uint32_t n = world_neighbours(s->world, c->avatar_id, s->vis, SRV_AOI_MAX - 1);
+    uint32_t nleft = 0, njoined = 0, nsnap = 0, i = 0, j = 0;
+    if (me->changed_tick > c->last_sent_tick)
+        s->snap[nsnap++] = me;
+    while (i < c->nknown || j < n) {
+        if (j == n || (i < c->nknown && c->known[i] < s->vis[j]->id)) {
+            s->left[nleft++] = c->known[i++];
+        } else if (i == c->nknown || c->known[i] > s->vis[j]->id) {
+            s->joined[njoined++] = s->vis[j++];
+        } else {
+            if (s->vis[j]->changed_tick > c->last_sent_tick)
+                s->snap[nsnap++] = s->vis[j];
+            i++;
+            j++;
+        }
+    }
+    int ack_changed = me->ack_seq != c->sent_ack;
+    if (!nleft && !njoined && !nsnap && !ack_changed) {
+        c->last_sent_tick = tick;
+        return;
+    }
+    size_t need = nleft * PROTO_SIZE_AVATAR_LEFT + njoined * PROTO_SIZE_AVATAR_JOINED_MAX +
+                  PROTO_SIZE_SNAPSHOT(nsnap);
+    proto_writer w;
+    if (out_begin(s, c, need, &w) < 0)
+        return;
+    for (uint32_t k = 0; k < nleft; k++) {
+        proto_avatar_left m = {.id = s->left[k],
+                               .reason = world_get(s->world, s->left[k]) ? PROTO_LEFT_OUT_OF_RANGE
+                                                                          : PROTO_LEFT_DISCONNECTED};
+        proto_put_avatar_left(&w, &m);
+    }
+    for (uint32_t k = 0; k < njoined; k++) {
+        const world_avatar *a = s->joined[k];
+        proto_avatar_joined m = {.id = a->id, .name = {a->name, (uint32_t)strlen(a->name)}};
+        memcpy(m.pos, a->pos, sizeof m.pos);
+        memcpy(m.box, a->box, sizeof m.box);
+        proto_put_avatar_joined(&w, &m);
+    }
+    if (nsnap || ack_changed) {
+        size_t at = proto_put_snapshot_begin(&w, tick, me->ack_seq);
+        for (uint32_t k = 0; k < nsnap; k++) {
+            proto_avatar a = {.id = s->snap[k]->id};
+            memcpy(a.pos, s->snap[k]->pos, sizeof a.pos);
+            proto_put_snapshot_add(&w, at, &a);
+        }
+        proto_put_snapshot_end(&w, at);
+    }
+    out_end(s, c, &w);
+    known_reserve(c, n);
+    for (uint32_t k = 0; k < n; k++)
+        c->known[k] = s->vis[k]->id;
+    c->nknown = n;
+    c->last_sent_tick = tick;
+    c->sent_ack = me->ack_seq;
+}
+
+static void on_tick(ev_loop *loop, void *data)
+{
+    server *s = data;
+    uint64_t t0 = ev_clock(loop);
+    world_step(s->world);
+    uint32_t tick = world_tick(s->world);
+    for (uint32_t i = 0; i < s->nclients; i++) {
+        client *c = s->clients[i];
+        if (c->state == ST_JOINED && !c->closing)
+            update_view(s, c, tick);
+    }
+    uint64_t us = (ev_clock(loop) - t0) / 1000u;
+    if (s->st.nticks < s->st.tick_cap)
+        s->st.tick_us[s->st.nticks++] = us > UINT32_MAX ? UINT32_MAX : (uint32_t)us;
+    events_flush(s);
+}
+
+/* ---- connections ------------------------------------------------------ */
+
+static void reap(server *s, client *c)
+{
+    if (c->avatar_id)
+        world_remove(s->world, c->avatar_id);
+    if (c->session_id) {
+        session_event *e = event_push(s, EVT_CLOSE, c->session_id);
+        snprintf(e->text, sizeof e->text, "%s", c->end_reason[0] ? c->end_reason : "closed");
+        log_info("%s (session %lld) ended: %s", c->peer, (long long)c->session_id, e->text);
+    }
+    ev_io_del(s->loop, c->c.fd);
+    conn_free(&c->c);
+    s->clients[c->index] = s->clients[--s->nclients];
+    s->clients[c->index]->index = c->index;
+    s->st.closed++;
+    free(c->known);
+    free(c);
+}
+
+static void peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t outlen)
+{
+    char host[NI_MAXHOST], port[NI_MAXSERV];
+    if (getnameinfo((const struct sockaddr *)sa, len, host, sizeof host, port, sizeof port,
+                    NI_NUMERICHOST | NI_NUMERICSERV) != 0)
+        snprintf(out, outlen, "?");
+    else if (sa->ss_family == AF_INET6)
+        snprintf(out, outlen, "[%s]:%s", host, port);
+    else
+        snprintf(out, outlen, "%s:%s", host, port);
+}
+
+/* Refuses a connection the server has no room for, with a best-effort error
+ * frame (the socket is fresh, so a small write goes through). */
+static void refuse(int fd, const char *why)
+{
+    uint8_t buf[PROTO_SIZE_ERROR_MAX];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_error(&w, PROTO_ERR_SERVER_FULL, why);
+    ssize_t n = write(fd, buf, w.len);
+    (void)n;
+    close(fd);
+}
+
+static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)events;
+    server *s = data;
+    for (int k = 0; k < ACCEPT_BUDGET; k++) {
+        struct sockaddr_storage sa;
+        socklen_t len = sizeof sa;
+        int cfd = accept4(fd, (struct sockaddr *)&sa, &len, SOCK_NONBLOCK | SOCK_CLOEXEC);
+        if (cfd < 0) {
+            if (errno == EMFILE || errno == ENFILE)
+                log_warn("accept: %s; raise the file limit (ulimit -n)", strerror(errno));
+            else if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
+                log_warn("accept: %s", strerror(errno));
+            return;
+        }
+        char peer[64];
+        peer_name(&sa, len, peer, sizeof peer);
+        if (s->nclients >= s->cfg.max_clients || cfd >= s->max_fd) {
+            log_warn("%s refused: server full (%u clients)", peer, s->nclients);
+            refuse(cfd, "server full");
+            continue;
+        }
+        int one = 1;
+        setsockopt(cfd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+        client *c = xcalloc(1, sizeof *c);
+        if (conn_init(&c->c, cfd) < 0 || ev_io_add(loop, cfd, EV_READ, on_client_io, c) < 0) {
+            log_error("%s refused: cannot register the connection", peer);
+            conn_free(&c->c);
+            free(c);
+            continue;
+        }
+        c->srv = s;
+        memcpy(c->peer, peer, sizeof c->peer);
+        c->connected_ns = c->last_frame_ns = now_ns(s);
+        c->index = s->nclients;
+        s->clients[s->nclients++] = c;
+        s->st.accepted++;
+        log_debug("%s connected", c->peer);
+    }
+}
+
+/* Enforces the handshake, idle and linger timeouts and the soft output
+ * limit; runs every HOUSEKEEPING_MS. */
+static void on_housekeeping(ev_loop *loop, void *data)
+{
+    (void)loop;
+    server *s = data;
+    uint64_t now = now_ns(s);
+    for (uint32_t i = 0; i < s->nclients; i++) {
+        client *c = s->clients[i];
+        if (c->dead)
+            continue;
+        if (c->closing) {
+            if (now > c->close_deadline_ns)
+                c->dead = 1;
+        } else if (c->state != ST_JOINED && now - c->connected_ns > s->cfg.handshake_timeout_ms * NS_PER_MS) {
+            protocol_error(s, c, PROTO_ERR_TIMEOUT, "handshake not completed within %u ms",
+                           s->cfg.handshake_timeout_ms);
+        } else if (now - c->last_frame_ns > s->cfg.idle_timeout_ms * NS_PER_MS) {
+            protocol_error(s, c, PROTO_ERR_TIMEOUT, "no complete frame for %u ms", s->cfg.idle_timeout_ms);
+        } else if (c->soft_since_ns && now - c->soft_since_ns > SRV_OUTBUF_SOFT_MS * NS_PER_MS) {
+            s->st.slow_readers++;
+            kill_client(s, c, "output backlog over %u bytes for %u ms", SRV_OUTBUF_SOFT, SRV_OUTBUF_SOFT_MS);
+        }
+    }
+}
+
+static int cmp_u32(const void *x, const void *y)
+{
+    uint32_t a = *(const uint32_t *)x, b = *(const uint32_t *)y;
+    return (a > b) - (a < b);
+}
+
+/* Logs the interval's figures, appends them to the stats file if one was
+ * asked for (with every tick duration, for exact percentiles), and starts a
+ * new interval. */
+static void on_stats(ev_loop *loop, void *data)
+{
+    server *s = data;
+    stats *st = &s->st;
+    double secs = (double)(ev_clock(loop) - st->interval_start_ns) * 1e-9;
+    uint32_t *sorted = xmalloc((st->nticks ? st->nticks : 1) * sizeof *sorted);
+    memcpy(sorted, st->tick_us, st->nticks * sizeof *sorted);
+    qsort(sorted, st->nticks, sizeof *sorted, cmp_u32);
+    double p50 = st->nticks ? sorted[st->nticks / 2] / 1000.0 : 0;
+    double p99 = st->nticks ? sorted[(st->nticks * 99) / 100] / 1000.0 : 0;
+    double mx = st->nticks ? sorted[st->nticks - 1] / 1000.0 : 0;
+    free(sorted);
+    if (s->nclients || st->frames_in)
+        log_info("stats: clients=%u ticks=%u tick_p50=%.2fms p99=%.2fms max=%.2fms moves/s=%.0f in=%.0fB/s "
+                 "out=%.0fB/s closed=%llu errors=%llu timeouts=%llu slow=%llu",
+                 s->nclients, st->nticks, p50, p99, mx, (double)st->moves_in / secs, (double)st->bytes_in / secs,
+                 (double)st->bytes_out / secs, (unsigned long long)st->closed,
+                 (unsigned long long)st->protocol_errors, (unsigned long long)st->timeouts,
+                 (unsigned long long)st->slow_readers);
+    if (s->cfg.stats_file) {
+        FILE *f = fopen(s->cfg.stats_file, "a");
+        if (!f) {
+            log_warn("stats file %s: %s", s->cfg.stats_file, strerror(errno));
+        } else {
+            fprintf(f,
+                    "{\"seconds\":%.3f,\"clients\":%u,\"moves_in\":%llu,\"frames_in\":%llu,\"bytes_in\":%llu,"
+                    "\"bytes_out\":%llu,\"closed\":%llu,\"protocol_errors\":%llu,\"timeouts\":%llu,"
+                    "\"slow_readers\":%llu,\"tick_us\":[",
+                    secs, s->nclients, (unsigned long long)st->moves_in, (unsigned long long)st->frames_in,
+                    (unsigned long long)st->bytes_in, (unsigned long long)st->bytes_out,
+                    (unsigned long long)st->closed, (unsigned long long)st->protocol_errors,
+                    (unsigned long long)st->timeouts, (unsigned long long)st->slow_readers);
+            for (uint32_t i = 0; i < st->nticks; i++)
+                fprintf(f, i ? ",%u" : "%u", st->tick_us[i]);
+            fprintf(f, "]}\n");
+            fclose(f);
+        }
+    }
+    uint32_t *keep = st->tick_us, cap = st->tick_cap;
+    *st = (stats){.tick_us = keep, .tick_cap = cap, .interval_start_ns = ev_now(loop)};
+}
+
+/* ---- shutdown --------------------------------------------------------- */
+
+static void begin_shutdown(server *s, const char *why)
+{
+    log_info("%s: shutting down, saying bye to %u clients", why, s->nclients);
+    s->stopping = 1;
+    s->stop_deadline_ns = now_ns(s) + SHUTDOWN_GRACE_MS * NS_PER_MS;
+    ev_io_del(s->loop, s->listen_fd);
+    close(s->listen_fd);
+    s->listen_fd = -1;
+    for (uint32_t i = 0; i < s->nclients; i++) {
+        client *c = s->clients[i];
+        proto_writer w;
+        if (c->closing || out_begin(s, c, PROTO_SIZE_BYE, &w) < 0)
+            continue;
+        proto_put_bye(&w, PROTO_BYE_SHUTDOWN);
+        out_end(s, c, &w);
+        begin_close(s, c, "shutdown");
+    }
+}
+
+static void on_signal(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)loop;
+    (void)events;
+    server *s = data;
+    struct signalfd_siginfo si;
+    if (read(fd, &si, sizeof si) != (ssize_t)sizeof si || s->stopping)
+        return;
+    begin_shutdown(s, si.ssi_signo == SIGINT ? "SIGINT" : "SIGTERM");
+}
+
+/* Housekeeping before the loop sleeps: write what the tick and the handlers
+ * queued (one write per client per wake-up), then free the clients that were
+ * closed, outside any of their callbacks. */
+static void before_sleep(ev_loop *loop, void *data)
+{
+    server *s = data;
+    for (uint32_t i = 0; i < s->nwrite; i++) {
+        s->write_list[i]->in_write_list = 0;
+        flush_client(s, s->write_list[i]);
+    }
+    s->nwrite = 0;
+    for (uint32_t i = 0; i < s->nclients;) {
+        client *c = s->clients[i];
+        if (c->dead)
+            reap(s, c); /* moves the last client into slot i */
+        else
+            i++;
+    }
+    if (s->stopping && (s->nclients == 0 || now_ns(s) > s->stop_deadline_ns))
+        ev_stop(loop);
+}
+
+/* ---- setup ------------------------------------------------------------ */
+
+static int listen_on(server *s, char *err, size_t errlen)
+{
+    struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
+                             .ai_flags = AI_PASSIVE | AI_NUMERICSERV},
+                    *res = NULL;
+    char port[8];
+    snprintf(port, sizeof port, "%u", s->cfg.port);
+    int rc = getaddrinfo(s->cfg.host, port, &hints, &res);
+    if (rc != 0) {
+        snprintf(err, errlen, "cannot resolve %s: %s", s->cfg.host, gai_strerror(rc));
+        return -1;
+    }
+    int fd = -1, saved = 0;
+    for (struct addrinfo *ai = res; ai; ai = ai->ai_next) {
+        fd = socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC, ai->ai_protocol);
+        if (fd < 0) {
+            saved = errno;
+            continue;
+        }
+        int one = 1;
+        setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+        if (bind(fd, ai->ai_addr, ai->ai_addrlen) == 0 && listen(fd, SRV_LISTEN_BACKLOG) == 0)
+            break;
+        saved = errno;
+        close(fd);
+        fd = -1;
+    }
+    freeaddrinfo(res);
+    if (fd < 0) {
+        snprintf(err, errlen, "cannot listen on %s:%u: %s", s->cfg.host, s->cfg.port, strerror(saved));
+        return -1;
+    }
+    struct sockaddr_storage sa;
+    socklen_t len = sizeof sa;
+    getsockname(fd, (struct sockaddr *)&sa, &len);
+    peer_name(&sa, len, s->address, sizeof s->address);
+    s->listen_fd = fd;
+    return 0;
+}
+
+static int setup_signals(server *s, char *err, size_t errlen)
+{
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    signal(SIGPIPE, SIG_IGN);
+    if (sigprocmask(SIG_BLOCK, &set, NULL) < 0 || (s->signal_fd = signalfd(-1, &set, SFD_NONBLOCK | SFD_CLOEXEC)) < 0) {
+        snprintf(err, errlen, "signalfd: %s", strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+server *server_create(const server_config *cfg, char *err, size_t errlen)
+{
+    server *s = xcalloc(1, sizeof *s);
+    s->cfg = *cfg;
+    s->listen_fd = s->signal_fd = -1;
+    /* fds are handed out lowest first, so this bounds every client fd. */
+    s->max_fd = (int)cfg->max_clients + 64;
+    float half = cfg->world_size * 0.5f;
+    world_config wc = {.min = {-half, 0, -half}, .max = {half, SRV_WORLD_HEIGHT, half},
+                       .max_speed = cfg->max_speed, .aoi_radius = cfg->aoi_radius,
+                       .spawn_radius = cfg->spawn_radius, .tick_dt = 1.0f / (float)cfg->tick_hz,
+                       .capacity = cfg->max_clients, .seed = cfg->seed};
+    s->world = world_create(&wc);
+    if (!s->world) {
+        snprintf(err, errlen, "cannot create the world (out of memory?)");
+        goto fail;
+    }
+    s->clients = xcalloc(cfg->max_clients, sizeof *s->clients);
+    s->write_list = xcalloc(cfg->max_clients, sizeof *s->write_list);
+    s->vis = xcalloc(SRV_AOI_MAX, sizeof *s->vis);
+    s->joined = xcalloc(SRV_AOI_MAX, sizeof *s->joined);
+    s->snap = xcalloc(SRV_AOI_MAX, sizeof *s->snap);
+    s->left = xcalloc(cfg->max_clients, sizeof *s->left);
+    s->st.tick_cap = (uint32_t)cfg->tick_hz * (cfg->stats_interval_ms / 1000u + 1u) * 2u;
+    s->st.tick_us = xcalloc(s->st.tick_cap, sizeof *s->st.tick_us);
+
+    s->db = db_open(cfg->db_path, DB_READWRITE, err, errlen);
+    if (!s->db)
+        goto fail;
+    s->last_session_id = db_session_last_id(s->db);
+    int stale = db_sessions_close_stale(s->db, db_now());
+    if (s->last_session_id < 0 || stale < 0) {
+        snprintf(err, errlen, "database %s: %s", cfg->db_path, db_error(s->db));
+        goto fail;
+    }
+    if (stale)
+        log_warn("closed %d sessions left open by a previous run that did not shut down cleanly", stale);
+
+    if (listen_on(s, err, errlen) < 0 || setup_signals(s, err, errlen) < 0)
+        goto fail;
+    s->loop = ev_create(s->max_fd);
+    if (!s->loop) {
+        snprintf(err, errlen, "event loop: %s", strerror(errno));
+        goto fail;
+    }
+    uint64_t tick_ns = (uint64_t)1000000000 / (uint64_t)cfg->tick_hz;
+    if (ev_io_add(s->loop, s->listen_fd, EV_READ, on_accept, s) < 0 ||
+        ev_io_add(s->loop, s->signal_fd, EV_READ, on_signal, s) < 0 ||
+        ev_timer_start(s->loop, tick_ns, tick_ns, on_tick, s) < 0 ||
+        ev_timer_start(s->loop, HOUSEKEEPING_MS * NS_PER_MS, HOUSEKEEPING_MS * NS_PER_MS, on_housekeeping, s) < 0 ||
+        ev_timer_start(s->loop, cfg->stats_interval_ms * NS_PER_MS, cfg->stats_interval_ms * NS_PER_MS, on_stats,
+                       s) < 0) {
+        snprintf(err, errlen, "event loop setup failed");
+        goto fail;
+    }
+    ev_set_before_sleep(s->loop, before_sleep, s);
+    s->st.interval_start_ns = ev_clock(s->loop);
+    return s;
+fail:
+    server_destroy(s);
+    return NULL;
+}
+
+int server_run(server *s)
+{
+    log_info("serving on %s: tick %d Hz, world %.0f m, area of interest %.0f m, up to %u clients", s->address,
+             s->cfg.tick_hz, (double)s->cfg.world_size, (double)s->cfg.aoi_radius, s->cfg.max_clients);
+    int rc = ev_run(s->loop);
+    if (rc < 0)
+        log_error("event loop: %s", strerror(-rc));
+    for (uint32_t i = 0; i < s->nclients; i++)
+        if (!s->clients[i]->end_reason[0] || !s->stopping)
+            snprintf(s->clients[i]->end_reason, sizeof s->clients[i]->end_reason, "shutdown");
+    while (s->nclients)
+        reap(s, s->clients[0]);
+    events_flush(s);
+    log_info("stopped: %llu connections served", (unsigned long long)s->st.accepted);
+    return rc < 0 ? -1 : 0;
+}
+
+void server_destroy(server *s)
+{
+    if (!s)
+        return;
+    while (s->nclients)
+        reap(s, s->clients[0]);
+    if (s->loop)
+        ev_destroy(s->loop);
+    if (s->listen_fd >= 0)
+        close(s->listen_fd);
+    if (s->signal_fd >= 0)
+        close(s->signal_fd);
+    db_close(s->db);
+    world_destroy(s->world);
+    free(s->clients);
+    free(s->write_list);
+    free(s->vis);
+    free(s->joined);
+    free(s->snap);
+    free(s->left);
+    free(s->events);
+    free(s->st.tick_us);
+    free(s);
+}

@@ -1,0 +1,44 @@
+/*
+ * server.h: cvre-server's core: accepts clients, speaks the protocol, runs
+ * the fixed-rate tick over the world and sends each client what it can see.
+ * Everything runs on one thread inside one ev loop.
+ */
+#ifndef CVRE_SERVER_H
+#define CVRE_SERVER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+typedef struct server_config {
+    const char *host;
+    uint16_t port;   /* 0: any free port */
+    const char *db_path;
+    int tick_hz;
+    uint32_t max_clients;
+    float aoi_radius;
+    float max_speed;
+    float world_size;   /* x and z extent, centred on 0 */
+    float spawn_radius;
+    uint32_t handshake_timeout_ms;
+    uint32_t idle_timeout_ms;
+    uint64_t seed;
+    const char *stats_file; /* NULL: none */
+    uint32_t stats_interval_ms;
+} server_config;
+
+typedef struct server server;
+
+/* Fills cfg with the defaults (limits.h). */
+void server_config_defaults(server_config *cfg);
+
+/* Opens the database, binds and listens. On failure returns NULL with a
+ * message in err. */
+server *server_create(const server_config *cfg, char *err, size_t errlen);
+/* "HOST:PORT" as bound (IPv6 in brackets). */
+const char *server_address(const server *s);
+/* Serves until SIGINT or SIGTERM, then says bye to every client, records
+ * the end of their sessions and returns 0; -1 on a fatal loop error. */
+int server_run(server *s);
+void server_destroy(server *s);
+
+#endif

@@ -1,0 +1,216 @@
+#include "world.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "alloc.h"
+#include "grid.h"
+#include "limits.h"
+
+#define SLOT_BITS 16u
+#define SLOT_MASK ((1u << SLOT_BITS) - 1u)
+
+typedef struct avatar {
+    world_avatar pub;
+    int used;
+    uint16_t gen;
+    int has_request;
+    uint32_t request_seq;
+    float request[3];
+    uint32_t moved_at_step; /* step of the last applied request */
+} avatar;
+
+struct world {
+    world_config cfg;
+    avatar *avatars; /* by slot */
+    uint32_t *free_slots;
+    uint32_t nfree;
+    uint32_t count;
+    uint32_t step;
+    uint64_t rng;
+    grid *grid;
+    uint32_t *scratch; /* grid query results */
+};
+
+/* xorshift64*: deterministic spawn points for a given seed. */
+static double rnd(world *w)
+{
+    w->rng ^= w->rng >> 12;
+    w->rng ^= w->rng << 25;
+    w->rng ^= w->rng >> 27;
+    return (double)((w->rng * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+world *world_create(const world_config *cfg)
+{
+    if (cfg->capacity == 0 || cfg->capacity > SLOT_MASK || !(cfg->aoi_radius > 0) || !(cfg->tick_dt > 0))
+        return NULL;
+    world *w = cvre_calloc(1, sizeof *w);
+    if (!w)
+        return NULL;
+    w->cfg = *cfg;
+    w->rng = cfg->seed ? cfg->seed : 0x9e3779b97f4a7c15ull;
+    w->avatars = cvre_calloc(cfg->capacity, sizeof *w->avatars);
+    w->free_slots = cvre_calloc(cfg->capacity, sizeof *w->free_slots);
+    w->scratch = cvre_calloc(cfg->capacity, sizeof *w->scratch);
+    /* Cells as wide as the radius: a query touches at most 3 x 3 cells. */
+    w->grid = grid_create(cfg->min[0], cfg->min[2], cfg->max[0], cfg->max[2], cfg->aoi_radius, cfg->capacity);
+    if (!w->avatars || !w->free_slots || !w->scratch || !w->grid) {
+        world_destroy(w);
+        return NULL;
+    }
+    /* Hand out low slots first: ids stay small and readable in logs. */
+    for (uint32_t i = 0; i < cfg->capacity; i++)
+        w->free_slots[i] = cfg->capacity - 1 - i;
+    w->nfree = cfg->capacity;
+    w->step = 1;
+    return w;
+}
+
+void world_destroy(world *w)
+{
+    if (!w)
+        return;
+    grid_destroy(w->grid);
+    free(w->avatars);
+    free(w->free_slots);
+    free(w->scratch);
+    free(w);
+}
+
+static avatar *lookup(const world *w, uint32_t id)
+{
+    uint32_t slot = id & SLOT_MASK;
+    if (slot >= w->cfg.capacity)
+        return NULL;
+    avatar *a = &w->avatars[slot];
+    return a->used && a->pub.id == id ? a : NULL;
+}
+
+const world_avatar *world_get(const world *w, uint32_t id)
+{
+    const avatar *a = lookup(w, id);
+    return a ? &a->pub : NULL;
+}
+
+static float clampf(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
+
+/* Keeps a box of size box standing at p inside the world. */
+static void clamp_into_world(const world *w, const float box[3], float p[3])
+{
+    const float *lo = w->cfg.min, *hi = w->cfg.max;
+    p[0] = clampf(p[0], lo[0] + box[0] * 0.5f, hi[0] - box[0] * 0.5f);
+    p[1] = clampf(p[1], lo[1], hi[1] - box[1]);
+    p[2] = clampf(p[2], lo[2] + box[2] * 0.5f, hi[2] - box[2] * 0.5f);
+}
+
+const world_avatar *world_add(world *w, const char *name, uint32_t name_len, const float box[3])
+{
+    if (!w->nfree || name_len > PROTO_NAME_MAX)
+        return NULL;
+    uint32_t slot = w->free_slots[w->nfree - 1];
+    avatar *a = &w->avatars[slot];
+    uint16_t gen = (uint16_t)(a->gen + 1u);
+    if (gen == 0) /* keeps every id non-zero */
+        gen = 1;
+    memset(a, 0, sizeof *a);
+    a->gen = gen;
+    a->pub.id = slot | (uint32_t)gen << SLOT_BITS;
+    memcpy(a->pub.name, name, name_len);
+    memcpy(a->pub.box, box, sizeof a->pub.box);
+    double ang = rnd(w) * 2.0 * M_PI, r = w->cfg.spawn_radius * sqrt(rnd(w));
+    a->pub.pos[0] = (w->cfg.min[0] + w->cfg.max[0]) * 0.5f + (float)(r * cos(ang));
+    a->pub.pos[1] = w->cfg.min[1];
+    a->pub.pos[2] = (w->cfg.min[2] + w->cfg.max[2]) * 0.5f + (float)(r * sin(ang));
+    clamp_into_world(w, box, a->pub.pos);
+    a->pub.changed_tick = w->step;
+    a->moved_at_step = w->step;
+    if (grid_insert(w->grid, slot, a->pub.pos[0], a->pub.pos[2]) < 0)
+        return NULL;
+    a->used = 1;
+    w->nfree--;
+    w->count++;
+    return &a->pub;
+}
+
+void world_remove(world *w, uint32_t id)
+{
+    avatar *a = lookup(w, id);
+    if (!a)
+        return;
+    uint32_t slot = id & SLOT_MASK;
+    grid_remove(w->grid, slot);
+    a->used = 0;
+    w->free_slots[w->nfree++] = slot;
+    w->count--;
+}
+
+void world_request_move(world *w, uint32_t id, uint32_t seq, const float pos[3])
+{
+    avatar *a = lookup(w, id);
+    if (!a)
+        return;
+    a->has_request = 1;
+    a->request_seq = seq;
+    memcpy(a->request, pos, sizeof a->request);
+}
+
+/* Moves a toward its request by at most max_speed x the time since its last
+ * applied move (capped), then clamps into the world. */
+static void apply(world *w, avatar *a)
+{
+    float elapsed = (float)(w->step - a->moved_at_step) * w->cfg.tick_dt;
+    if (elapsed > SRV_MOVE_MAX_DT)
+        elapsed = SRV_MOVE_MAX_DT;
+    float reach = w->cfg.max_speed * elapsed;
+    float *p = a->pub.pos, d[3];
+    for (int i = 0; i < 3; i++)
+        d[i] = a->request[i] - p[i];
+    float len = sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    float k = len > reach ? reach / len : 1.0f;
+    float q[3] = {p[0] + d[0] * k, p[1] + d[1] * k, p[2] + d[2] * k};
+    clamp_into_world(w, a->pub.box, q);
+    a->has_request = 0;
+    a->moved_at_step = w->step;
+    a->pub.ack_seq = a->request_seq;
+    if (q[0] == p[0] && q[1] == p[1] && q[2] == p[2])
+        return;
+    memcpy(p, q, sizeof q);
+    a->pub.changed_tick = w->step;
+    /* On out-of-memory the grid keeps the avatar in its old cell, which only
+     * delays when neighbours see it; the move itself stands. */
+    (void)grid_move(w->grid, a->pub.id & SLOT_MASK, p[0], p[2]);
+}
+
+void world_step(world *w)
+{
+    w->step++;
+    for (uint32_t s = 0; s < w->cfg.capacity; s++)
+        if (w->avatars[s].used && w->avatars[s].has_request)
+            apply(w, &w->avatars[s]);
+}
+
+uint32_t world_tick(const world *w) { return w->step; }
+
+uint32_t world_count(const world *w) { return w->count; }
+
+static int by_id(const void *x, const void *y)
+{
+    uint32_t a = (*(const world_avatar *const *)x)->id, b = (*(const world_avatar *const *)y)->id;
+    return (a > b) - (a < b);
+}
+
+uint32_t world_neighbours(world *w, uint32_t id, const world_avatar **out, uint32_t max)
+{
+    const avatar *me = lookup(w, id);
+    if (!me)
+        return 0;
+    uint32_t n = grid_query(w->grid, me->pub.pos[0], me->pub.pos[2], w->cfg.aoi_radius, w->scratch, w->cfg.capacity);
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < n && k < max; i++)
+        if (w->scratch[i] != (id & SLOT_MASK))
+            out[k++] = &w->avatars[w->scratch[i]].pub;
+    qsort(out, k, sizeof *out, by_id);
+    return k;
+}

@@ -1,0 +1,66 @@
+/*
+ * world.h: the authoritative simulation state: avatars, their movement, and
+ * who is near whom. Single-threaded (the tick thread). No I/O.
+ *
+ * Avatars are boxes whose position is the centre of the bottom face; y is up
+ * and the floor is y = min[1]. A client's move is recorded as a request and
+ * applied at the next world_step, limited to max_speed x elapsed time and
+ * clamped into the world.
+ */
+#ifndef CVRE_WORLD_H
+#define CVRE_WORLD_H
+
+#include <stdint.h>
+
+#include "proto.h"
+
+typedef struct world world;
+
+typedef struct world_config {
+    float min[3], max[3]; /* world bounds */
+    float max_speed;      /* m/s */
+    float aoi_radius;     /* m, horizontal */
+    float spawn_radius;   /* m around the centre of the floor */
+    float tick_dt;        /* s per step */
+    uint32_t capacity;    /* most avatars at once (<= 65535) */
+    uint64_t seed;        /* spawn positions */
+} world_config;
+
+/* A read-only view of one avatar. */
+typedef struct world_avatar {
+    uint32_t id;
+    float pos[3];
+    float box[3];
+    char name[PROTO_NAME_MAX + 1];
+    uint32_t changed_tick; /* last step that moved it */
+    uint32_t ack_seq;      /* seq of the last move request applied */
+} world_avatar;
+
+/* NULL if out of memory or the config is unusable. */
+world *world_create(const world_config *cfg);
+void world_destroy(world *w);
+
+/* Adds an avatar at a spawn point. name is name_len bytes (<= PROTO_NAME_MAX).
+ * Returns the new avatar, or NULL when the world is full or out of memory.
+ * Ids are never 0 and are not reused soon (the slot's generation changes). */
+const world_avatar *world_add(world *w, const char *name, uint32_t name_len, const float box[3]);
+void world_remove(world *w, uint32_t id);
+/* The avatar with this id, or NULL if it is gone. */
+const world_avatar *world_get(const world *w, uint32_t id);
+
+/* Records a move request; a later request in the same step replaces it.
+ * pos must be finite (the codec guarantees it). */
+void world_request_move(world *w, uint32_t id, uint32_t seq, const float pos[3]);
+
+/* Applies the pending requests and advances the step counter. */
+void world_step(world *w);
+uint32_t world_tick(const world *w);
+
+/* The other avatars within the area-of-interest radius of avatar id,
+ * written to out (room for max) sorted by id. Returns how many were
+ * written. */
+uint32_t world_neighbours(world *w, uint32_t id, const world_avatar **out, uint32_t max);
+
+uint32_t world_count(const world *w);
+
+#endif

@@ -1,0 +1,227 @@
+"""Test harness: starts the real cvre-server on loopback and speaks the wire
+protocol (protocol/PROTOCOL.md) from Python, or drives real cvre-client
+processes and reads their JSON event lines."""
+import argparse
+import json
+import math
+import os
+import select
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+MAGIC = 0x45525643
+T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINED=7,
+         AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12)
+E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
+         BAD_STRING=21, NOT_FINITE=22, BAD_VALUE=23, BAD_MAGIC=24, VERSION=25, UNEXPECTED=26,
+         ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, OVERLOADED=31, BAD_SEQ=32)
+
+
+def args():
+    p = argparse.ArgumentParser()
+    p.add_argument("--bin", required=True, help="build directory with cvre-server and cvre-client")
+    return p.parse_args()
+
+
+def frame(t, payload=b""):
+    return struct.pack("<IH", len(payload) + 2, t) + payload
+
+
+def s8(text):
+    b = text.encode()
+    return bytes([len(b)]) + b
+
+
+def hello(version=1, magic=MAGIC):
+    return frame(T["HELLO"], struct.pack("<IH", magic, version))
+
+
+def join(name, box=(0.6, 1.8, 0.6)):
+    return frame(T["JOIN"], s8(name) + struct.pack("<3f", *box))
+
+
+def move(seq, pos):
+    return frame(T["MOVE"], struct.pack("<I3f", seq, *pos))
+
+
+def ping(stamp):
+    return frame(T["PING"], struct.pack("<Q", stamp))
+
+
+def decode(t, p):
+    """One server-to-client message as a dict (enough for the tests)."""
+    if t == T["WELCOME"]:
+        v, sid = struct.unpack_from("<HQ", p)
+        return dict(type="welcome", version=v, session=sid)
+    if t == T["JOIN_OK"]:
+        i, x, y, z = struct.unpack_from("<I3f", p)
+        return dict(type="join_ok", id=i, pos=(x, y, z))
+    if t == T["SNAPSHOT"]:
+        tick, ack, n = struct.unpack_from("<IIH", p)
+        ents = {}
+        for k in range(n):
+            i, x, y, z = struct.unpack_from("<I3f", p, 10 + 16 * k)
+            ents[i] = (x, y, z)
+        return dict(type="snapshot", tick=tick, ack=ack, avatars=ents)
+    if t == T["AVATAR_JOINED"]:
+        i, ln = struct.unpack_from("<IB", p)
+        return dict(type="joined", id=i, name=p[5:5 + ln].decode())
+    if t == T["AVATAR_LEFT"]:
+        i, r = struct.unpack_from("<IB", p)
+        return dict(type="left", id=i, reason=r)
+    if t == T["ERROR"]:
+        code, ln = struct.unpack_from("<HB", p)
+        return dict(type="error", code=code, message=p[3:3 + ln].decode())
+    if t == T["PONG"]:
+        return dict(type="pong", stamp=struct.unpack_from("<Q", p)[0])
+    if t == T["BYE"]:
+        return dict(type="bye", reason=p[0])
+    return dict(type="other", t=t)
+
+
+class Server:
+    """The real cvre-server on 127.0.0.1 and a free port, with a fresh
+    database unless one is given."""
+
+    def __init__(self, bindir, *extra, db=None):
+        self.bindir = bindir
+        self.tmp = tempfile.mkdtemp(prefix="cvre-it-")
+        self.db = db or os.path.join(self.tmp, "cvre.db")
+        self.log = open(os.path.join(self.tmp, "server.log"), "w+")
+        self.proc = subprocess.Popen(
+            [os.path.join(bindir, "cvre-server"), "--port", "0", "--db", self.db, *extra],
+            stdout=subprocess.PIPE, stderr=self.log, text=True)
+        line = self.proc.stdout.readline()
+        assert line.startswith("listening on 127.0.0.1:"), f"unexpected first line {line!r}"
+        self.port = int(line.rsplit(":", 1)[1])
+
+    def alive(self):
+        return self.proc.poll() is None
+
+    def stop(self, sig=15, timeout=10):
+        self.proc.send_signal(sig)
+        rc = self.proc.wait(timeout)
+        rest = self.proc.stdout.read()
+        assert rest == "", f"server printed more on stdout: {rest!r}"
+        return rc
+
+    def logtext(self):
+        self.log.flush()
+        self.log.seek(0)
+        return self.log.read()
+
+
+class Raw:
+    """A hand-driven connection that sends exact bytes and decodes replies."""
+
+    def __init__(self, port):
+        self.s = socket.create_connection(("127.0.0.1", port), timeout=5)
+        self.buf = b""
+        self.queue = []  # received, not yet consumed by expect()
+        self.closed = False
+
+    def send(self, data):
+        self.s.sendall(data)
+
+    def handshake(self, name):
+        self.send(hello() + join(name))
+        w = self.expect("welcome")
+        ok = self.expect("join_ok")
+        return w, ok
+
+    def poll(self, timeout):
+        """Messages that arrive within timeout seconds (returns early on close)."""
+        out, end = [], time.time() + timeout
+        while not self.closed:
+            left = end - time.time()
+            if left <= 0:
+                break
+            r, _, _ = select.select([self.s], [], [], left)
+            if not r:
+                break
+            try:
+                d = self.s.recv(65536)
+            except ConnectionResetError:
+                d = b""
+            if not d:
+                self.closed = True
+                break
+            self.buf += d
+            while len(self.buf) >= 6:
+                ln, t = struct.unpack_from("<IH", self.buf)
+                if len(self.buf) < 4 + ln:
+                    break
+                out.append(decode(t, self.buf[6:4 + ln]))
+                self.buf = self.buf[4 + ln:]
+        return out
+
+    def expect(self, kind, timeout=5, where=None):
+        """Consumes messages in order until one of this kind (for which
+        where(msg) holds, if given) arrives; earlier ones are dropped."""
+        end = time.time() + timeout
+        seen = []
+        while True:
+            while self.queue:
+                m = self.queue.pop(0)
+                seen.append(m)
+                if m["type"] == kind and (where is None or where(m)):
+                    return m
+            if time.time() >= end or self.closed:
+                raise AssertionError(f"no {kind} within {timeout}s; saw {seen[-5:]}")
+            self.queue += self.poll(min(0.2, end - time.time()))
+
+    def wait_closed(self, timeout=5):
+        end = time.time() + timeout
+        msgs, self.queue = self.queue, []
+        while not self.closed and time.time() < end:
+            msgs += self.poll(0.2)
+        assert self.closed, "server did not close the connection"
+        return msgs
+
+    def close(self):
+        self.s.close()
+
+
+class Client:
+    """A real cvre-client process in script mode; its stdout is JSON lines."""
+
+    def __init__(self, bindir, port, name, script, *extra):
+        self.proc = subprocess.Popen(
+            [os.path.join(bindir, "cvre-client"), "--port", str(port), "--name", name, *extra],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc.stdin.write(script)
+        self.proc.stdin.close()
+        self.events = []
+
+    def wait(self, timeout=30):
+        out, err = self.proc.communicate(timeout=timeout)
+        self.stderr = err
+        for line in out.splitlines():
+            self.events.append(json.loads(line))  # every line must be JSON
+        return self.proc.returncode
+
+    def of(self, kind):
+        return [e for e in self.events if e["event"] == kind]
+
+
+def close_to(a, b, tol=0.05):
+    return all(abs(x - y) <= tol for x, y in zip(a, b))
+
+
+def run(tests):
+    """Runs test functions in order; prints one line each and the total."""
+    failed = 0
+    for t in tests:
+        t0 = time.time()
+        try:
+            t()
+            print(f"ok   {t.__name__} ({time.time() - t0:.1f}s)", flush=True)
+        except Exception as e:  # report and go on with the next test
+            failed += 1
+            print(f"FAIL {t.__name__}: {type(e).__name__}: {e}", flush=True)
+    print(f"{len(tests) - failed} passed, {failed} failed")
+    sys.exit(1 if failed else 0)

@@ -1,0 +1,112 @@
+/* The store: migrations, session records, stale sessions after a crash, and
+ * the schema-version checks that guard read-only opens. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "db.h"
+
+static char path[64];
+
+static int setup(void **state)
+{
+    (void)state;
+    snprintf(path, sizeof path, "/tmp/cvre-test-db-%d.sqlite", (int)getpid());
+    unlink(path);
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    (void)state;
+    char p[80];
+    unlink(path);
+    snprintf(p, sizeof p, "%s-wal", path);
+    unlink(p);
+    snprintf(p, sizeof p, "%s-shm", path);
+    unlink(p);
+    return 0;
+}
+
+static int64_t scalar(db *d, const char *sql)
+{
+    sqlite3_stmt *st;
+    assert_int_equal(sqlite3_prepare_v2(db_sqlite(d), sql, -1, &st, NULL), SQLITE_OK);
+    assert_int_equal(sqlite3_step(st), SQLITE_ROW);
+    int64_t v = sqlite3_column_int64(st, 0);
+    sqlite3_finalize(st);
+    return v;
+}
+
+static void test_sessions_round_trip(void **state)
+{
+    (void)state;
+    char err[256];
+    db *d = db_open(path, DB_READWRITE, err, sizeof err);
+    assert_non_null(d);
+    assert_int_equal(scalar(d, "PRAGMA user_version"), db_schema_version());
+    assert_int_equal(db_session_last_id(d), 0);
+    assert_int_equal(db_begin(d), 0);
+    assert_int_equal(db_session_open(d, 1, "00ff", "127.0.0.1:1", 100.0), 0);
+    assert_int_equal(db_session_open(d, 2, "11ee", "127.0.0.1:2", 101.0), 0);
+    assert_int_equal(db_session_join(d, 1, "alice", 65536, 100.5), 0);
+    assert_int_equal(db_session_join(d, 2, "alice", 65537, 101.5), 0); /* same user again */
+    assert_int_equal(db_session_close(d, 1, "quit", 102.0), 0);
+    assert_int_equal(db_commit(d), 0);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM users"), 1);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE user_id = 1"), 2);
+    assert_int_equal(scalar(d, "SELECT last_seen_at FROM users WHERE name = 'alice'"), 101);
+    db_close(d); /* session 2 is left open, as by a crash */
+
+    d = db_open(path, DB_READWRITE, err, sizeof err);
+    assert_non_null(d);
+    assert_int_equal(db_session_last_id(d), 2);
+    assert_int_equal(db_sessions_close_stale(d, 200.0), 1);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'crashed'"), 1);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'quit'"), 1);
+    /* Duplicate ids are refused, with a message. */
+    assert_int_equal(db_session_open(d, 2, "x", "y", 1.0), -1);
+    assert_non_null(strstr(db_error(d), "UNIQUE"));
+    db_close(d);
+
+    d = db_open(path, DB_READONLY, err, sizeof err);
+    assert_non_null(d);
+    db_close(d);
+}
+
+static void test_version_checks(void **state)
+{
+    (void)state;
+    char err[256];
+    /* A file of another program: read-only open refuses it by version. */
+    sqlite3 *raw;
+    assert_int_equal(sqlite3_open(path, &raw), SQLITE_OK);
+    assert_int_equal(sqlite3_exec(raw, "CREATE TABLE t(x)", NULL, NULL, NULL), SQLITE_OK);
+    sqlite3_close(raw);
+    assert_null(db_open(path, DB_READONLY, err, sizeof err));
+    assert_non_null(strstr(err, "schema version 0"));
+    /* A newer schema than this build knows is refused, not downgraded. */
+    assert_int_equal(sqlite3_open(path, &raw), SQLITE_OK);
+    assert_int_equal(sqlite3_exec(raw, "PRAGMA user_version = 999", NULL, NULL, NULL), SQLITE_OK);
+    sqlite3_close(raw);
+    assert_null(db_open(path, DB_READWRITE, err, sizeof err));
+    assert_non_null(strstr(err, "newer"));
+    /* A missing file cannot be opened read-only. */
+    assert_null(db_open("/nonexistent/dir/x.db", DB_READONLY, err, sizeof err));
+    assert_non_null(strstr(err, "cannot open"));
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_sessions_round_trip, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_version_checks, setup, teardown),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
