@@ -133,8 +133,9 @@ class Raw:
         ok = self.expect("join_ok")
         return w, ok
 
-    def poll(self, timeout):
-        """Messages that arrive within timeout seconds (returns early on close)."""
+    def poll(self, timeout, first=False):
+        """Messages that arrive within timeout seconds; returns early on
+        close, or as soon as any message is in when first is set."""
         out, end = [], time.time() + timeout
         while not self.closed:
             left = end - time.time()
@@ -157,6 +158,8 @@ class Raw:
                     break
                 out.append(decode(t, self.buf[6:4 + ln]))
                 self.buf = self.buf[4 + ln:]
+            if first and out:
+                break
         return out
 
     def expect(self, kind, timeout=5, where=None):
@@ -172,7 +175,7 @@ class Raw:
                     return m
             if time.time() >= end or self.closed:
                 raise AssertionError(f"no {kind} within {timeout}s; saw {seen[-5:]}")
-            self.queue += self.poll(min(0.2, end - time.time()))
+            self.queue += self.poll(min(0.2, end - time.time()), first=True)
 
     def wait_closed(self, timeout=5):
         end = time.time() + timeout

@@ -1,0 +1,136 @@
+"""Session benchmark: cvre-server against the cvre-client bot swarm, and the
+bare frame-counting server (bare_server.c) against the same swarm, side by
+side in one run. Bounded: each run lasts ramp + --seconds and stops itself.
+
+Prints, per avatar count: tick duration p50/p99/max, inbound moves/s,
+outbound bytes/s, server CPU %, peak RSS, disconnects, and the server's CPU
+per inbound move as a ratio to the bare server's CPU per frame."""
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+CLK = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK  # utime + stime
+
+
+def rss_mib(pid):
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def start(cmd, **kw):
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, **kw)
+    line = p.stdout.readline()
+    if not line.startswith("listening on"):
+        p.kill()
+        sys.exit(f"bench: {cmd[0]} did not start: {line!r}")
+    return p, int(line.rsplit(":", 1)[1])
+
+
+def swarm(bindir, port, n, seconds, extra=()):
+    return subprocess.Popen([os.path.join(bindir, "cvre-client"), "--port", str(port), "--bots", str(n),
+                             "--rate", "20", "--pattern", "random-walk", "--duration", str(seconds),
+                             "--ramp", "2000", *extra], stdout=subprocess.PIPE, text=True)
+
+
+def summary(proc, timeout):
+    out, _ = proc.communicate(timeout=timeout)
+    for line in reversed(out.splitlines()):
+        e = json.loads(line)
+        if e.get("event") == "summary":
+            return e
+    return {}
+
+
+def measure_window(pid, ramp, seconds):
+    """CPU seconds used and peak RSS over the steady window after ramp-up."""
+    time.sleep(ramp)
+    c0, t0 = cpu_seconds(pid), time.time()
+    peak = 0.0
+    while time.time() - t0 < seconds:
+        time.sleep(0.5)
+        peak = max(peak, rss_mib(pid))
+    return cpu_seconds(pid) - c0, time.time() - t0, peak
+
+
+def run_bare(bindir, n, ramp, seconds):
+    srv, port = start([os.path.join(bindir, "bare_server")])
+    sw = swarm(bindir, port, n, ramp + seconds + 1, ["--no-handshake"])
+    time.sleep(ramp)
+    c0 = cpu_seconds(srv.pid)
+    # Frames are counted by the server only at exit, so estimate the window's
+    # frames from the swarm's send rate: n bots x 20 Hz.
+    t0 = time.time()
+    time.sleep(seconds)
+    cpu, wall = cpu_seconds(srv.pid) - c0, time.time() - t0
+    summary(sw, 30)
+    srv.send_signal(signal.SIGTERM)
+    srv.communicate(timeout=10)
+    return cpu / (n * 20 * wall)
+
+
+def run_cvre(bindir, n, ramp, seconds):
+    tmp = tempfile.mkdtemp(prefix="cvre-bench-")
+    stats = os.path.join(tmp, "stats.jsonl")
+    srv, port = start([os.path.join(bindir, "cvre-server"), "--port", "0", "--db", os.path.join(tmp, "b.db"),
+                       "--max-clients", str(n + 100), "--world-size", "1000", "--spawn-radius", "500",
+                       "--stats-file", stats, "--stats-interval", "1", "--log-level", "warn"])
+    sw = swarm(bindir, port, n, ramp + seconds + 1)
+    t_start = time.time()
+    cpu, wall, peak = measure_window(srv.pid, ramp, seconds)
+    t_end = time.time()
+    sm = summary(sw, 60)
+    srv.send_signal(signal.SIGTERM)
+    srv.communicate(timeout=30)
+    # Stats lines are one per second; keep those inside the steady window.
+    lines = [json.loads(l) for l in open(stats)]
+    steady = lines[int(ramp - 0.5) + 1: int(t_end - t_start)]
+    ticks = sorted(t for l in steady for t in l["tick_us"])
+    secs = sum(l["seconds"] for l in steady) or 1
+    moves = sum(l["moves_in"] for l in steady)
+    pct = lambda q: ticks[min(len(ticks) - 1, int(q * len(ticks)))] / 1000 if ticks else float("nan")
+    return dict(n=n, p50=pct(0.5), p99=pct(0.99), max=ticks[-1] / 1000 if ticks else float("nan"),
+                moves_s=moves / secs, out_s=sum(l["bytes_out"] for l in steady) / secs,
+                cpu_pct=100 * cpu / wall, rss=peak, cpu_per_move=cpu / moves if moves else float("nan"),
+                disconnects=sm.get("disconnects", "?"), errors=sm.get("errors", "?"),
+                joined=sm.get("joined", "?"))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--bin", required=True, help="build directory")
+    ap.add_argument("--avatars", default="1000,5000,10000", help="comma-separated avatar counts")
+    ap.add_argument("--seconds", type=float, default=10, help="steady-state window per run")
+    a = ap.parse_args()
+    rows = []
+    for n in [int(x) for x in a.avatars.split(",")]:
+        ramp = n / 2000 + 3
+        bare = run_bare(a.bin, n, ramp, a.seconds)
+        r = run_cvre(a.bin, n, ramp, a.seconds)
+        r["ratio"] = r["cpu_per_move"] / bare
+        r["bare_us"] = bare * 1e6
+        rows.append(r)
+        print(f"# {n} avatars done", file=sys.stderr, flush=True)
+    print("avatars | joined | tick p50 ms | p99 ms | max ms | moves/s | out MB/s | CPU % | RSS MiB | "
+          "disconnects | CPU/move us | bare CPU/frame us | ratio")
+    for r in rows:
+        print(f"{r['n']} | {r['joined']} | {r['p50']:.2f} | {r['p99']:.2f} | {r['max']:.2f} | {r['moves_s']:.0f} | "
+              f"{r['out_s'] / 1e6:.2f} | {r['cpu_pct']:.0f} | {r['rss']:.0f} | {r['disconnects']} | "
+              f"{r['cpu_per_move'] * 1e6:.2f} | {r['bare_us']:.2f} | {r['ratio']:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,623 @@
+/*
+ * fuzz_proto.c: fuzz target for the wire codec (protocol/proto.c).
+ *
+ * The target reads its input as a stream of frames, the way a connection's
+ * input buffer is read, under both length caps. Every frame that decodes is
+ * checked against the decoder's promises, re-encoded with the writer and
+ * must come back byte for byte and decode to the same message: the encoding
+ * is canonical, so any difference is a codec bug. A failed check aborts.
+ *
+ * Built with -DCVRE_LIBFUZZER (clang -fsanitize=fuzzer) it is a plain
+ * libFuzzer target. Otherwise main() below drives it, so the target runs
+ * under any compiler and in ctest (see tests/fuzz/README.md):
+ *   fuzz_proto --runs N [--seed S]   N generated inputs
+ *   fuzz_proto --write-seeds DIR     one valid frame per type, as a corpus
+ *   fuzz_proto FILE...               replay inputs, e.g. a crash file
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "proto.h"
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+#define CHECK(cond)                                                                  \
+    do {                                                                             \
+        if (!(cond)) {                                                               \
+            fprintf(stderr, "fuzz_proto: check failed: %s (%s:%d)\n", #cond, __FILE__, \
+                    __LINE__);                                                       \
+            abort();                                                                 \
+        }                                                                            \
+    } while (0)
+
+/* What the target saw, reported by the standalone driver so a change that
+ * stops inputs from reaching the decoder shows up. */
+static unsigned long n_frames, n_decoded;
+
+/* The largest frame there is. */
+static uint8_t reenc[PROTO_MAX_LEN + 4];
+
+/* ---- the target --------------------------------------------------------- */
+
+static int same_floats(const float *a, const float *b, size_t n)
+{
+    return memcmp(a, b, n * sizeof *a) == 0; /* bitwise: -0.0 is not 0.0 */
+}
+
+static int same_str(proto_str a, proto_str b)
+{
+    return a.len == b.len && memcmp(a.ptr, b.ptr, a.len) == 0;
+}
+
+static int same_msg(const proto_msg *a, const proto_msg *b)
+{
+    if (a->type != b->type)
+        return 0;
+    switch (a->type) {
+    case PROTO_HELLO:
+        return a->u.hello.magic == b->u.hello.magic && a->u.hello.version == b->u.hello.version;
+    case PROTO_WELCOME: {
+        const proto_welcome *x = &a->u.welcome, *y = &b->u.welcome;
+        return x->version == y->version && x->session_id == y->session_id &&
+               memcmp(x->token, y->token, PROTO_TOKEN_SIZE) == 0 && x->tick_hz == y->tick_hz &&
+               same_floats(&x->aoi_radius, &y->aoi_radius, 1) &&
+               same_floats(&x->max_speed, &y->max_speed, 1) &&
+               same_floats(x->world_min, y->world_min, 3) && same_floats(x->world_max, y->world_max, 3);
+    }
+    case PROTO_JOIN:
+        return same_str(a->u.join.name, b->u.join.name) && same_floats(a->u.join.box, b->u.join.box, 3);
+    case PROTO_JOIN_OK:
+        return a->u.join_ok.avatar_id == b->u.join_ok.avatar_id &&
+               same_floats(a->u.join_ok.pos, b->u.join_ok.pos, 3) &&
+               same_floats(a->u.join_ok.box, b->u.join_ok.box, 3);
+    case PROTO_MOVE:
+        return a->u.move.seq == b->u.move.seq && same_floats(a->u.move.pos, b->u.move.pos, 3);
+    case PROTO_SNAPSHOT: {
+        const proto_snapshot *x = &a->u.snapshot, *y = &b->u.snapshot;
+        if (x->tick != y->tick || x->ack_seq != y->ack_seq || x->count != y->count)
+            return 0;
+        for (uint16_t i = 0; i < x->count; i++) {
+            proto_avatar p, q;
+            proto_snapshot_entry(x, i, &p);
+            proto_snapshot_entry(y, i, &q);
+            if (p.id != q.id || !same_floats(p.pos, q.pos, 3))
+                return 0;
+        }
+        return 1;
+    }
+    case PROTO_AVATAR_JOINED: {
+        const proto_avatar_joined *x = &a->u.avatar_joined, *y = &b->u.avatar_joined;
+        return x->id == y->id && same_str(x->name, y->name) && same_floats(x->pos, y->pos, 3) &&
+               same_floats(x->box, y->box, 3);
+    }
+    case PROTO_AVATAR_LEFT:
+        return a->u.avatar_left.id == b->u.avatar_left.id &&
+               a->u.avatar_left.reason == b->u.avatar_left.reason;
+    case PROTO_ERROR:
+        return a->u.error.code == b->u.error.code && same_str(a->u.error.message, b->u.error.message);
+    case PROTO_PING:
+    case PROTO_PONG:
+        return a->u.ping.stamp == b->u.ping.stamp;
+    case PROTO_BYE:
+        return a->u.bye.reason == b->u.bye.reason;
+    default:
+        return 0;
+    }
+}
+
+/* Appends m to w with the matching put. m must have decoded cleanly, so
+ * its type is one of the twelve defined ones. */
+static void encode(proto_writer *w, const proto_msg *m)
+{
+    switch (m->type) {
+    case PROTO_HELLO: proto_put_hello(w, &m->u.hello); break;
+    case PROTO_WELCOME: proto_put_welcome(w, &m->u.welcome); break;
+    case PROTO_JOIN: proto_put_join(w, &m->u.join); break;
+    case PROTO_JOIN_OK: proto_put_join_ok(w, &m->u.join_ok); break;
+    case PROTO_MOVE: proto_put_move(w, &m->u.move); break;
+    case PROTO_SNAPSHOT: {
+        size_t at = proto_put_snapshot_begin(w, m->u.snapshot.tick, m->u.snapshot.ack_seq);
+        for (uint16_t i = 0; i < m->u.snapshot.count; i++) {
+            proto_avatar a;
+            proto_snapshot_entry(&m->u.snapshot, i, &a);
+            proto_put_snapshot_add(w, at, &a);
+        }
+        proto_put_snapshot_end(w, at);
+        break;
+    }
+    case PROTO_AVATAR_JOINED: proto_put_avatar_joined(w, &m->u.avatar_joined); break;
+    case PROTO_AVATAR_LEFT: proto_put_avatar_left(w, &m->u.avatar_left); break;
+    case PROTO_ERROR: {
+        /* The writer takes a C string; decoded text never holds a NUL. */
+        char text[PROTO_MESSAGE_MAX + 1];
+        memcpy(text, m->u.error.message.ptr, m->u.error.message.len);
+        text[m->u.error.message.len] = 0;
+        proto_put_error(w, m->u.error.code, text);
+        break;
+    }
+    case PROTO_PING: proto_put_ping(w, m->u.ping.stamp); break;
+    case PROTO_PONG: proto_put_pong(w, m->u.ping.stamp); break;
+    case PROTO_BYE: proto_put_bye(w, m->u.bye.reason); break;
+    }
+}
+
+static int inside(const proto_frame *f, const void *p, size_t n)
+{
+    const uint8_t *b = p;
+    return b >= f->payload && n <= f->payload_len && (size_t)(b - f->payload) <= f->payload_len - n;
+}
+
+/* Checks a message the decoder accepted, then its round trip. */
+static void check_decoded(const proto_frame *f, const proto_msg *m)
+{
+    proto_writer w;
+    proto_frame g;
+    proto_msg again;
+
+    CHECK(m->type == f->type && m->type >= PROTO_HELLO && m->type <= PROTO_BYE);
+    if (m->type == PROTO_JOIN)
+        CHECK(inside(f, m->u.join.name.ptr, m->u.join.name.len));
+    if (m->type == PROTO_AVATAR_JOINED)
+        CHECK(inside(f, m->u.avatar_joined.name.ptr, m->u.avatar_joined.name.len));
+    if (m->type == PROTO_ERROR)
+        CHECK(inside(f, m->u.error.message.ptr, m->u.error.message.len));
+    if (m->type == PROTO_SNAPSHOT) {
+        size_t n = (size_t)m->u.snapshot.count * PROTO_SNAPSHOT_ENTRY_SIZE;
+        CHECK(f->payload_len == PROTO_SNAPSHOT_HEAD_SIZE + n);
+        CHECK(inside(f, m->u.snapshot.entries, n));
+        for (uint16_t i = 0; i < m->u.snapshot.count; i++) {
+            proto_avatar a;
+            proto_snapshot_entry(&m->u.snapshot, i, &a);
+            for (int k = 0; k < 3; k++)
+                CHECK(isfinite(a.pos[k]));
+        }
+    }
+
+    proto_writer_init(&w, reenc, sizeof reenc);
+    encode(&w, m);
+    CHECK(w.err == PROTO_OK);
+    CHECK(w.len == f->size);
+    CHECK(memcmp(reenc, f->payload - PROTO_HEADER_SIZE, f->size) == 0);
+    CHECK(proto_frame_parse(reenc, w.len, PROTO_MAX_LEN, &g) == PROTO_OK);
+    CHECK(g.size == w.len);
+    CHECK(proto_decode(&g, &again) == PROTO_OK);
+    CHECK(same_msg(m, &again));
+}
+
+/* Reads frames from the front of p like a connection's input buffer does,
+ * stopping at the first that is incomplete or refused. */
+static void walk(const uint8_t *p, size_t left, uint32_t cap)
+{
+    for (;;) {
+        proto_frame f, g;
+        proto_msg m;
+        int rc = proto_frame_parse(p, left, cap, &f);
+
+        if (rc == PROTO_INCOMPLETE) {
+            CHECK(left < 4 || left - 4 < ((uint32_t)p[0] | (uint32_t)p[1] << 8 |
+                                          (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24));
+            return;
+        }
+        if (rc != PROTO_OK) {
+            CHECK(rc == PROTO_ERR_FRAME_EMPTY || rc == PROTO_ERR_FRAME_TOO_LONG);
+            return;
+        }
+        n_frames++;
+        CHECK(f.size >= PROTO_HEADER_SIZE && f.size <= left && f.size - 4 <= cap);
+        CHECK(f.payload == p + PROTO_HEADER_SIZE && f.payload_len == f.size - PROTO_HEADER_SIZE);
+        /* What passes the small cap passes the large one unchanged. */
+        CHECK(proto_frame_parse(p, left, PROTO_MAX_LEN, &g) == PROTO_OK && g.size == f.size);
+        rc = proto_decode(&f, &m);
+        if (rc == PROTO_OK) {
+            n_decoded++;
+            check_decoded(&f, &m);
+        } else {
+            CHECK(rc >= PROTO_ERR_UNKNOWN_TYPE && rc <= PROTO_ERR_BAD_MAGIC);
+        }
+        p += f.size;
+        left -= f.size;
+    }
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    walk(data, size, PROTO_MAX_LEN_PREJOIN);
+    walk(data, size, PROTO_MAX_LEN);
+    return 0;
+}
+
+#ifndef CVRE_LIBFUZZER
+
+/* ---- standalone driver -------------------------------------------------- */
+
+/* Three frames of the largest size, plus room for inserted bytes. */
+#define INPUT_MAX (3u * (PROTO_MAX_LEN + 4u) + 256u)
+#define MAX_FRAMES 3
+
+static uint64_t rng;
+
+/* splitmix64: tiny, and the same sequence on every platform for a seed.
+ * Callers never put two draws where C leaves their order to the compiler
+ * (two arguments, two initializers of one struct), so that a seed makes
+ * the same inputs whatever the compiler. */
+static uint64_t rnd(void)
+{
+    uint64_t z = (rng += 0x9e3779b97f4a7c15u);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9u;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebu;
+    return z ^ (z >> 31);
+}
+
+static uint32_t below(uint32_t n) { return (uint32_t)(rnd() % n); }
+
+static float bits_f32(uint32_t b)
+{
+    float v;
+    memcpy(&v, &b, sizeof v);
+    return v;
+}
+
+/* Mostly ordinary coordinates, with the edge cases a codec can get wrong. */
+static float rnd_float(void)
+{
+    switch (below(8)) {
+    case 0: return 0.0f;
+    case 1: return -0.0f;
+    case 2: return (float)below(2001) - 1000.0f;
+    case 3: return bits_f32(0x7f7fffffu); /* largest finite */
+    case 4: return bits_f32(below(0x800000u)); /* denormal */
+    case 5: return bits_f32((uint32_t)rnd()); /* anything, NaN included */
+    default: return (float)below(1u << 24) / 1024.0f - 8192.0f;
+    }
+}
+
+static float rnd_box(void)
+{
+    if (below(16) == 0)
+        return rnd_float();
+    return PROTO_BOX_MIN + (float)below(3901) / 1000.0f;
+}
+
+static void rnd_vec3(float v[3])
+{
+    for (int i = 0; i < 3; i++)
+        v[i] = rnd_float();
+}
+
+/* Text of about max bytes built from pieces, some of them invalid, and
+ * sometimes longer than max to exercise truncation. Returns its length;
+ * out gets a NUL after it and must hold max + 16 bytes. */
+static size_t rnd_text(char *out, size_t max)
+{
+    static const char *const good[] = {"a", "Z", " ", "~", "\xc3\xa9", "\xe2\x82\xac",
+                                       "\xf0\x9f\x98\x80", "\xf4\x8f\xbf\xbf"};
+    static const char *const bad[] = {"\n", "\x7f", "\xff", "\xc3", "\xed\xa0\x80", "\xc0\x80"};
+    size_t want = below((uint32_t)max + 9), n = 0;
+
+    while (n < want) {
+        const char *piece = below(32) == 0 ? bad[below(6)] : good[below(8)];
+        size_t k = strlen(piece);
+
+        if (n + k > max + 8)
+            break;
+        memcpy(out + n, piece, k);
+        n += k;
+    }
+    out[n] = 0;
+    return n;
+}
+
+/* Appends one message of the given type with random contents. */
+static void gen_frame(proto_writer *w, uint16_t type)
+{
+    char text[PROTO_MESSAGE_MAX + 16];
+
+    switch (type) {
+    case PROTO_HELLO: {
+        proto_hello m;
+        m.magic = below(8) ? PROTO_MAGIC : (uint32_t)rnd();
+        m.version = (uint16_t)below(3);
+        proto_put_hello(w, &m);
+        break;
+    }
+    case PROTO_WELCOME: {
+        proto_welcome m;
+        m.version = PROTO_VERSION;
+        m.session_id = rnd();
+        for (size_t i = 0; i < PROTO_TOKEN_SIZE; i++)
+            m.token[i] = (uint8_t)rnd();
+        m.tick_hz = (uint16_t)below(200);
+        m.aoi_radius = rnd_float();
+        m.max_speed = rnd_float();
+        for (int i = 0; i < 3; i++) {
+            m.world_min[i] = -(float)below(5000);
+            m.world_max[i] = (float)below(5000);
+        }
+        proto_put_welcome(w, &m);
+        break;
+    }
+    case PROTO_JOIN: {
+        proto_join m;
+        m.name.ptr = text;
+        m.name.len = (uint32_t)rnd_text(text, PROTO_NAME_MAX);
+        for (int i = 0; i < 3; i++)
+            m.box[i] = rnd_box();
+        proto_put_join(w, &m);
+        break;
+    }
+    case PROTO_JOIN_OK: {
+        proto_join_ok m;
+        m.avatar_id = (uint32_t)rnd();
+        rnd_vec3(m.pos);
+        for (int i = 0; i < 3; i++)
+            m.box[i] = rnd_box();
+        proto_put_join_ok(w, &m);
+        break;
+    }
+    case PROTO_MOVE: {
+        proto_move m;
+        m.seq = (uint32_t)rnd();
+        rnd_vec3(m.pos);
+        proto_put_move(w, &m);
+        break;
+    }
+    case PROTO_SNAPSHOT: {
+        /* Now and then the largest snapshot, or one entry too many. */
+        uint32_t n = below(4) ? below(8) : below(200), tick, ack;
+        size_t at;
+
+        if (below(2048) == 0)
+            n = PROTO_SNAPSHOT_MAX_ENTRIES + below(2);
+        tick = (uint32_t)rnd();
+        ack = (uint32_t)rnd();
+        at = proto_put_snapshot_begin(w, tick, ack);
+        for (uint32_t i = 0; i < n; i++) {
+            proto_avatar a;
+            a.id = below(1000);
+            rnd_vec3(a.pos);
+            proto_put_snapshot_add(w, at, &a);
+        }
+        proto_put_snapshot_end(w, at);
+        break;
+    }
+    case PROTO_AVATAR_JOINED: {
+        proto_avatar_joined m;
+        m.id = (uint32_t)rnd();
+        m.name.ptr = text;
+        m.name.len = (uint32_t)rnd_text(text, PROTO_NAME_MAX);
+        rnd_vec3(m.pos);
+        for (int i = 0; i < 3; i++)
+            m.box[i] = rnd_box();
+        proto_put_avatar_joined(w, &m);
+        break;
+    }
+    case PROTO_AVATAR_LEFT: {
+        proto_avatar_left m;
+        m.id = (uint32_t)rnd();
+        m.reason = (uint8_t)below(3);
+        proto_put_avatar_left(w, &m);
+        break;
+    }
+    case PROTO_ERROR:
+        rnd_text(text, PROTO_MESSAGE_MAX);
+        proto_put_error(w, (uint16_t)(below(16) ? 16 + below(20) : rnd()), text);
+        break;
+    case PROTO_PING: proto_put_ping(w, rnd()); break;
+    case PROTO_PONG: proto_put_pong(w, rnd()); break;
+    default: proto_put_bye(w, (uint8_t)below(4)); break;
+    }
+}
+
+/* Puts an interesting u32 little-endian at p. */
+static void put_u32(uint8_t *p, uint32_t v)
+{
+    for (int i = 0; i < 4; i++)
+        p[i] = (uint8_t)(v >> (8 * i));
+}
+
+/*
+ * Applies one random mutation to in[0..*len). starts[] are the offsets
+ * where the generated frames began, so that length and type corruption
+ * hit real header fields. *len never exceeds INPUT_MAX.
+ */
+static void mutate(uint8_t *in, size_t *len, const size_t *starts, size_t nstarts)
+{
+    static const uint8_t bytes[] = {0x00, 0x01, 0x1f, 0x20, 0x7f, 0x80, 0xbf, 0xc0, 0xff};
+    size_t n = *len, s = nstarts ? starts[below((uint32_t)nstarts)] : 0;
+
+    switch (below(10)) {
+    case 0: /* flip a bit */
+        if (n) {
+            size_t at = below((uint32_t)n);
+            in[at] ^= (uint8_t)(1u << below(8));
+        }
+        break;
+    case 1: /* set a byte to a boundary value */
+        if (n) {
+            size_t at = below((uint32_t)n);
+            in[at] = bytes[below(sizeof bytes)];
+        }
+        break;
+    case 2: /* truncate */
+        *len = below((uint32_t)n + 1);
+        break;
+    case 3: /* corrupt a frame's length */
+        if (s + 4 <= n) {
+            const uint32_t cur = (uint32_t)in[s] | (uint32_t)in[s + 1] << 8 |
+                                 (uint32_t)in[s + 2] << 16 | (uint32_t)in[s + 3] << 24;
+            const uint32_t lens[] = {0, 1, 2, cur - 1, cur + 1, PROTO_MAX_LEN_PREJOIN,
+                                     PROTO_MAX_LEN_PREJOIN + 1, PROTO_MAX_LEN, PROTO_MAX_LEN + 1,
+                                     0xffffffffu, 0x80000000u, (uint32_t)rnd()};
+            put_u32(in + s, lens[below(sizeof lens / sizeof lens[0])]);
+        }
+        break;
+    case 4: /* corrupt a frame's type */
+        if (s + 6 <= n) {
+            const uint32_t t = below(4) ? below(96) : (uint32_t)rnd();
+            in[s + 4] = (uint8_t)t;
+            in[s + 5] = (uint8_t)(t >> 8);
+        }
+        break;
+    case 5: /* a NaN or infinity somewhere */
+        if (n >= 4) {
+            const uint32_t bad[] = {0x7fc00000u, 0x7f800000u, 0xff800000u, 0x7f800001u};
+            size_t at = below((uint32_t)n - 3);
+            put_u32(in + at, bad[below(4)]);
+        }
+        break;
+    case 6: /* overwrite a span with noise */
+        if (n) {
+            size_t at = below((uint32_t)n), k = 1 + below(16);
+            for (size_t i = at; i < n && i < at + k; i++)
+                in[i] = (uint8_t)rnd();
+        }
+        break;
+    case 7: /* insert noise */
+        if (n + 16 <= INPUT_MAX) {
+            size_t at = below((uint32_t)n + 1), k = 1 + below(16);
+            memmove(in + at + k, in + at, n - at);
+            for (size_t i = at; i < at + k; i++)
+                in[i] = (uint8_t)rnd();
+            *len = n + k;
+        }
+        break;
+    case 8: /* delete a span */
+        if (n) {
+            size_t at = below((uint32_t)n), k = 1 + below(16);
+            if (k > n - at)
+                k = n - at;
+            memmove(in + at, in + at + k, n - at - k);
+            *len = n - k;
+        }
+        break;
+    default: /* replace everything with noise */
+        *len = below(256);
+        for (size_t i = 0; i < *len; i++)
+            in[i] = (uint8_t)rnd();
+        break;
+    }
+}
+
+static int run_random(unsigned long long runs, uint64_t seed)
+{
+    static uint8_t in[INPUT_MAX];
+
+    rng = seed;
+    for (unsigned long long r = 0; r < runs; r++) {
+        proto_writer w;
+        size_t starts[MAX_FRAMES], nstarts = 0, len;
+        uint32_t frames = 1 + below(MAX_FRAMES), muts = below(4);
+
+        proto_writer_init(&w, in, sizeof in);
+        for (uint32_t i = 0; i < frames; i++) {
+            starts[nstarts++] = w.len;
+            gen_frame(&w, (uint16_t)(1 + below(PROTO_BYE)));
+        }
+        len = w.len;
+        for (uint32_t i = 0; i < muts; i++)
+            mutate(in, &len, starts, nstarts);
+        LLVMFuzzerTestOneInput(in, len);
+    }
+    printf("fuzz_proto: %llu inputs, 0 crashes\n", runs);
+    fflush(stdout);
+    fprintf(stderr, "fuzz_proto: %lu frames parsed, %lu decoded and round-tripped\n", n_frames,
+            n_decoded);
+    return 0;
+}
+
+/* Writes one valid frame of each type to DIR/<type name>, a starting
+ * corpus for libFuzzer. */
+static int write_seeds(const char *dir)
+{
+    static uint8_t buf[PROTO_MAX_LEN + 4];
+
+    rng = 1;
+    for (uint16_t t = PROTO_HELLO; t <= PROTO_BYE; t++) {
+        char path[4096];
+        proto_writer w;
+        proto_frame f;
+        proto_msg m;
+        FILE *fp;
+
+        /* Draw until the random contents make a frame that decodes. */
+        do {
+            proto_writer_init(&w, buf, sizeof buf);
+            gen_frame(&w, t);
+        } while (w.err != PROTO_OK || proto_frame_parse(buf, w.len, PROTO_MAX_LEN, &f) != PROTO_OK ||
+                 proto_decode(&f, &m) != PROTO_OK);
+        snprintf(path, sizeof path, "%s/%s", dir, proto_type_name(t));
+        fp = fopen(path, "wb");
+        if (!fp || fwrite(buf, 1, w.len, fp) != w.len || fclose(fp) != 0) {
+            perror(path);
+            return 1;
+        }
+    }
+    printf("fuzz_proto: wrote %d seeds to %s\n", PROTO_BYE, dir);
+    return 0;
+}
+
+/* Feeds each file to the target, whole. */
+static int replay(int nfiles, char **files)
+{
+    for (int i = 0; i < nfiles; i++) {
+        FILE *fp = fopen(files[i], "rb");
+        uint8_t *data = NULL;
+        long size;
+
+        if (!fp || fseek(fp, 0, SEEK_END) != 0 || (size = ftell(fp)) < 0 || fseek(fp, 0, SEEK_SET) != 0 ||
+            !(data = malloc((size_t)size + 1)) || fread(data, 1, (size_t)size, fp) != (size_t)size) {
+            perror(files[i]);
+            free(data);
+            if (fp)
+                fclose(fp);
+            return 1;
+        }
+        fclose(fp);
+        LLVMFuzzerTestOneInput(data, (size_t)size);
+        free(data);
+    }
+    printf("fuzz_proto: %d inputs, 0 crashes\n", nfiles);
+    return 0;
+}
+
+static int usage(void)
+{
+    fprintf(stderr, "usage: fuzz_proto --runs N [--seed S]\n"
+                    "       fuzz_proto --write-seeds DIR\n"
+                    "       fuzz_proto FILE...\n");
+    return 2;
+}
+
+/* Parses a whole decimal number; 0 on anything else. */
+static int parse_count(const char *s, unsigned long long *out)
+{
+    char *end;
+
+    if (s[0] < '0' || s[0] > '9')
+        return 0;
+    *out = strtoull(s, &end, 10);
+    return *end == 0;
+}
+
+int main(int argc, char **argv)
+{
+    unsigned long long runs, seed = 1;
+
+    if (argc == 3 && strcmp(argv[1], "--write-seeds") == 0)
+        return write_seeds(argv[2]);
+    if (argc >= 3 && strcmp(argv[1], "--runs") == 0) {
+        if (!parse_count(argv[2], &runs))
+            return usage();
+        if (argc == 5 && strcmp(argv[3], "--seed") == 0 && parse_count(argv[4], &seed))
+            return run_random(runs, seed);
+        return argc == 3 ? run_random(runs, seed) : usage();
+    }
+    if (argc >= 2 && argv[1][0] != '-')
+        return replay(argc - 1, argv + 1);
+    return usage();
+}
+
+#endif

@@ -1,0 +1,1471 @@
+/*
+ * test_proto.c: unit tests for the wire codec (protocol/proto.c).
+ *
+ * Round trips go through the public writer and decoder only. Malformed
+ * input is built by hand from a table of valid sample payloads, one per
+ * type, that records where each string and float sits, so every class of
+ * error is tried against every type it applies to.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <float.h>
+#include <limits.h>
+#include <string.h>
+
+#include "proto.h"
+
+/* Room for the largest frame plus a little, shared by the tests. */
+#define BIG (PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES) + 64u)
+static uint8_t big[BIG];
+
+/* ---- helpers ------------------------------------------------------------ */
+
+static uint32_t f32_bits(float v)
+{
+    uint32_t b;
+    memcpy(&b, &v, sizeof b);
+    return b;
+}
+
+static float bits_f32(uint32_t b)
+{
+    float v;
+    memcpy(&v, &b, sizeof v);
+    return v;
+}
+
+static void wr_u16(uint8_t *p, uint16_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+}
+
+static void wr_u32(uint8_t *p, uint32_t v)
+{
+    for (int i = 0; i < 4; i++)
+        p[i] = (uint8_t)(v >> (8 * i));
+}
+
+static void wr_f32(uint8_t *p, float v) { wr_u32(p, f32_bits(v)); }
+
+/* Float fields are compared bit for bit: -0.0 must survive as -0.0. */
+static void assert_same_floats(const float *a, const float *b, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        assert_int_equal(f32_bits(a[i]), f32_bits(b[i]));
+}
+
+static void assert_str(proto_str s, const char *want, size_t want_len)
+{
+    assert_int_equal(s.len, want_len);
+    assert_memory_equal(s.ptr, want, want_len);
+}
+
+/* Parses b[0..n) as exactly one frame (joined cap) and decodes it; any
+ * other outcome fails the test. */
+static void decode_all(const uint8_t *b, size_t n, proto_msg *m)
+{
+    proto_frame f;
+
+    assert_int_equal(proto_frame_parse(b, n, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(f.size, n);
+    assert_ptr_equal(f.payload, b + PROTO_HEADER_SIZE);
+    assert_int_equal(f.payload_len, n - PROTO_HEADER_SIZE);
+    assert_int_equal(proto_decode(&f, m), PROTO_OK);
+    assert_int_equal(m->type, f.type);
+}
+
+/* Decodes a hand-built payload of the given type and returns the status.
+ * The frame is built in a static buffer so pointers in m stay valid. */
+static int decode_raw_msg(uint16_t type, const uint8_t *payload, size_t n, proto_msg *m)
+{
+    static uint8_t b[BIG];
+    proto_frame f;
+
+    assert_true(n + PROTO_HEADER_SIZE <= sizeof b);
+    wr_u32(b, (uint32_t)(n + 2));
+    wr_u16(b + 4, type);
+    if (n > 0)
+        memcpy(b + PROTO_HEADER_SIZE, payload, n);
+    assert_int_equal(proto_frame_parse(b, n + PROTO_HEADER_SIZE, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(f.type, type);
+    return proto_decode(&f, m);
+}
+
+static int decode_raw(uint16_t type, const uint8_t *payload, size_t n)
+{
+    proto_msg m;
+    return decode_raw_msg(type, payload, n, &m);
+}
+
+/* ---- sample payloads ---------------------------------------------------- */
+
+#define MAX_FLOATS 12
+
+/* One valid payload per type and what sits where in it. */
+typedef struct sample {
+    uint16_t type;
+    uint8_t payload[64];
+    size_t len;
+    int has_str;
+    size_t str_at;  /* offset of the string's length byte */
+    size_t str_len; /* bytes of text after it */
+    size_t floats[MAX_FLOATS]; /* offsets of every f32 */
+    size_t nfloats;
+    size_t boxes[3]; /* offsets of the box edges, if any */
+    size_t nboxes;
+} sample;
+
+static const proto_welcome sample_welcome = {
+    PROTO_VERSION, 0x0102030405060708u,
+    {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16},
+    20, 50.0f, 5.0f, {-100.0f, 0.0f, -100.0f}, {100.0f, 50.0f, 100.0f}};
+
+/* Encodes one message of each type with the writer and strips the header,
+ * so the samples are exactly what a peer sends. */
+static size_t build_samples(sample *s)
+{
+    size_t n = 0;
+    uint8_t b[128];
+    proto_writer w;
+    const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
+    const proto_join join = {{"ann", 3}, {0.5f, 1.8f, 0.5f}};
+    const proto_join_ok jok = {7, {1.0f, 0.0f, 2.0f}, {0.5f, 1.8f, 0.5f}};
+    const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
+    const proto_avatar e0 = {7, {1.0f, 2.0f, 3.0f}}, e1 = {8, {-1.0f, -2.0f, -3.0f}};
+    const proto_avatar_joined aj = {8, {"bob", 3}, {4.0f, 0.0f, 4.0f}, {1.0f, 1.0f, 1.0f}};
+    const proto_avatar_left al = {8, PROTO_LEFT_OUT_OF_RANGE};
+    size_t at;
+
+    memset(s, 0, 13 * sizeof *s);
+#define ADD(T, put)                                                      \
+    do {                                                                 \
+        proto_writer_init(&w, b, sizeof b);                              \
+        put;                                                             \
+        assert_int_equal(w.err, PROTO_OK);                               \
+        s[n].type = (T);                                                 \
+        s[n].len = w.len - PROTO_HEADER_SIZE;                            \
+        memcpy(s[n].payload, b + PROTO_HEADER_SIZE, s[n].len);           \
+    } while (0)
+#define FLOATS(...)                                                      \
+    do {                                                                 \
+        const size_t offs[] = {__VA_ARGS__};                             \
+        s[n].nfloats = sizeof offs / sizeof offs[0];                     \
+        memcpy(s[n].floats, offs, sizeof offs);                          \
+    } while (0)
+
+    ADD(PROTO_HELLO, proto_put_hello(&w, &hello));
+    n++;
+    ADD(PROTO_WELCOME, proto_put_welcome(&w, &sample_welcome));
+    FLOATS(28, 32, 36, 40, 44, 48, 52, 56);
+    n++;
+    ADD(PROTO_JOIN, proto_put_join(&w, &join));
+    s[n].has_str = 1, s[n].str_at = 0, s[n].str_len = 3;
+    FLOATS(4, 8, 12);
+    s[n].boxes[0] = 4, s[n].boxes[1] = 8, s[n].boxes[2] = 12, s[n].nboxes = 3;
+    n++;
+    ADD(PROTO_JOIN_OK, proto_put_join_ok(&w, &jok));
+    FLOATS(4, 8, 12, 16, 20, 24);
+    s[n].boxes[0] = 16, s[n].boxes[1] = 20, s[n].boxes[2] = 24, s[n].nboxes = 3;
+    n++;
+    ADD(PROTO_MOVE, proto_put_move(&w, &move));
+    FLOATS(4, 8, 12);
+    n++;
+    ADD(PROTO_SNAPSHOT, (at = proto_put_snapshot_begin(&w, 100, 1),
+                         proto_put_snapshot_add(&w, at, &e0), proto_put_snapshot_add(&w, at, &e1),
+                         proto_put_snapshot_end(&w, at)));
+    FLOATS(14, 18, 22, 30, 34, 38);
+    n++;
+    ADD(PROTO_AVATAR_JOINED, proto_put_avatar_joined(&w, &aj));
+    s[n].has_str = 1, s[n].str_at = 4, s[n].str_len = 3;
+    FLOATS(8, 12, 16, 20, 24, 28);
+    s[n].boxes[0] = 20, s[n].boxes[1] = 24, s[n].boxes[2] = 28, s[n].nboxes = 3;
+    n++;
+    ADD(PROTO_AVATAR_LEFT, proto_put_avatar_left(&w, &al));
+    n++;
+    ADD(PROTO_ERROR, proto_put_error(&w, PROTO_ERR_BAD_SEQ, "oops"));
+    s[n].has_str = 1, s[n].str_at = 2, s[n].str_len = 4;
+    n++;
+    ADD(PROTO_PING, proto_put_ping(&w, 42));
+    n++;
+    ADD(PROTO_PONG, proto_put_pong(&w, 42));
+    n++;
+    ADD(PROTO_BYE, proto_put_bye(&w, PROTO_BYE_QUIT));
+    n++;
+#undef ADD
+#undef FLOATS
+    /* The offsets above are this file's copy of PROTOCOL.md; check them. */
+    for (size_t i = 0; i < n; i++) {
+        assert_int_equal(decode_raw(s[i].type, s[i].payload, s[i].len), PROTO_OK);
+        for (size_t k = 0; k < s[i].nfloats; k++)
+            assert_true(s[i].floats[k] + 4 <= s[i].len);
+    }
+    return n;
+}
+
+/* ---- round trips -------------------------------------------------------- */
+
+static void test_hello_roundtrip(void **state)
+{
+    proto_writer w;
+    proto_msg m;
+    const proto_hello in = {PROTO_MAGIC, 0xbeef};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_hello(&w, &in);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, PROTO_SIZE_HELLO);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_HELLO);
+    assert_int_equal(m.u.hello.magic, PROTO_MAGIC);
+    assert_int_equal(m.u.hello.version, 0xbeef);
+}
+
+static void test_welcome_roundtrip(void **state)
+{
+    proto_writer w;
+    proto_msg m;
+    proto_welcome in = sample_welcome;
+
+    (void)state;
+    in.session_id = UINT64_MAX - 1;
+    in.tick_hz = 0xffff;
+    in.max_speed = 0.0f;
+    in.world_min[1] = in.world_max[1] = -0.0f; /* a flat world is allowed */
+    proto_writer_init(&w, big, BIG);
+    proto_put_welcome(&w, &in);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, PROTO_SIZE_WELCOME);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_WELCOME);
+    assert_int_equal(m.u.welcome.version, in.version);
+    assert_true(m.u.welcome.session_id == in.session_id);
+    assert_memory_equal(m.u.welcome.token, in.token, PROTO_TOKEN_SIZE);
+    assert_int_equal(m.u.welcome.tick_hz, in.tick_hz);
+    assert_same_floats(&m.u.welcome.aoi_radius, &in.aoi_radius, 1);
+    assert_same_floats(&m.u.welcome.max_speed, &in.max_speed, 1);
+    assert_same_floats(m.u.welcome.world_min, in.world_min, 3);
+    assert_same_floats(m.u.welcome.world_max, in.world_max, 3);
+}
+
+static void test_join_roundtrip(void **state)
+{
+    static const char *names[] = {
+        "a", "Ann Lee", "Zoë", "€uro", "\xf0\x9f\x98\x80 smile", "\xf4\x8f\xbf\xbf",
+        "abcdefghijklmnopqrstuvwxyz012345", /* exactly PROTO_NAME_MAX */
+    };
+    (void)state;
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_join in = {{names[i], (uint32_t)strlen(names[i])},
+                               {PROTO_BOX_MIN, 1.8f, PROTO_BOX_MAX}};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_join(&w, &in);
+        assert_int_equal(w.err, PROTO_OK);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 1 + strlen(names[i]) + 12);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_JOIN);
+        assert_str(m.u.join.name, names[i], strlen(names[i]));
+        /* The name points into the frame, not into a copy. */
+        assert_ptr_equal(m.u.join.name.ptr, (const char *)big + PROTO_HEADER_SIZE + 1);
+        assert_same_floats(m.u.join.box, in.box, 3);
+    }
+}
+
+static void test_join_ok_roundtrip(void **state)
+{
+    proto_writer w;
+    proto_msg m;
+    const proto_join_ok in = {0xfffffffe, {-0.0f, FLT_MAX, -FLT_MIN}, {0.1f, 4.0f, 2.0f}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_join_ok(&w, &in);
+    assert_int_equal(w.len, PROTO_SIZE_JOIN_OK);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_JOIN_OK);
+    assert_int_equal(m.u.join_ok.avatar_id, in.avatar_id);
+    assert_same_floats(m.u.join_ok.pos, in.pos, 3);
+    assert_same_floats(m.u.join_ok.box, in.box, 3);
+}
+
+static void test_move_roundtrip(void **state)
+{
+    const float odd[] = {0.0f, -0.0f, FLT_MAX, -FLT_MAX, FLT_MIN, bits_f32(1) /* denormal */,
+                         123.456f, -1e-30f};
+    (void)state;
+    for (size_t i = 0; i < sizeof odd / sizeof odd[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_move in = {(uint32_t)i * 0x10001u + 0xff000000u, {odd[i], -odd[i], 1.0f}};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_move(&w, &in);
+        assert_int_equal(w.len, PROTO_SIZE_MOVE);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_MOVE);
+        assert_int_equal(m.u.move.seq, in.seq);
+        assert_same_floats(m.u.move.pos, in.pos, 3);
+    }
+}
+
+/* Writes a snapshot of n entries (ids and positions derived from the index)
+ * and checks every field after decoding. */
+static void snapshot_roundtrip(uint32_t n)
+{
+    proto_writer w;
+    proto_msg m;
+    size_t at;
+
+    proto_writer_init(&w, big, BIG);
+    at = proto_put_snapshot_begin(&w, 0xdeadbeef, 0xfeedface);
+    assert_int_equal(at, 0);
+    for (uint32_t i = 0; i < n; i++) {
+        const proto_avatar a = {i * 3u + 1u, {(float)i, -(float)i, (float)i * 0.5f}};
+        proto_put_snapshot_add(&w, at, &a);
+    }
+    proto_put_snapshot_end(&w, at);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, PROTO_SIZE_SNAPSHOT(n));
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_SNAPSHOT);
+    assert_int_equal(m.u.snapshot.tick, 0xdeadbeef);
+    assert_int_equal(m.u.snapshot.ack_seq, 0xfeedface);
+    assert_int_equal(m.u.snapshot.count, n);
+    for (uint16_t i = 0; i < m.u.snapshot.count; i++) {
+        proto_avatar got;
+        const float want[3] = {(float)i, -(float)i, (float)i * 0.5f};
+
+        proto_snapshot_entry(&m.u.snapshot, i, &got);
+        assert_int_equal(got.id, (uint32_t)i * 3u + 1u);
+        assert_same_floats(got.pos, want, 3);
+    }
+}
+
+static void test_snapshot_empty(void **state)
+{
+    (void)state;
+    snapshot_roundtrip(0);
+}
+
+static void test_snapshot_one(void **state)
+{
+    (void)state;
+    snapshot_roundtrip(1);
+}
+
+static void test_snapshot_many(void **state)
+{
+    (void)state;
+    snapshot_roundtrip(300);
+}
+
+/* The writer holds exactly PROTO_SNAPSHOT_MAX_ENTRIES, the frame then fits
+ * the joined cap, and one entry more drops the whole snapshot. */
+static void test_snapshot_max_entries(void **state)
+{
+    proto_writer w;
+    proto_frame f;
+    size_t at;
+    const proto_avatar a = {1, {0.0f, 0.0f, 0.0f}};
+
+    (void)state;
+    snapshot_roundtrip(PROTO_SNAPSHOT_MAX_ENTRIES);
+    assert_int_equal(proto_frame_parse(big, BIG, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_true(f.size - 4 <= PROTO_MAX_LEN);
+    assert_true(f.size - 4 + PROTO_SNAPSHOT_ENTRY_SIZE > PROTO_MAX_LEN);
+
+    proto_writer_init(&w, big, BIG);
+    proto_put_ping(&w, 9);
+    at = proto_put_snapshot_begin(&w, 1, 2);
+    assert_int_equal(at, PROTO_SIZE_PING);
+    for (uint32_t i = 0; i < PROTO_SNAPSHOT_MAX_ENTRIES; i++)
+        proto_put_snapshot_add(&w, at, &a);
+    assert_int_equal(w.err, PROTO_OK);
+    proto_put_snapshot_add(&w, at, &a);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, at);
+    proto_put_snapshot_end(&w, at);
+    assert_int_equal(w.len, at);
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(f.type, PROTO_PING);
+    assert_int_equal(f.size, w.len);
+}
+
+static void test_avatar_joined_roundtrip(void **state)
+{
+    proto_writer w;
+    proto_msg m;
+    const proto_avatar_joined in = {77, {"Zoë", 4}, {1.5f, -0.0f, 3.25f}, {0.6f, 1.7f, 0.4f}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_avatar_joined(&w, &in);
+    assert_int_equal(w.len, PROTO_HEADER_SIZE + 4 + 1 + 4 + 24);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_AVATAR_JOINED);
+    assert_int_equal(m.u.avatar_joined.id, 77);
+    assert_str(m.u.avatar_joined.name, "Zoë", 4);
+    assert_same_floats(m.u.avatar_joined.pos, in.pos, 3);
+    assert_same_floats(m.u.avatar_joined.box, in.box, 3);
+}
+
+static void test_avatar_left_roundtrip(void **state)
+{
+    (void)state;
+    for (uint8_t reason = 0; reason <= PROTO_LEFT_DISCONNECTED; reason++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_avatar_left in = {0xffffffff, reason};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_avatar_left(&w, &in);
+        assert_int_equal(w.len, PROTO_SIZE_AVATAR_LEFT);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_AVATAR_LEFT);
+        assert_int_equal(m.u.avatar_left.id, 0xffffffff);
+        assert_int_equal(m.u.avatar_left.reason, reason);
+    }
+}
+
+static void test_error_roundtrip(void **state)
+{
+    static const char *texts[] = {"", "move sequence did not increase", "name “Zoë” taken"};
+    (void)state;
+    for (size_t i = 0; i < sizeof texts / sizeof texts[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const uint16_t code = (uint16_t)(PROTO_ERR_FRAME_EMPTY + i * 1000);
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_error(&w, code, texts[i]);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 3 + strlen(texts[i]));
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_ERROR);
+        assert_int_equal(m.u.error.code, code);
+        assert_str(m.u.error.message, texts[i], strlen(texts[i]));
+    }
+}
+
+static void test_ping_pong_roundtrip(void **state)
+{
+    const uint64_t stamps[] = {0, 1, 0x8000000000000000u, UINT64_MAX};
+
+    (void)state;
+    for (size_t i = 0; i < 4; i++) {
+        proto_writer w;
+        proto_msg m;
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_ping(&w, stamps[i]);
+        proto_put_pong(&w, stamps[i]);
+        assert_int_equal(w.len, 2 * PROTO_SIZE_PING);
+        decode_all(big, PROTO_SIZE_PING, &m);
+        assert_int_equal(m.type, PROTO_PING);
+        assert_true(m.u.ping.stamp == stamps[i]);
+        decode_all(big + PROTO_SIZE_PING, PROTO_SIZE_PING, &m);
+        assert_int_equal(m.type, PROTO_PONG);
+        assert_true(m.u.ping.stamp == stamps[i]);
+    }
+}
+
+static void test_bye_roundtrip(void **state)
+{
+    (void)state;
+    for (uint8_t reason = 0; reason <= PROTO_BYE_KICKED; reason++) {
+        proto_writer w;
+        proto_msg m;
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_bye(&w, reason);
+        assert_int_equal(w.len, PROTO_SIZE_BYE);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_BYE);
+        assert_int_equal(m.u.bye.reason, reason);
+    }
+}
+
+/* The *_MAX size macros are what the largest strings produce. */
+static void test_max_sizes(void **state)
+{
+    char name[PROTO_NAME_MAX + 1], text[PROTO_MESSAGE_MAX + 1];
+    proto_writer w;
+    const proto_join join = {{name, PROTO_NAME_MAX}, {1, 1, 1}};
+    const proto_avatar_joined aj = {1, {name, PROTO_NAME_MAX}, {0, 0, 0}, {1, 1, 1}};
+
+    (void)state;
+    memset(name, 'n', sizeof name);
+    memset(text, 't', PROTO_MESSAGE_MAX);
+    text[PROTO_MESSAGE_MAX] = 0;
+    proto_writer_init(&w, big, BIG);
+    proto_put_join(&w, &join);
+    assert_int_equal(w.len, PROTO_SIZE_JOIN_MAX);
+    assert_true(w.len - 4 <= PROTO_MAX_LEN_PREJOIN);
+    proto_writer_init(&w, big, BIG);
+    proto_put_avatar_joined(&w, &aj);
+    assert_int_equal(w.len, PROTO_SIZE_AVATAR_JOINED_MAX);
+    proto_writer_init(&w, big, BIG);
+    proto_put_error(&w, PROTO_ERR_INTERNAL, text);
+    assert_int_equal(w.len, PROTO_SIZE_ERROR_MAX);
+}
+
+/* Names are cut at PROTO_NAME_MAX bytes, never inside a character. */
+static void test_name_truncation(void **state)
+{
+    static const struct {
+        const char *in;
+        size_t want;
+    } cases[] = {
+        {"abcdefghijklmnopqrstuvwxyz0123456789", 32},
+        {"abcdefghijklmnopqrstuvwxyz01234\xc3\xa9", 31},      /* é straddles 32 */
+        {"abcdefghijklmnopqrstuvwxyz0123\xf0\x9f\x98\x80", 30}, /* 4-byte char */
+        {"abcdefghijklmnopqrstuvwxyz012\xe2\x82\xac", 32},     /* € ends at 32 */
+    };
+    (void)state;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_join join = {{cases[i].in, (uint32_t)strlen(cases[i].in)}, {1, 1, 1}};
+        const proto_avatar_joined aj = {3, {cases[i].in, (uint32_t)strlen(cases[i].in)},
+                                        {0, 0, 0}, {1, 1, 1}};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_join(&w, &join);
+        decode_all(big, w.len, &m);
+        assert_str(m.u.join.name, cases[i].in, cases[i].want);
+        proto_writer_init(&w, big, BIG);
+        proto_put_avatar_joined(&w, &aj);
+        decode_all(big, w.len, &m);
+        assert_str(m.u.avatar_joined.name, cases[i].in, cases[i].want);
+    }
+}
+
+/* Error texts are cut at PROTO_MESSAGE_MAX on a character boundary, and
+ * bytes the decoder would refuse become '?', so the frame always decodes. */
+static void test_error_message_cleaning(void **state)
+{
+    char in[400], want[400];
+    proto_writer w;
+    proto_msg m;
+
+    (void)state;
+    memset(in, 'x', 250);
+    in[250] = 0;
+    proto_writer_init(&w, big, BIG);
+    proto_put_error(&w, PROTO_ERR_INTERNAL, in);
+    decode_all(big, w.len, &m);
+    assert_str(m.u.error.message, in, PROTO_MESSAGE_MAX);
+
+    memset(in, 'x', 199);
+    strcpy(in + 199, "\xe2\x82\xac tail"); /* € would end at byte 202 */
+    proto_writer_init(&w, big, BIG);
+    proto_put_error(&w, PROTO_ERR_INTERNAL, in);
+    decode_all(big, w.len, &m);
+    assert_str(m.u.error.message, in, 199);
+
+    memset(in, 'x', 199);
+    strcpy(in + 199, "\xffyz"); /* a replacement still fits at 199 */
+    proto_writer_init(&w, big, BIG);
+    proto_put_error(&w, PROTO_ERR_INTERNAL, in);
+    decode_all(big, w.len, &m);
+    memcpy(want, in, 199);
+    want[199] = '?';
+    assert_str(m.u.error.message, want, 200);
+
+    memset(in, 'x', 200);
+    strcpy(in + 200, "\xff"); /* a replacement past the limit is dropped too */
+    proto_writer_init(&w, big, BIG);
+    proto_put_error(&w, PROTO_ERR_INTERNAL, in);
+    decode_all(big, w.len, &m);
+    assert_str(m.u.error.message, in, 200);
+
+    proto_writer_init(&w, big, BIG);
+    proto_put_error(&w, PROTO_ERR_BAD_STRING, "bad name \"a\nb\" \x7f\xc3(\xed\xa0\x80 ok é");
+    decode_all(big, w.len, &m);
+    strcpy(want, "bad name \"a?b\" ?" "?(??" "? ok é"); /* split: no trigraphs */
+    assert_str(m.u.error.message, want, strlen(want));
+}
+
+/* A name the writer cannot fix (empty) is still encoded, and the decoder
+ * refuses it: the server, not the client's codec, rejects bad names. */
+static void test_empty_name_encodes(void **state)
+{
+    proto_writer w;
+    proto_frame f;
+    proto_msg m;
+    const proto_join join = {{NULL, 0}, {1, 1, 1}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_join(&w, &join);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN_PREJOIN, &f), PROTO_OK);
+    assert_int_equal(proto_decode(&f, &m), PROTO_ERR_BAD_STRING);
+}
+
+/* Several frames back to back parse one at a time, and every cut of the
+ * stream that is not at a frame boundary reads as incomplete. */
+static void test_stream_of_frames(void **state)
+{
+    const uint16_t want[] = {PROTO_HELLO, PROTO_JOIN, PROTO_MOVE, PROTO_PING, PROTO_BYE};
+    size_t ends[5], off = 0, k = 0;
+    proto_writer w;
+    const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
+    const proto_join join = {{"ann", 3}, {1, 1, 1}};
+    const proto_move move = {1, {0, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_hello(&w, &hello);
+    ends[0] = w.len;
+    proto_put_join(&w, &join);
+    ends[1] = w.len;
+    proto_put_move(&w, &move);
+    ends[2] = w.len;
+    proto_put_ping(&w, 5);
+    ends[3] = w.len;
+    proto_put_bye(&w, PROTO_BYE_QUIT);
+    ends[4] = w.len;
+    assert_int_equal(w.err, PROTO_OK);
+
+    while (off < w.len) {
+        proto_frame f;
+        proto_msg m;
+
+        assert_int_equal(proto_frame_parse(big + off, w.len - off, PROTO_MAX_LEN_PREJOIN, &f), PROTO_OK);
+        assert_int_equal(f.type, want[k]);
+        assert_int_equal(proto_decode(&f, &m), PROTO_OK);
+        off += f.size;
+        assert_int_equal(off, ends[k]);
+        k++;
+    }
+    assert_int_equal(k, 5);
+
+    off = 0;
+    for (k = 0; k < 5; k++) {
+        for (size_t cut = off; cut < ends[k]; cut++) {
+            proto_frame f;
+            assert_int_equal(proto_frame_parse(big + off, cut - off, PROTO_MAX_LEN, &f),
+                             PROTO_INCOMPLETE);
+        }
+        off = ends[k];
+    }
+}
+
+/* The worked examples in PROTOCOL.md, byte for byte. */
+static void test_worked_examples(void **state)
+{
+    static const uint8_t hello_bytes[] = {0x08, 0x00, 0x00, 0x00, 0x01, 0x00,
+                                          0x43, 0x56, 0x52, 0x45, 0x01, 0x00};
+    static const uint8_t move_bytes[] = {0x12, 0x00, 0x00, 0x00, 0x05, 0x00, 0x01, 0x00,
+                                         0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
+                                         0x00, 0x00, 0x00, 0x00, 0x20, 0xc0};
+    proto_writer w;
+    const proto_hello hello = {PROTO_MAGIC, 1};
+    const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
+
+    (void)state;
+    assert_int_equal(PROTO_VERSION, 1);
+    proto_writer_init(&w, big, BIG);
+    proto_put_hello(&w, &hello);
+    assert_int_equal(w.len, sizeof hello_bytes);
+    assert_memory_equal(big, hello_bytes, sizeof hello_bytes);
+    proto_writer_init(&w, big, BIG);
+    proto_put_move(&w, &move);
+    assert_int_equal(w.len, sizeof move_bytes);
+    assert_memory_equal(big, move_bytes, sizeof move_bytes);
+}
+
+/* ---- writer overflow ---------------------------------------------------- */
+
+static void test_writer_exact_fit(void **state)
+{
+    uint8_t b[PROTO_SIZE_MOVE];
+    proto_writer w;
+    const proto_move move = {1, {0, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, b, sizeof b);
+    proto_put_move(&w, &move);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, sizeof b);
+    proto_put_bye(&w, 0);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, sizeof b);
+}
+
+static void test_writer_overflow_first_frame(void **state)
+{
+    uint8_t b[PROTO_SIZE_MOVE - 1];
+    proto_writer w;
+    const proto_move move = {1, {0, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, b, sizeof b);
+    proto_put_move(&w, &move);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, 0);
+    /* Sticky: a frame that would fit is not written either. */
+    proto_put_bye(&w, 0);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, 0);
+}
+
+/* After an overflow len stays at the end of the last whole frame, later
+ * puts of every kind do nothing, and what is there parses cleanly. */
+static void test_writer_overflow_sticky(void **state)
+{
+    uint8_t b[2 * PROTO_SIZE_PING + PROTO_SIZE_PING / 2];
+    proto_writer w;
+    proto_frame f;
+    size_t at, off = 0;
+    const proto_hello hello = {PROTO_MAGIC, 1};
+    const proto_join join = {{"a", 1}, {1, 1, 1}};
+    const proto_join_ok jok = {1, {0, 0, 0}, {1, 1, 1}};
+    const proto_move move = {1, {0, 0, 0}};
+    const proto_avatar_joined aj = {1, {"a", 1}, {0, 0, 0}, {1, 1, 1}};
+    const proto_avatar_left al = {1, 0};
+    const proto_avatar a = {1, {0, 0, 0}};
+
+    (void)state;
+    memset(b, 0xee, sizeof b);
+    proto_writer_init(&w, b, sizeof b);
+    proto_put_ping(&w, 1);
+    proto_put_ping(&w, 2);
+    proto_put_ping(&w, 3);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, 2 * PROTO_SIZE_PING);
+
+    proto_put_bye(&w, 0); /* would fit in the 7 bytes left */
+    proto_put_hello(&w, &hello);
+    proto_put_welcome(&w, &sample_welcome);
+    proto_put_join(&w, &join);
+    proto_put_join_ok(&w, &jok);
+    proto_put_move(&w, &move);
+    proto_put_avatar_joined(&w, &aj);
+    proto_put_avatar_left(&w, &al);
+    proto_put_error(&w, PROTO_ERR_INTERNAL, "x");
+    proto_put_pong(&w, 4);
+    at = proto_put_snapshot_begin(&w, 1, 1);
+    assert_int_equal(at, w.len);
+    proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_end(&w, at);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, 2 * PROTO_SIZE_PING);
+    for (size_t i = w.len; i < sizeof b; i++)
+        assert_int_equal(b[i], 0xee);
+
+    for (int i = 0; i < 2; i++) {
+        assert_int_equal(proto_frame_parse(b + off, w.len - off, PROTO_MAX_LEN, &f), PROTO_OK);
+        off += f.size;
+    }
+    assert_int_equal(off, w.len);
+}
+
+static void test_writer_null_buffer(void **state)
+{
+    proto_writer w;
+    size_t at;
+    const proto_avatar a = {1, {0, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, NULL, 0);
+    proto_put_ping(&w, 1);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    at = proto_put_snapshot_begin(&w, 1, 1);
+    proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_end(&w, at);
+    assert_int_equal(at, 0);
+    assert_int_equal(w.len, 0);
+}
+
+static void test_snapshot_begin_no_room(void **state)
+{
+    uint8_t b[PROTO_SIZE_SNAPSHOT(0) - 1];
+    proto_writer w;
+    size_t at;
+    const proto_avatar a = {1, {0, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, b, sizeof b);
+    at = proto_put_snapshot_begin(&w, 1, 1);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(at, 0);
+    proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_end(&w, at);
+    assert_int_equal(w.len, 0);
+}
+
+/* Running out of room mid-snapshot drops the snapshot but keeps the frames
+ * before it. */
+static void test_snapshot_add_no_room(void **state)
+{
+    uint8_t b[PROTO_SIZE_PING + PROTO_SIZE_SNAPSHOT(2) + PROTO_SNAPSHOT_ENTRY_SIZE - 1];
+    proto_writer w;
+    proto_frame f;
+    proto_msg m;
+    size_t at;
+    const proto_avatar a = {1, {0, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, b, sizeof b);
+    proto_put_ping(&w, 77);
+    at = proto_put_snapshot_begin(&w, 1, 1);
+    assert_int_equal(at, PROTO_SIZE_PING);
+    proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_add(&w, at, &a);
+    assert_int_equal(w.err, PROTO_OK);
+    proto_put_snapshot_add(&w, at, &a);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, at);
+    proto_put_snapshot_end(&w, at);
+    assert_int_equal(w.len, at);
+    decode_all(b, w.len, &m);
+    assert_int_equal(m.type, PROTO_PING);
+    assert_true(m.u.ping.stamp == 77);
+    assert_int_equal(proto_frame_parse(b, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+}
+
+/* A snapshot after other frames gets the right offset, count and length. */
+static void test_snapshot_after_frames(void **state)
+{
+    proto_writer w;
+    proto_msg m;
+    size_t at;
+    const proto_avatar a = {5, {1, 2, 3}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_bye(&w, 0);
+    at = proto_put_snapshot_begin(&w, 9, 8);
+    assert_int_equal(at, PROTO_SIZE_BYE);
+    proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_end(&w, at);
+    proto_put_pong(&w, 3);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, PROTO_SIZE_BYE + PROTO_SIZE_SNAPSHOT(2) + PROTO_SIZE_PING);
+    decode_all(big + at, PROTO_SIZE_SNAPSHOT(2), &m);
+    assert_int_equal(m.u.snapshot.count, 2);
+    decode_all(big + at + PROTO_SIZE_SNAPSHOT(2), PROTO_SIZE_PING, &m);
+    assert_int_equal(m.type, PROTO_PONG);
+}
+
+/* ---- framing ------------------------------------------------------------ */
+
+static void test_frame_incomplete_length(void **state)
+{
+    const uint8_t b[4] = {0xff, 0xff, 0xff, 0xff};
+    proto_frame f;
+
+    (void)state;
+    for (size_t n = 0; n < 4; n++)
+        assert_int_equal(proto_frame_parse(b, n, PROTO_MAX_LEN, &f), PROTO_INCOMPLETE);
+}
+
+static void test_frame_empty(void **state)
+{
+    uint8_t b[16] = {0};
+    proto_frame f;
+
+    (void)state;
+    for (uint32_t len = 0; len < PROTO_LEN_MIN; len++) {
+        wr_u32(b, len);
+        assert_int_equal(proto_frame_parse(b, 4, PROTO_MAX_LEN, &f), PROTO_ERR_FRAME_EMPTY);
+        assert_int_equal(proto_frame_parse(b, sizeof b, PROTO_MAX_LEN_PREJOIN, &f),
+                         PROTO_ERR_FRAME_EMPTY);
+    }
+    /* Length 2 is the smallest frame: a type and no payload. */
+    wr_u32(b, 2);
+    wr_u16(b + 4, PROTO_BYE);
+    assert_int_equal(proto_frame_parse(b, sizeof b, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(f.size, 6);
+    assert_int_equal(f.payload_len, 0);
+    assert_int_equal(f.type, PROTO_BYE);
+}
+
+/* An oversized length is refused as soon as its 4 bytes are in, under
+ * either cap, before any payload is buffered. */
+static void test_frame_too_long(void **state)
+{
+    static const struct {
+        uint32_t cap, len;
+    } cases[] = {
+        {PROTO_MAX_LEN, PROTO_MAX_LEN + 1},
+        {PROTO_MAX_LEN, 0x7fffffff},
+        {PROTO_MAX_LEN, 0xfffffffc},
+        {PROTO_MAX_LEN, 0xffffffff},
+        {PROTO_MAX_LEN_PREJOIN, PROTO_MAX_LEN_PREJOIN + 1},
+        {PROTO_MAX_LEN_PREJOIN, PROTO_MAX_LEN},
+        {PROTO_MAX_LEN_PREJOIN, 0xffffffff},
+    };
+    uint8_t b[8] = {0};
+    proto_frame f;
+
+    (void)state;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        wr_u32(b, cases[i].len);
+        assert_int_equal(proto_frame_parse(b, 4, cases[i].cap, &f), PROTO_ERR_FRAME_TOO_LONG);
+        assert_int_equal(proto_frame_parse(b, sizeof b, cases[i].cap, &f), PROTO_ERR_FRAME_TOO_LONG);
+    }
+    /* Over the pre-join cap but within the joined one: just incomplete. */
+    wr_u32(b, PROTO_MAX_LEN_PREJOIN + 1);
+    assert_int_equal(proto_frame_parse(b, sizeof b, PROTO_MAX_LEN, &f), PROTO_INCOMPLETE);
+}
+
+/* A length exactly at the cap is accepted under that cap. */
+static void test_frame_at_cap(void **state)
+{
+    proto_frame f;
+
+    (void)state;
+    memset(big, 0, PROTO_MAX_LEN + 4);
+    wr_u32(big, PROTO_MAX_LEN);
+    wr_u16(big + 4, PROTO_SNAPSHOT);
+    assert_int_equal(proto_frame_parse(big, PROTO_MAX_LEN + 3, PROTO_MAX_LEN, &f), PROTO_INCOMPLETE);
+    assert_int_equal(proto_frame_parse(big, PROTO_MAX_LEN + 4, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(f.size, PROTO_MAX_LEN + 4);
+    assert_int_equal(f.payload_len, PROTO_MAX_LEN - 2);
+
+    wr_u32(big, PROTO_MAX_LEN_PREJOIN);
+    assert_int_equal(proto_frame_parse(big, PROTO_MAX_LEN_PREJOIN + 4, PROTO_MAX_LEN_PREJOIN, &f),
+                     PROTO_OK);
+    assert_int_equal(f.size, PROTO_MAX_LEN_PREJOIN + 4);
+}
+
+static void test_frame_incomplete_header_and_payload(void **state)
+{
+    uint8_t b[32] = {0};
+    proto_frame f;
+
+    (void)state;
+    wr_u32(b, 2 + 16);
+    wr_u16(b + 4, PROTO_MOVE);
+    assert_int_equal(proto_frame_parse(b, 5, PROTO_MAX_LEN, &f), PROTO_INCOMPLETE); /* half a type */
+    for (size_t n = 6; n < 22; n++)
+        assert_int_equal(proto_frame_parse(b, n, PROTO_MAX_LEN, &f), PROTO_INCOMPLETE);
+    assert_int_equal(proto_frame_parse(b, 22, PROTO_MAX_LEN, &f), PROTO_OK);
+    /* Bytes after the frame belong to the next one. */
+    assert_int_equal(proto_frame_parse(b, sizeof b, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(f.size, 22);
+    assert_int_equal(f.payload_len, 16);
+}
+
+/* ---- decoding: classes that apply to every type ------------------------- */
+
+static void test_unknown_and_reserved_types(void **state)
+{
+    const uint8_t payload[16] = {0};
+
+    (void)state;
+    for (uint32_t t = 0; t <= 0xffff; t++) {
+        if (t >= PROTO_HELLO && t <= PROTO_BYE)
+            continue;
+        assert_int_equal(decode_raw((uint16_t)t, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
+        assert_int_equal(decode_raw((uint16_t)t, NULL, 0), PROTO_ERR_UNKNOWN_TYPE);
+    }
+    for (uint16_t t = PROTO_RESERVED_FIRST; t <= PROTO_RESERVED_LAST; t++)
+        assert_int_equal(decode_raw(t, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
+}
+
+/* Every proper prefix of every sample is short, except a cut inside a
+ * string's text, which is a string running past the end of the frame. */
+static void test_short_every_type(void **state)
+{
+    sample s[13];
+    size_t n = build_samples(s);
+
+    (void)state;
+    assert_int_equal(n, 12);
+    for (size_t i = 0; i < n; i++) {
+        for (size_t k = 0; k < s[i].len; k++) {
+            int want = PROTO_ERR_SHORT;
+
+            if (s[i].has_str && k > s[i].str_at && k <= s[i].str_at + s[i].str_len)
+                want = PROTO_ERR_BAD_STRING;
+            if (decode_raw(s[i].type, s[i].payload, k) != want)
+                fail_msg("%s cut at %zu: got %d want %d", proto_type_name(s[i].type), k,
+                         decode_raw(s[i].type, s[i].payload, k), want);
+        }
+    }
+}
+
+static void test_trailing_every_type(void **state)
+{
+    sample s[13];
+    size_t n = build_samples(s);
+
+    (void)state;
+    for (size_t i = 0; i < n; i++) {
+        uint8_t p[96] = {0};
+
+        memcpy(p, s[i].payload, s[i].len);
+        for (size_t extra = 1; extra <= 17; extra++)
+            assert_int_equal(decode_raw(s[i].type, p, s[i].len + extra), PROTO_ERR_TRAILING);
+    }
+}
+
+/* NaN (quiet, signalling, negative) and both infinities in every float
+ * field of every type. */
+static void test_not_finite_every_float(void **state)
+{
+    static const uint32_t bad[] = {0x7fc00000u, 0x7f800001u, 0xffc00000u, 0x7fffffffu,
+                                   0x7f800000u, 0xff800000u};
+    sample s[13];
+    size_t n = build_samples(s);
+    size_t tried = 0;
+
+    (void)state;
+    for (size_t i = 0; i < n; i++) {
+        for (size_t k = 0; k < s[i].nfloats; k++) {
+            for (size_t b = 0; b < sizeof bad / sizeof bad[0]; b++) {
+                uint8_t p[64];
+
+                memcpy(p, s[i].payload, s[i].len);
+                wr_u32(p + s[i].floats[k], bad[b]);
+                if (decode_raw(s[i].type, p, s[i].len) != PROTO_ERR_NOT_FINITE)
+                    fail_msg("%s float at %zu = %08x accepted", proto_type_name(s[i].type),
+                             s[i].floats[k], (unsigned)bad[b]);
+                tried++;
+            }
+        }
+    }
+    assert_int_equal(tried, (8 + 3 + 6 + 3 + 6 + 6) * 6);
+}
+
+/* Box edges must lie in [PROTO_BOX_MIN, PROTO_BOX_MAX] in join, join_ok and
+ * avatar_joined, with both bounds included. */
+static void test_box_range(void **state)
+{
+    const float bad[] = {0.0f, -0.0f, -1.0f, bits_f32(f32_bits(PROTO_BOX_MIN) - 1),
+                         bits_f32(f32_bits(PROTO_BOX_MAX) + 1), 4.5f, 1e30f, -FLT_MAX, FLT_MAX};
+    const float good[] = {PROTO_BOX_MIN, PROTO_BOX_MAX, 1.0f, 0.25f};
+    sample s[13];
+    size_t n = build_samples(s), tried = 0;
+
+    (void)state;
+    for (size_t i = 0; i < n; i++) {
+        for (size_t k = 0; k < s[i].nboxes; k++) {
+            uint8_t p[64];
+
+            memcpy(p, s[i].payload, s[i].len);
+            for (size_t b = 0; b < sizeof bad / sizeof bad[0]; b++) {
+                wr_f32(p + s[i].boxes[k], bad[b]);
+                assert_int_equal(decode_raw(s[i].type, p, s[i].len), PROTO_ERR_BAD_VALUE);
+                tried++;
+            }
+            for (size_t g = 0; g < sizeof good / sizeof good[0]; g++) {
+                wr_f32(p + s[i].boxes[k], good[g]);
+                assert_int_equal(decode_raw(s[i].type, p, s[i].len), PROTO_OK);
+            }
+        }
+    }
+    assert_int_equal(tried, 3 * 3 * (sizeof bad / sizeof bad[0]));
+}
+
+/* ---- decoding: strings -------------------------------------------------- */
+
+/* Decodes a string of n bytes placed in a valid message of type t (join,
+ * avatar_joined or error) and returns the status. */
+static int string_status(uint16_t t, const char *text, size_t n)
+{
+    uint8_t p[400];
+    size_t at = 0;
+
+    assert_true(n <= 255);
+    if (t == PROTO_AVATAR_JOINED) {
+        wr_u32(p, 9);
+        at = 4;
+    } else if (t == PROTO_ERROR) {
+        wr_u16(p, PROTO_ERR_INTERNAL);
+        at = 2;
+    }
+    p[at++] = (uint8_t)n;
+    memcpy(p + at, text, n);
+    at += n;
+    if (t == PROTO_AVATAR_JOINED) {
+        for (int i = 0; i < 3; i++, at += 4)
+            wr_f32(p + at, 0.0f);
+    }
+    if (t != PROTO_ERROR) {
+        for (int i = 0; i < 3; i++, at += 4)
+            wr_f32(p + at, 1.0f);
+    }
+    return decode_raw(t, p, at);
+}
+
+static const char *const bad_text[] = {
+    "\x00", "a\x01", "\x1f", "\x7f", "a\nb", "tab\there", "a\rb", "\x1b[31m",
+    "\x80", "a\xbf", "\xc0\x80", "\xc1\xbf", "\xe0\x80\x80", "\xe0\x9f\xbf",
+    "\xf0\x80\x80\x80", "\xf0\x8f\xbf\xbf", "\xed\xa0\x80", "\xed\xbf\xbf",
+    "\xf4\x90\x80\x80", "\xf5\x80\x80\x80", "\xf8\x88\x80\x80\x80", "\xfe", "\xff",
+    "\xc3", "ab\xe2\x82", "ab\xf0\x9f\x98", "\xc3\x41", "\xe2\x28\xa1",
+};
+/* Lengths, because several bad texts contain NUL. */
+static size_t bad_text_len(size_t i) { return i == 0 ? 1 : strlen(bad_text[i]); }
+
+static const char *const good_text[] = {
+    " ", "~", "a b", "Zoë", "\xe2\x82\xac", "\xf0\x9f\x98\x80", "\xf4\x8f\xbf\xbf",
+    "\xef\xbf\xbd", "\xed\x9f\xbf", "\xee\x80\x80", "\xc2\xa0",
+};
+
+static void test_name_rules(void **state)
+{
+    const uint16_t types[] = {PROTO_JOIN, PROTO_AVATAR_JOINED};
+    char longest[PROTO_NAME_MAX + 1];
+
+    (void)state;
+    memset(longest, 'x', sizeof longest);
+    for (size_t t = 0; t < 2; t++) {
+        for (size_t i = 0; i < sizeof bad_text / sizeof bad_text[0]; i++) {
+            if (string_status(types[t], bad_text[i], bad_text_len(i)) != PROTO_ERR_BAD_STRING)
+                fail_msg("%s accepted bad text #%zu", proto_type_name(types[t]), i);
+        }
+        for (size_t i = 0; i < sizeof good_text / sizeof good_text[0]; i++)
+            assert_int_equal(string_status(types[t], good_text[i], strlen(good_text[i])), PROTO_OK);
+        assert_int_equal(string_status(types[t], "", 0), PROTO_ERR_BAD_STRING);
+        assert_int_equal(string_status(types[t], longest, PROTO_NAME_MAX), PROTO_OK);
+        assert_int_equal(string_status(types[t], longest, PROTO_NAME_MAX + 1), PROTO_ERR_BAD_STRING);
+    }
+}
+
+static void test_message_rules(void **state)
+{
+    char longest[256];
+
+    (void)state;
+    memset(longest, 'x', sizeof longest);
+    for (size_t i = 0; i < sizeof bad_text / sizeof bad_text[0]; i++)
+        assert_int_equal(string_status(PROTO_ERROR, bad_text[i], bad_text_len(i)), PROTO_ERR_BAD_STRING);
+    for (size_t i = 0; i < sizeof good_text / sizeof good_text[0]; i++)
+        assert_int_equal(string_status(PROTO_ERROR, good_text[i], strlen(good_text[i])), PROTO_OK);
+    assert_int_equal(string_status(PROTO_ERROR, "", 0), PROTO_OK);
+    assert_int_equal(string_status(PROTO_ERROR, longest, PROTO_MESSAGE_MAX), PROTO_OK);
+    assert_int_equal(string_status(PROTO_ERROR, longest, PROTO_MESSAGE_MAX + 1), PROTO_ERR_BAD_STRING);
+    assert_int_equal(string_status(PROTO_ERROR, longest, 255), PROTO_ERR_BAD_STRING);
+}
+
+/* A string length that runs past the end of the frame is a bad string, for
+ * each type that carries one, whatever the declared length. */
+static void test_string_past_end(void **state)
+{
+    uint8_t p[8];
+
+    (void)state;
+    p[0] = 4;
+    memcpy(p + 1, "abc", 3);
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 4), PROTO_ERR_BAD_STRING);
+    p[0] = 255;
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 4), PROTO_ERR_BAD_STRING);
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 1), PROTO_ERR_BAD_STRING);
+
+    wr_u32(p, 1);
+    p[4] = 3;
+    memcpy(p + 5, "ab", 2);
+    assert_int_equal(decode_raw(PROTO_AVATAR_JOINED, p, 7), PROTO_ERR_BAD_STRING);
+
+    wr_u16(p, PROTO_ERR_INTERNAL);
+    p[2] = 1;
+    assert_int_equal(decode_raw(PROTO_ERROR, p, 3), PROTO_ERR_BAD_STRING);
+    p[2] = 0;
+    assert_int_equal(decode_raw(PROTO_ERROR, p, 3), PROTO_OK);
+    /* The length byte itself missing is a short payload. */
+    assert_int_equal(decode_raw(PROTO_ERROR, p, 2), PROTO_ERR_SHORT);
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 0), PROTO_ERR_SHORT);
+}
+
+/* ---- decoding: per-type values ------------------------------------------ */
+
+static void test_hello_magic(void **state)
+{
+    const uint32_t bad[] = {0, 0x43565245u /* "CVRE" read big-endian */, PROTO_MAGIC ^ 1u,
+                            PROTO_MAGIC ^ 0x80000000u, 0xffffffffu};
+    uint8_t p[6];
+    proto_msg m;
+
+    (void)state;
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        wr_u32(p, bad[i]);
+        wr_u16(p + 4, PROTO_VERSION);
+        assert_int_equal(decode_raw(PROTO_HELLO, p, 6), PROTO_ERR_BAD_MAGIC);
+    }
+    /* The magic is the ASCII bytes "CVRE" in order. */
+    memcpy(p, "CVRE", 4);
+    /* The version is the server's business, not the codec's. */
+    wr_u16(p + 4, 0);
+    assert_int_equal(decode_raw_msg(PROTO_HELLO, p, 6, &m), PROTO_OK);
+    assert_int_equal(m.u.hello.version, 0);
+    wr_u16(p + 4, 0xffff);
+    assert_int_equal(decode_raw_msg(PROTO_HELLO, p, 6, &m), PROTO_OK);
+    assert_int_equal(m.u.hello.version, 0xffff);
+}
+
+static void test_welcome_values(void **state)
+{
+    sample s[13];
+    uint8_t p[64];
+
+    (void)state;
+    build_samples(s);
+    assert_int_equal(s[1].type, PROTO_WELCOME);
+#define TRY(off, put, want)                                              \
+    do {                                                                 \
+        memcpy(p, s[1].payload, s[1].len);                               \
+        put(p + (off));                                                  \
+        assert_int_equal(decode_raw(PROTO_WELCOME, p, s[1].len), want);  \
+    } while (0)
+#define TICK0(q) wr_u16(q, 0)
+#define NEG(q) wr_f32(q, -1.0f)
+#define ZERO(q) wr_f32(q, 0.0f)
+#define NZERO(q) wr_f32(q, -0.0f)
+#define HUGE_MIN(q) wr_f32(q, 1000.0f)
+#define SAME_MIN(q) wr_f32(q, 0.0f)
+    TRY(26, TICK0, PROTO_ERR_BAD_VALUE);
+    TRY(28, ZERO, PROTO_ERR_BAD_VALUE);  /* aoi radius */
+    TRY(28, NZERO, PROTO_ERR_BAD_VALUE);
+    TRY(28, NEG, PROTO_ERR_BAD_VALUE);
+    TRY(32, NEG, PROTO_ERR_BAD_VALUE);   /* max speed */
+    TRY(32, ZERO, PROTO_OK);
+    TRY(36, HUGE_MIN, PROTO_ERR_BAD_VALUE); /* world_min.x > world_max.x */
+    TRY(44, HUGE_MIN, PROTO_ERR_BAD_VALUE);
+    TRY(52, NEG, PROTO_ERR_BAD_VALUE);      /* world_max.y < world_min.y (0) */
+    TRY(52, SAME_MIN, PROTO_OK);            /* equal bounds: a flat world */
+#undef TRY
+#undef TICK0
+#undef NEG
+#undef ZERO
+#undef NZERO
+#undef HUGE_MIN
+#undef SAME_MIN
+}
+
+static void test_snapshot_count_mismatch(void **state)
+{
+    uint8_t p[PROTO_SNAPSHOT_HEAD_SIZE + 3 * PROTO_SNAPSHOT_ENTRY_SIZE] = {0};
+    const size_t head = PROTO_SNAPSHOT_HEAD_SIZE, e = PROTO_SNAPSHOT_ENTRY_SIZE;
+
+    (void)state;
+    wr_u16(p + 8, 0);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head), PROTO_OK);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + e), PROTO_ERR_TRAILING);
+    wr_u16(p + 8, 1);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head), PROTO_ERR_SHORT);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + e - 1), PROTO_ERR_SHORT);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + e), PROTO_OK);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + 2 * e), PROTO_ERR_TRAILING);
+    wr_u16(p + 8, 2);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + e), PROTO_ERR_SHORT);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + 3 * e), PROTO_ERR_TRAILING);
+    wr_u16(p + 8, 0xffff);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, head + 3 * e), PROTO_ERR_SHORT);
+}
+
+/* A non-finite coordinate deep in a long snapshot is still found. */
+static void test_snapshot_late_nan(void **state)
+{
+    proto_writer w;
+    proto_frame f;
+    proto_msg m;
+    size_t at;
+    const proto_avatar a = {1, {1, 2, 3}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    at = proto_put_snapshot_begin(&w, 1, 1);
+    for (int i = 0; i < 1000; i++)
+        proto_put_snapshot_add(&w, at, &a);
+    proto_put_snapshot_end(&w, at);
+    wr_u32(big + at + PROTO_HEADER_SIZE + PROTO_SNAPSHOT_HEAD_SIZE + 999 * PROTO_SNAPSHOT_ENTRY_SIZE + 12,
+           0x7f800000u);
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(proto_decode(&f, &m), PROTO_ERR_NOT_FINITE);
+}
+
+static void test_avatar_left_reason(void **state)
+{
+    uint8_t p[5] = {1, 0, 0, 0, 0};
+
+    (void)state;
+    for (unsigned r = 0; r <= 255; r++) {
+        p[4] = (uint8_t)r;
+        assert_int_equal(decode_raw(PROTO_AVATAR_LEFT, p, 5),
+                         r <= PROTO_LEFT_DISCONNECTED ? PROTO_OK : PROTO_ERR_BAD_VALUE);
+    }
+}
+
+static void test_bye_reason(void **state)
+{
+    uint8_t p[1];
+
+    (void)state;
+    for (unsigned r = 0; r <= 255; r++) {
+        p[0] = (uint8_t)r;
+        assert_int_equal(decode_raw(PROTO_BYE, p, 1), r <= PROTO_BYE_KICKED ? PROTO_OK : PROTO_ERR_BAD_VALUE);
+    }
+}
+
+/* Codes below 16 are local results and never travel; codes the receiver
+ * does not know yet (up to 0xffff) are accepted for later versions. */
+static void test_error_code(void **state)
+{
+    uint8_t p[3] = {0, 0, 0};
+
+    (void)state;
+    for (unsigned c = 0; c <= 0xffff; c++) {
+        wr_u16(p, (uint16_t)c);
+        assert_int_equal(decode_raw(PROTO_ERROR, p, 3), c < 16 ? PROTO_ERR_BAD_VALUE : PROTO_OK);
+    }
+}
+
+/* With several problems the first in field order wins. */
+static void test_first_failure_wins(void **state)
+{
+    uint8_t p[64];
+
+    (void)state;
+    /* join: empty name, then a NaN box */
+    p[0] = 0;
+    wr_u32(p + 1, 0x7fc00000u);
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 13), PROTO_ERR_BAD_STRING);
+    /* join: box.x out of range, box.y NaN / box.x NaN, box.y out of range */
+    p[0] = 1;
+    p[1] = 'a';
+    wr_f32(p + 2, 0.0f);
+    wr_u32(p + 6, 0x7fc00000u);
+    wr_f32(p + 10, 1.0f);
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 14), PROTO_ERR_BAD_VALUE);
+    wr_u32(p + 2, 0x7fc00000u);
+    wr_f32(p + 6, 0.0f);
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 14), PROTO_ERR_NOT_FINITE);
+    /* ...and both before trailing bytes */
+    assert_int_equal(decode_raw(PROTO_JOIN, p, 20), PROTO_ERR_NOT_FINITE);
+    /* move: NaN x, then the payload ends */
+    wr_u32(p, 1);
+    wr_u32(p + 4, 0xff800000u);
+    assert_int_equal(decode_raw(PROTO_MOVE, p, 10), PROTO_ERR_NOT_FINITE);
+    /* hello: bad magic, then short or trailing */
+    wr_u32(p, 0);
+    assert_int_equal(decode_raw(PROTO_HELLO, p, 5), PROTO_ERR_BAD_MAGIC);
+    assert_int_equal(decode_raw(PROTO_HELLO, p, 9), PROTO_ERR_BAD_MAGIC);
+    /* avatar_left / bye: bad reason, then trailing */
+    memset(p, 9, 8);
+    assert_int_equal(decode_raw(PROTO_AVATAR_LEFT, p, 8), PROTO_ERR_BAD_VALUE);
+    assert_int_equal(decode_raw(PROTO_BYE, p, 3), PROTO_ERR_BAD_VALUE);
+    /* error: bad code, then a string past the end */
+    wr_u16(p, 3);
+    p[2] = 50;
+    assert_int_equal(decode_raw(PROTO_ERROR, p, 5), PROTO_ERR_BAD_VALUE);
+    /* snapshot: NaN in entry 0 though the count promises more than is there */
+    memset(p, 0, sizeof p);
+    wr_u16(p + 8, 3);
+    wr_u32(p + 14, 0x7fc00000u);
+    assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, 26), PROTO_ERR_NOT_FINITE);
+}
+
+/* ---- names of things ---------------------------------------------------- */
+
+static void test_strerror_total(void **state)
+{
+    const char *unknown = proto_strerror(-1);
+    const int known[] = {PROTO_OK, PROTO_INCOMPLETE, 16, 17, 18, 19, 20, 21, 22, 23, 24,
+                         25, 26, 27, 28, 29, 30, 31, 32, 33, 34};
+
+    (void)state;
+    for (int s = -2000; s <= 2000; s++) {
+        assert_non_null(proto_strerror(s));
+        assert_true(proto_strerror(s)[0] != '\0');
+    }
+    assert_non_null(proto_strerror(INT_MIN));
+    assert_non_null(proto_strerror(INT_MAX));
+    assert_ptr_equal(proto_strerror(2), unknown);
+    assert_ptr_equal(proto_strerror(15), unknown);
+    assert_ptr_equal(proto_strerror(35), unknown);
+    for (size_t i = 0; i < sizeof known / sizeof known[0]; i++) {
+        assert_true(proto_strerror(known[i]) != unknown);
+        for (size_t j = 0; j < i; j++)
+            assert_string_not_equal(proto_strerror(known[i]), proto_strerror(known[j]));
+    }
+}
+
+static void test_type_names(void **state)
+{
+    static const char *want[] = {NULL, "hello", "welcome", "join", "join_ok", "move", "snapshot",
+                                 "avatar_joined", "avatar_left", "error", "ping", "pong", "bye"};
+    (void)state;
+    for (uint16_t t = PROTO_HELLO; t <= PROTO_BYE; t++)
+        assert_string_equal(proto_type_name(t), want[t]);
+    assert_string_equal(proto_type_name(0), "unknown");
+    assert_string_equal(proto_type_name(13), "unknown");
+    assert_string_equal(proto_type_name(40), "unknown");
+    assert_string_equal(proto_type_name(0xffff), "unknown");
+    assert_string_equal(proto_type_name(PROTO_OBJECT_UPLOAD_BEGIN), "object_upload_begin");
+    assert_string_equal(proto_type_name(PROTO_COLLISION), "collision");
+    assert_string_equal(proto_type_name(PROTO_ECM_UPDATE), "ecm_update");
+    assert_string_equal(proto_type_name(PROTO_ADMIN_REPLY), "admin_reply");
+    for (uint32_t t = 0; t <= 0xffff; t++)
+        assert_non_null(proto_type_name((uint16_t)t));
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_hello_roundtrip),
+        cmocka_unit_test(test_welcome_roundtrip),
+        cmocka_unit_test(test_join_roundtrip),
+        cmocka_unit_test(test_join_ok_roundtrip),
+        cmocka_unit_test(test_move_roundtrip),
+        cmocka_unit_test(test_snapshot_empty),
+        cmocka_unit_test(test_snapshot_one),
+        cmocka_unit_test(test_snapshot_many),
+        cmocka_unit_test(test_snapshot_max_entries),
+        cmocka_unit_test(test_avatar_joined_roundtrip),
+        cmocka_unit_test(test_avatar_left_roundtrip),
+        cmocka_unit_test(test_error_roundtrip),
+        cmocka_unit_test(test_ping_pong_roundtrip),
+        cmocka_unit_test(test_bye_roundtrip),
+        cmocka_unit_test(test_max_sizes),
+        cmocka_unit_test(test_name_truncation),
+        cmocka_unit_test(test_error_message_cleaning),
+        cmocka_unit_test(test_empty_name_encodes),
+        cmocka_unit_test(test_stream_of_frames),
+        cmocka_unit_test(test_worked_examples),
+        cmocka_unit_test(test_writer_exact_fit),
+        cmocka_unit_test(test_writer_overflow_first_frame),
+        cmocka_unit_test(test_writer_overflow_sticky),
+        cmocka_unit_test(test_writer_null_buffer),
+        cmocka_unit_test(test_snapshot_begin_no_room),
+        cmocka_unit_test(test_snapshot_add_no_room),
+        cmocka_unit_test(test_snapshot_after_frames),
+        cmocka_unit_test(test_frame_incomplete_length),
+        cmocka_unit_test(test_frame_empty),
+        cmocka_unit_test(test_frame_too_long),
+        cmocka_unit_test(test_frame_at_cap),
+        cmocka_unit_test(test_frame_incomplete_header_and_payload),
+        cmocka_unit_test(test_unknown_and_reserved_types),
+        cmocka_unit_test(test_short_every_type),
+        cmocka_unit_test(test_trailing_every_type),
+        cmocka_unit_test(test_not_finite_every_float),
+        cmocka_unit_test(test_box_range),
+        cmocka_unit_test(test_name_rules),
+        cmocka_unit_test(test_message_rules),
+        cmocka_unit_test(test_string_past_end),
+        cmocka_unit_test(test_hello_magic),
+        cmocka_unit_test(test_welcome_values),
+        cmocka_unit_test(test_snapshot_count_mismatch),
+        cmocka_unit_test(test_snapshot_late_nan),
+        cmocka_unit_test(test_avatar_left_reason),
+        cmocka_unit_test(test_bye_reason),
+        cmocka_unit_test(test_error_code),
+        cmocka_unit_test(test_first_failure_wins),
+        cmocka_unit_test(test_strerror_total),
+        cmocka_unit_test(test_type_names),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
