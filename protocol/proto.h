@@ -100,9 +100,7 @@ enum proto_status {
     PROTO_ERR_TRUNCATED = 28,      /* peer closed in the middle of a frame */
     PROTO_ERR_TIMEOUT = 29,        /* handshake, idle or partial-frame timeout */
     PROTO_ERR_SERVER_FULL = 30,
-    PROTO_ERR_OVERLOADED = 31,     /* output backlog over the limit */
-    PROTO_ERR_BAD_SEQ = 32,        /* move sequence did not increase */
-    PROTO_ERR_NAME_TAKEN = 33,     /* display name in use by a connected user */
+    PROTO_ERR_BAD_SEQ = 32,        /* move sequence did not increase (31 and 33 are reserved) */
     PROTO_ERR_INTERNAL = 34
 };
 

@@ -6,7 +6,7 @@
 #include <unistd.h>
 
 #include "alloc.h"
-#include "limits.h"
+#include "srv_limits.h"
 
 int conn_init(conn *c, int fd)
 {

@@ -7,7 +7,7 @@
 #include <string.h>
 #include <sys/resource.h>
 
-#include "limits.h"
+#include "srv_limits.h"
 #include "log.h"
 #include "server.h"
 

@@ -19,7 +19,7 @@
 #include "conn.h"
 #include "db.h"
 #include "ev.h"
-#include "limits.h"
+#include "srv_limits.h"
 #include "log.h"
 #include "proto.h"
 #include "world.h"
@@ -48,7 +48,7 @@ typedef struct client {
     uint32_t index; /* in server.clients */
     int64_t session_id; /* 0 before hello */
     uint8_t token[PROTO_TOKEN_SIZE];
-    char peer[64];
+    char peer[80];
     uint32_t avatar_id; /* 0 before join */
     int has_seq;
     uint32_t last_seq;
@@ -623,7 +623,7 @@ static void reap(server *s, client *c)
 
 static void peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t outlen)
 {
-    char host[NI_MAXHOST], port[NI_MAXSERV];
+    char host[64], port[8]; /* numeric: an IPv6 address with scope fits */
     if (getnameinfo((const struct sockaddr *)sa, len, host, sizeof host, port, sizeof port,
                     NI_NUMERICHOST | NI_NUMERICSERV) != 0)
         snprintf(out, outlen, "?");
@@ -661,7 +661,7 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
                 log_warn("accept: %s", strerror(errno));
             return;
         }
-        char peer[64];
+        char peer[80];
         peer_name(&sa, len, peer, sizeof peer);
         if (s->nclients >= s->cfg.max_clients || cfd >= s->max_fd) {
             log_warn("%s refused: server full (%u clients)", peer, s->nclients);

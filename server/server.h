@@ -28,7 +28,7 @@ typedef struct server_config {
 
 typedef struct server server;
 
-/* Fills cfg with the defaults (limits.h). */
+/* Fills cfg with the defaults (srv_limits.h). */
 void server_config_defaults(server_config *cfg);
 
 /* Opens the database, binds and listens. On failure returns NULL with a

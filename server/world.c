@@ -6,7 +6,7 @@
 
 #include "alloc.h"
 #include "grid.h"
-#include "limits.h"
+#include "srv_limits.h"
 
 #define SLOT_BITS 16u
 #define SLOT_MASK ((1u << SLOT_BITS) - 1u)

@@ -18,7 +18,7 @@ T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINE
          AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12)
 E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
          BAD_STRING=21, NOT_FINITE=22, BAD_VALUE=23, BAD_MAGIC=24, VERSION=25, UNEXPECTED=26,
-         ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, OVERLOADED=31, BAD_SEQ=32)
+         ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, BAD_SEQ=32)
 
 
 def args():
@@ -198,6 +198,7 @@ class Client:
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.proc.stdin.write(script)
         self.proc.stdin.close()
+        self.proc.stdin = None  # so that communicate() does not touch it
         self.events = []
 
     def wait(self, timeout=30):

@@ -1,10 +1,10 @@
 /*
- * limits.h: every server limit in one place, each with the reason for its
+ * srv_limits.h: every server limit in one place, each with the reason for its
  * value. All can be overridden at build time (-DSRV_...=N); the asserts keep
  * overrides sane. Runtime flags (main.c) override the ones marked "default".
  */
-#ifndef CVRE_LIMITS_H
-#define CVRE_LIMITS_H
+#ifndef CVRE_SRV_LIMITS_H
+#define CVRE_SRV_LIMITS_H
 
 #include "proto.h"
 

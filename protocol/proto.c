@@ -1,0 +1,734 @@
+/*
+ * proto.c: the cvre wire codec (see proto.h for the API, PROTOCOL.md for the
+ * bytes).
+ *
+ * Every field goes through the little-endian load/store helpers below; no
+ * struct is ever laid over the buffer, so the code does not depend on the
+ * host's byte order, alignment or padding. Decoding uses a reader whose
+ * first failure sticks: each field read after a failure yields zero and
+ * changes nothing, so a decoder reads its whole layout and checks the status
+ * once, and the status always names the first problem in field order.
+ */
+#include "proto.h"
+
+#include <assert.h>
+#include <string.h>
+
+_Static_assert(sizeof(float) == sizeof(uint32_t), "floats travel as IEEE-754 binary32");
+_Static_assert(PROTO_MAX_LEN_PREJOIN <= PROTO_MAX_LEN, "the pre-join cap is the smaller one");
+_Static_assert(PROTO_MESSAGE_MAX <= 0xffu && PROTO_NAME_MAX <= 0xffu, "string lengths are a u8");
+_Static_assert(PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES) - 4u <= PROTO_MAX_LEN,
+               "a full snapshot fits the cap");
+
+/* Offsets inside an encoded snapshot frame, from the start of the frame. */
+#define SNAP_COUNT_AT (PROTO_HEADER_SIZE + 8u)
+#define SNAP_ENTRIES_AT (PROTO_HEADER_SIZE + PROTO_SNAPSHOT_HEAD_SIZE)
+
+/* ---- little-endian loads and stores ---------------------------------- */
+
+static inline uint16_t ld_u16(const uint8_t *p) { return (uint16_t)(p[0] | p[1] << 8); }
+
+static inline uint32_t ld_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static inline uint64_t ld_u64(const uint8_t *p)
+{
+    return (uint64_t)ld_u32(p) | (uint64_t)ld_u32(p + 4) << 32;
+}
+
+static inline float bits_to_f32(uint32_t b)
+{
+    float v;
+    memcpy(&v, &b, sizeof v);
+    return v;
+}
+
+/* True unless the exponent bits are all ones (NaN or infinity). Looking at
+ * the bits rather than calling isfinite() keeps the test exact whatever
+ * floating-point flags the codec is built with. */
+static inline int bits_finite(uint32_t b) { return (b & 0x7f800000u) != 0x7f800000u; }
+
+static inline uint8_t *st_u8(uint8_t *p, uint8_t v)
+{
+    p[0] = v;
+    return p + 1;
+}
+
+static inline uint8_t *st_u16(uint8_t *p, uint16_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    return p + 2;
+}
+
+static inline uint8_t *st_u32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
+    return p + 4;
+}
+
+static inline uint8_t *st_u64(uint8_t *p, uint64_t v)
+{
+    st_u32(p, (uint32_t)v);
+    return st_u32(p + 4, (uint32_t)(v >> 32));
+}
+
+static inline uint8_t *st_f32(uint8_t *p, float v)
+{
+    uint32_t b;
+    memcpy(&b, &v, sizeof b);
+    return st_u32(p, b);
+}
+
+static inline uint8_t *st_vec3(uint8_t *p, const float v[3])
+{
+    p = st_f32(p, v[0]);
+    p = st_f32(p, v[1]);
+    return st_f32(p, v[2]);
+}
+
+static inline uint8_t *st_bytes(uint8_t *p, const void *src, size_t n)
+{
+    if (n > 0)
+        memcpy(p, src, n);
+    return p + n;
+}
+
+/* ---- UTF-8 ------------------------------------------------------------ */
+
+/*
+ * Decodes the character at s, of which n > 0 bytes are readable. Returns its
+ * length in bytes and stores its code point in *cp, or returns 0 when the
+ * bytes there are not one well-formed character: a stray continuation byte,
+ * a sequence cut short, an overlong form, a surrogate or a value past
+ * U+10FFFF. Rejecting those keeps one byte form per character, so names
+ * compare equal exactly when their bytes do.
+ */
+static size_t utf8_next(const uint8_t *s, size_t n, uint32_t *cp)
+{
+    uint32_t c = s[0];
+    uint32_t min;
+    size_t len;
+
+    if (c < 0x80u) {
+        *cp = c;
+        return 1;
+    }
+    if ((c & 0xe0u) == 0xc0u) {
+        len = 2;
+        min = 0x80u;
+        c &= 0x1fu;
+    } else if ((c & 0xf0u) == 0xe0u) {
+        len = 3;
+        min = 0x800u;
+        c &= 0x0fu;
+    } else if ((c & 0xf8u) == 0xf0u) {
+        len = 4;
+        min = 0x10000u;
+        c &= 0x07u;
+    } else {
+        return 0;
+    }
+    for (size_t i = 1; i < len; i++) {
+        if (i >= n || (s[i] & 0xc0u) != 0x80u)
+            return 0;
+        c = c << 6 | (s[i] & 0x3fu);
+    }
+    if (c < min || c > 0x10ffffu || (c >= 0xd800u && c <= 0xdfffu))
+        return 0;
+    *cp = c;
+    return len;
+}
+
+/* Control characters would let a peer forge lines in our logs or mangle a
+ * terminal; NUL would end the string early for C callers. */
+static inline int is_control(uint32_t cp) { return cp < 0x20u || cp == 0x7fu; }
+
+/* True when s[0..n) is well-formed UTF-8 without control characters, the
+ * rule for every string on the wire. */
+static int text_ok(const uint8_t *s, size_t n)
+{
+    size_t i = 0;
+
+    while (i < n) {
+        uint32_t cp;
+        size_t k = utf8_next(s + i, n - i, &cp);
+
+        if (k == 0 || is_control(cp))
+            return 0;
+        i += k;
+    }
+    return 1;
+}
+
+/* ---- reader ----------------------------------------------------------- */
+
+typedef struct reader {
+    const uint8_t *p;
+    size_t left;
+    int err; /* PROTO_OK or the first failure */
+} reader;
+
+/* Records status unless an earlier failure already did: the first wins. */
+static void fail(reader *r, int status)
+{
+    if (r->err == PROTO_OK)
+        r->err = status;
+}
+
+/* Consumes n bytes and returns where they start, or returns NULL when the
+ * reader has failed or fewer than n bytes remain (PROTO_ERR_SHORT). */
+static const uint8_t *take(reader *r, size_t n)
+{
+    const uint8_t *p = r->p;
+
+    if (r->err != PROTO_OK)
+        return NULL;
+    if (n > r->left) {
+        r->err = PROTO_ERR_SHORT;
+        return NULL;
+    }
+    if (n > 0) {
+        r->p += n;
+        r->left -= n;
+    }
+    return p;
+}
+
+static uint8_t get_u8(reader *r)
+{
+    const uint8_t *p = take(r, 1);
+    return p ? p[0] : 0;
+}
+
+static uint16_t get_u16(reader *r)
+{
+    const uint8_t *p = take(r, 2);
+    return p ? ld_u16(p) : 0;
+}
+
+static uint32_t get_u32(reader *r)
+{
+    const uint8_t *p = take(r, 4);
+    return p ? ld_u32(p) : 0;
+}
+
+static uint64_t get_u64(reader *r)
+{
+    const uint8_t *p = take(r, 8);
+    return p ? ld_u64(p) : 0;
+}
+
+/* Every float on the wire must be finite: a NaN compares false with every
+ * bound, so it would slip through the clamps and range checks written the
+ * usual way in the server, and an infinity would defeat the speed limit. */
+static float get_f32(reader *r)
+{
+    uint32_t b = get_u32(r);
+
+    if (!bits_finite(b)) {
+        fail(r, PROTO_ERR_NOT_FINITE);
+        return 0.0f;
+    }
+    return bits_to_f32(b);
+}
+
+static void get_vec3(reader *r, float v[3])
+{
+    for (int i = 0; i < 3; i++)
+        v[i] = get_f32(r);
+}
+
+/* A box edge out of range fails at the edge that is wrong, so the status
+ * still names the first bad field. */
+static void get_box(reader *r, float box[3])
+{
+    for (int i = 0; i < 3; i++) {
+        box[i] = get_f32(r);
+        if (!(box[i] >= PROTO_BOX_MIN && box[i] <= PROTO_BOX_MAX))
+            fail(r, PROTO_ERR_BAD_VALUE);
+    }
+}
+
+/*
+ * Reads a u8 length and that many bytes of text, min..max bytes long. A
+ * missing length byte is PROTO_ERR_SHORT; a length past the end of the
+ * payload, out of bounds, or bytes that break the text rule are
+ * PROTO_ERR_BAD_STRING. The result points into the payload.
+ */
+static proto_str get_str(reader *r, uint32_t min, uint32_t max)
+{
+    proto_str s = {NULL, 0};
+    uint8_t n = get_u8(r);
+
+    if (r->err != PROTO_OK)
+        return s;
+    if (n > r->left || n < min || n > max || !text_ok(r->p, n)) {
+        fail(r, PROTO_ERR_BAD_STRING);
+        return s;
+    }
+    s.ptr = (const char *)take(r, n);
+    s.len = n;
+    return s;
+}
+
+/* ---- framing and decoding --------------------------------------------- */
+
+int proto_frame_parse(const uint8_t *buf, size_t avail, uint32_t max_len, proto_frame *f)
+{
+    uint32_t len;
+
+    if (avail < 4)
+        return PROTO_INCOMPLETE;
+    len = ld_u32(buf);
+    if (len < PROTO_LEN_MIN)
+        return PROTO_ERR_FRAME_EMPTY;
+    if (len > max_len)
+        return PROTO_ERR_FRAME_TOO_LONG;
+    /* avail >= 4 here, so the subtraction cannot wrap and nothing is added
+     * to a length the peer chose. */
+    if (avail - 4 < len)
+        return PROTO_INCOMPLETE;
+    f->type = ld_u16(buf + 4);
+    f->payload = buf + PROTO_HEADER_SIZE;
+    f->payload_len = len - 2;
+    f->size = (size_t)len + 4;
+    return PROTO_OK;
+}
+
+static void decode_hello(reader *r, proto_hello *m)
+{
+    m->magic = get_u32(r);
+    if (m->magic != PROTO_MAGIC)
+        fail(r, PROTO_ERR_BAD_MAGIC);
+    m->version = get_u16(r);
+}
+
+/* Beyond finiteness, a welcome must describe a usable world: a client
+ * divides by the tick rate and builds its view from the radius and bounds. */
+static void decode_welcome(reader *r, proto_welcome *m)
+{
+    const uint8_t *token;
+
+    m->version = get_u16(r);
+    m->session_id = get_u64(r);
+    token = take(r, PROTO_TOKEN_SIZE);
+    if (token)
+        memcpy(m->token, token, PROTO_TOKEN_SIZE);
+    m->tick_hz = get_u16(r);
+    if (m->tick_hz == 0)
+        fail(r, PROTO_ERR_BAD_VALUE);
+    m->aoi_radius = get_f32(r);
+    if (!(m->aoi_radius > 0.0f))
+        fail(r, PROTO_ERR_BAD_VALUE);
+    m->max_speed = get_f32(r);
+    if (!(m->max_speed >= 0.0f))
+        fail(r, PROTO_ERR_BAD_VALUE);
+    get_vec3(r, m->world_min);
+    for (int i = 0; i < 3; i++) {
+        m->world_max[i] = get_f32(r);
+        if (!(m->world_max[i] >= m->world_min[i]))
+            fail(r, PROTO_ERR_BAD_VALUE);
+    }
+}
+
+static void decode_snapshot(reader *r, proto_snapshot *m)
+{
+    m->tick = get_u32(r);
+    m->ack_seq = get_u32(r);
+    m->count = get_u16(r);
+    m->entries = r->p;
+    /* Reading each entry, rather than comparing sizes up front, keeps the
+     * first-failure-in-field-order rule: a NaN in entry 0 is reported even
+     * if the payload also ends before the last entry. */
+    for (uint16_t i = 0; i < m->count && r->err == PROTO_OK; i++) {
+        float pos[3];
+
+        (void)get_u32(r);
+        get_vec3(r, pos);
+    }
+}
+
+int proto_decode(const proto_frame *f, proto_msg *m)
+{
+    reader rd = {f->payload, f->payload_len, PROTO_OK};
+    reader *r = &rd;
+
+    m->type = f->type;
+    switch (f->type) {
+    case PROTO_HELLO:
+        decode_hello(r, &m->u.hello);
+        break;
+    case PROTO_WELCOME:
+        decode_welcome(r, &m->u.welcome);
+        break;
+    case PROTO_JOIN:
+        m->u.join.name = get_str(r, 1, PROTO_NAME_MAX);
+        get_box(r, m->u.join.box);
+        break;
+    case PROTO_JOIN_OK:
+        m->u.join_ok.avatar_id = get_u32(r);
+        get_vec3(r, m->u.join_ok.pos);
+        get_box(r, m->u.join_ok.box);
+        break;
+    case PROTO_MOVE:
+        m->u.move.seq = get_u32(r);
+        get_vec3(r, m->u.move.pos);
+        break;
+    case PROTO_SNAPSHOT:
+        decode_snapshot(r, &m->u.snapshot);
+        break;
+    case PROTO_AVATAR_JOINED:
+        m->u.avatar_joined.id = get_u32(r);
+        m->u.avatar_joined.name = get_str(r, 1, PROTO_NAME_MAX);
+        get_vec3(r, m->u.avatar_joined.pos);
+        get_box(r, m->u.avatar_joined.box);
+        break;
+    case PROTO_AVATAR_LEFT:
+        m->u.avatar_left.id = get_u32(r);
+        m->u.avatar_left.reason = get_u8(r);
+        if (m->u.avatar_left.reason > PROTO_LEFT_DISCONNECTED)
+            fail(r, PROTO_ERR_BAD_VALUE);
+        break;
+    case PROTO_ERROR:
+        m->u.error.code = get_u16(r);
+        if (m->u.error.code < PROTO_ERR_FRAME_EMPTY)
+            fail(r, PROTO_ERR_BAD_VALUE);
+        m->u.error.message = get_str(r, 0, PROTO_MESSAGE_MAX);
+        break;
+    case PROTO_PING:
+    case PROTO_PONG:
+        m->u.ping.stamp = get_u64(r);
+        break;
+    case PROTO_BYE:
+        m->u.bye.reason = get_u8(r);
+        if (m->u.bye.reason > PROTO_BYE_KICKED)
+            fail(r, PROTO_ERR_BAD_VALUE);
+        break;
+    default:
+        return PROTO_ERR_UNKNOWN_TYPE;
+    }
+    if (rd.err == PROTO_OK && rd.left > 0)
+        return PROTO_ERR_TRAILING;
+    return rd.err;
+}
+
+void proto_snapshot_entry(const proto_snapshot *s, uint16_t i, proto_avatar *out)
+{
+    const uint8_t *p = s->entries + (size_t)i * PROTO_SNAPSHOT_ENTRY_SIZE;
+
+    assert(i < s->count);
+    out->id = ld_u32(p);
+    for (int k = 0; k < 3; k++)
+        out->pos[k] = bits_to_f32(ld_u32(p + 4 + 4 * k));
+}
+
+const char *proto_strerror(int status)
+{
+    switch (status) {
+    case PROTO_OK: return "ok";
+    case PROTO_INCOMPLETE: return "incomplete frame";
+    case PROTO_ERR_FRAME_EMPTY: return "frame length below 2";
+    case PROTO_ERR_FRAME_TOO_LONG: return "frame too long";
+    case PROTO_ERR_UNKNOWN_TYPE: return "unknown message type";
+    case PROTO_ERR_SHORT: return "payload too short";
+    case PROTO_ERR_TRAILING: return "trailing bytes after payload";
+    case PROTO_ERR_BAD_STRING: return "bad string";
+    case PROTO_ERR_NOT_FINITE: return "number not finite";
+    case PROTO_ERR_BAD_VALUE: return "value out of range";
+    case PROTO_ERR_BAD_MAGIC: return "bad magic";
+    case PROTO_ERR_VERSION: return "protocol version not supported";
+    case PROTO_ERR_UNEXPECTED: return "unexpected message";
+    case PROTO_ERR_ALREADY_JOINED: return "already joined";
+    case PROTO_ERR_TRUNCATED: return "connection closed mid-frame";
+    case PROTO_ERR_TIMEOUT: return "timeout";
+    case PROTO_ERR_SERVER_FULL: return "server full";
+    case PROTO_ERR_BAD_SEQ: return "move sequence did not increase";
+    case PROTO_ERR_INTERNAL: return "internal server error";
+    default: return "unknown status";
+    }
+}
+
+const char *proto_type_name(uint16_t type)
+{
+    switch (type) {
+    case PROTO_HELLO: return "hello";
+    case PROTO_WELCOME: return "welcome";
+    case PROTO_JOIN: return "join";
+    case PROTO_JOIN_OK: return "join_ok";
+    case PROTO_MOVE: return "move";
+    case PROTO_SNAPSHOT: return "snapshot";
+    case PROTO_AVATAR_JOINED: return "avatar_joined";
+    case PROTO_AVATAR_LEFT: return "avatar_left";
+    case PROTO_ERROR: return "error";
+    case PROTO_PING: return "ping";
+    case PROTO_PONG: return "pong";
+    case PROTO_BYE: return "bye";
+    /* Reserved ids get their future names so a log line says what an older
+     * server was sent, although they do not decode yet. */
+    case PROTO_OBJECT_UPLOAD_BEGIN: return "object_upload_begin";
+    case PROTO_OBJECT_UPLOAD_CHUNK: return "object_upload_chunk";
+    case PROTO_OBJECT_UPLOAD_END: return "object_upload_end";
+    case PROTO_OBJECT_PLACE: return "object_place";
+    case PROTO_OBJECT_MOVE: return "object_move";
+    case PROTO_OBJECT_REMOVE: return "object_remove";
+    case PROTO_OBJECT_INFO: return "object_info";
+    case PROTO_OBJECT_REMOVED: return "object_removed";
+    case PROTO_COLLISION: return "collision";
+    case PROTO_ECM_UPDATE: return "ecm_update";
+    case PROTO_ADMIN_REQUEST: return "admin_request";
+    case PROTO_ADMIN_REPLY: return "admin_reply";
+    default: return "unknown";
+    }
+}
+
+/* ---- writer ----------------------------------------------------------- */
+
+void proto_writer_init(proto_writer *w, uint8_t *buf, size_t cap)
+{
+    w->buf = buf;
+    w->cap = cap;
+    w->len = 0;
+    w->err = PROTO_OK;
+}
+
+/*
+ * Reserves one whole frame with payload_len bytes of payload, writes its
+ * header and returns where the payload goes; the caller must fill all of
+ * it. Returns NULL, writing nothing, when the writer has already failed or
+ * the frame does not fit (which makes the failure sticky). Reserving the
+ * full size first is what keeps partial frames out of the buffer.
+ */
+static uint8_t *frame_open(proto_writer *w, uint16_t type, size_t payload_len)
+{
+    size_t need = PROTO_HEADER_SIZE + payload_len;
+    uint8_t *p;
+
+    if (w->err != PROTO_OK)
+        return NULL;
+    if (need > w->cap - w->len) {
+        w->err = PROTO_ERR_FRAME_TOO_LONG;
+        return NULL;
+    }
+    p = w->buf + w->len;
+    w->len += need;
+    p = st_u32(p, (uint32_t)(need - 4));
+    return st_u16(p, type);
+}
+
+/* Bytes of s to send as a name: at most PROTO_NAME_MAX, backing off so the
+ * cut does not split a UTF-8 character (the server would refuse the half). */
+static uint8_t name_len(proto_str s)
+{
+    uint32_t n = s.len;
+
+    if (n > PROTO_NAME_MAX) {
+        n = PROTO_NAME_MAX;
+        while (n > 0 && ((uint8_t)s.ptr[n] & 0xc0u) == 0x80u)
+            n--;
+    }
+    return (uint8_t)n;
+}
+
+/*
+ * Copies the C string src into dst (PROTO_MESSAGE_MAX bytes) so that the
+ * result always passes the decoder's text rule: each byte that is not part
+ * of a well-formed, non-control character becomes '?', and the copy stops at
+ * the limit without splitting a character. Error texts often quote what a
+ * peer sent, and a message the receiver rejects would hide the real error.
+ * Returns the number of bytes written.
+ */
+static size_t clean_message(uint8_t *dst, const char *src)
+{
+    const uint8_t *s = (const uint8_t *)src;
+    size_t n = 0, i = 0;
+
+    /* A character starting before the limit ends at most 3 bytes after it. */
+    while (n < PROTO_MESSAGE_MAX + 3 && s[n] != 0)
+        n++;
+    while (i < n && i < PROTO_MESSAGE_MAX) {
+        uint32_t cp;
+        size_t k = utf8_next(s + i, n - i, &cp);
+
+        if (k == 0 || is_control(cp)) {
+            dst[i++] = '?';
+            continue;
+        }
+        if (i + k > PROTO_MESSAGE_MAX)
+            break;
+        memcpy(dst + i, s + i, k);
+        i += k;
+    }
+    return i;
+}
+
+void proto_put_hello(proto_writer *w, const proto_hello *m)
+{
+    uint8_t *p = frame_open(w, PROTO_HELLO, PROTO_SIZE_HELLO - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->magic);
+    st_u16(p, m->version);
+}
+
+void proto_put_welcome(proto_writer *w, const proto_welcome *m)
+{
+    uint8_t *p = frame_open(w, PROTO_WELCOME, PROTO_SIZE_WELCOME - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u16(p, m->version);
+    p = st_u64(p, m->session_id);
+    p = st_bytes(p, m->token, PROTO_TOKEN_SIZE);
+    p = st_u16(p, m->tick_hz);
+    p = st_f32(p, m->aoi_radius);
+    p = st_f32(p, m->max_speed);
+    p = st_vec3(p, m->world_min);
+    st_vec3(p, m->world_max);
+}
+
+void proto_put_join(proto_writer *w, const proto_join *m)
+{
+    uint8_t n = name_len(m->name);
+    uint8_t *p = frame_open(w, PROTO_JOIN, 1u + n + 12u);
+
+    if (!p)
+        return;
+    p = st_u8(p, n);
+    p = st_bytes(p, m->name.ptr, n);
+    st_vec3(p, m->box);
+}
+
+void proto_put_join_ok(proto_writer *w, const proto_join_ok *m)
+{
+    uint8_t *p = frame_open(w, PROTO_JOIN_OK, PROTO_SIZE_JOIN_OK - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->avatar_id);
+    p = st_vec3(p, m->pos);
+    st_vec3(p, m->box);
+}
+
+void proto_put_move(proto_writer *w, const proto_move *m)
+{
+    uint8_t *p = frame_open(w, PROTO_MOVE, PROTO_SIZE_MOVE - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->seq);
+    st_vec3(p, m->pos);
+}
+
+void proto_put_avatar_joined(proto_writer *w, const proto_avatar_joined *m)
+{
+    uint8_t n = name_len(m->name);
+    uint8_t *p = frame_open(w, PROTO_AVATAR_JOINED, 4u + 1u + n + 24u);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->id);
+    p = st_u8(p, n);
+    p = st_bytes(p, m->name.ptr, n);
+    p = st_vec3(p, m->pos);
+    st_vec3(p, m->box);
+}
+
+void proto_put_avatar_left(proto_writer *w, const proto_avatar_left *m)
+{
+    uint8_t *p = frame_open(w, PROTO_AVATAR_LEFT, PROTO_SIZE_AVATAR_LEFT - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->id);
+    st_u8(p, m->reason);
+}
+
+void proto_put_error(proto_writer *w, uint16_t code, const char *message)
+{
+    uint8_t text[PROTO_MESSAGE_MAX];
+    size_t n = clean_message(text, message);
+    uint8_t *p = frame_open(w, PROTO_ERROR, 2u + 1u + n);
+
+    if (!p)
+        return;
+    p = st_u16(p, code);
+    p = st_u8(p, (uint8_t)n);
+    st_bytes(p, text, n);
+}
+
+static void put_stamp(proto_writer *w, uint16_t type, uint64_t stamp)
+{
+    uint8_t *p = frame_open(w, type, PROTO_SIZE_PING - PROTO_HEADER_SIZE);
+
+    if (p)
+        st_u64(p, stamp);
+}
+
+void proto_put_ping(proto_writer *w, uint64_t stamp) { put_stamp(w, PROTO_PING, stamp); }
+
+void proto_put_pong(proto_writer *w, uint64_t stamp) { put_stamp(w, PROTO_PONG, stamp); }
+
+void proto_put_bye(proto_writer *w, uint8_t reason)
+{
+    uint8_t *p = frame_open(w, PROTO_BYE, PROTO_SIZE_BYE - PROTO_HEADER_SIZE);
+
+    if (p)
+        st_u8(p, reason);
+}
+
+/*
+ * The snapshot frame is open from begin to end: its header says count 0
+ * until end patches it, so the writer must not be used for other frames in
+ * between. If begin fails it returns w->len and writes nothing; add and end
+ * then do nothing because the error is sticky.
+ */
+size_t proto_put_snapshot_begin(proto_writer *w, uint32_t tick, uint32_t ack_seq)
+{
+    uint8_t *p = frame_open(w, PROTO_SNAPSHOT, PROTO_SNAPSHOT_HEAD_SIZE);
+
+    if (!p)
+        return w->len;
+    p = st_u32(p, tick);
+    p = st_u32(p, ack_seq);
+    st_u16(p, 0);
+    return w->len - SNAP_ENTRIES_AT;
+}
+
+/* On overflow (no room, or a PROTO_SNAPSHOT_MAX_ENTRIES + 1st entry) the
+ * whole snapshot is dropped, len going back to frame_at, so a half-built
+ * snapshot is never sent; the caller retries next tick with a fresh buffer. */
+void proto_put_snapshot_add(proto_writer *w, size_t frame_at, const proto_avatar *a)
+{
+    size_t entries;
+    uint8_t *p;
+
+    if (w->err != PROTO_OK)
+        return;
+    entries = (w->len - frame_at - SNAP_ENTRIES_AT) / PROTO_SNAPSHOT_ENTRY_SIZE;
+    if (entries >= PROTO_SNAPSHOT_MAX_ENTRIES || PROTO_SNAPSHOT_ENTRY_SIZE > w->cap - w->len) {
+        w->err = PROTO_ERR_FRAME_TOO_LONG;
+        w->len = frame_at;
+        return;
+    }
+    p = st_u32(w->buf + w->len, a->id);
+    st_vec3(p, a->pos);
+    w->len += PROTO_SNAPSHOT_ENTRY_SIZE;
+}
+
+void proto_put_snapshot_end(proto_writer *w, size_t frame_at)
+{
+    size_t entries;
+
+    if (w->err != PROTO_OK)
+        return;
+    entries = (w->len - frame_at - SNAP_ENTRIES_AT) / PROTO_SNAPSHOT_ENTRY_SIZE;
+    st_u32(w->buf + frame_at, (uint32_t)(w->len - frame_at - 4));
+    st_u16(w->buf + frame_at + SNAP_COUNT_AT, (uint16_t)entries);
+}
