@@ -335,6 +335,9 @@ static void decode_welcome(reader *r, proto_welcome *m)
         if (!(m->world_max[i] >= m->world_min[i]))
             fail(r, PROTO_ERR_BAD_VALUE);
     }
+    m->idle_timeout_ms = get_u32(r);
+    if (m->idle_timeout_ms == 0)
+        fail(r, PROTO_ERR_BAD_VALUE);
 }
 
 static void decode_snapshot(reader *r, proto_snapshot *m)
@@ -590,7 +593,8 @@ void proto_put_welcome(proto_writer *w, const proto_welcome *m)
     p = st_f32(p, m->aoi_radius);
     p = st_f32(p, m->max_speed);
     p = st_vec3(p, m->world_min);
-    st_vec3(p, m->world_max);
+    p = st_vec3(p, m->world_max);
+    st_u32(p, m->idle_timeout_ms);
 }
 
 void proto_put_join(proto_writer *w, const proto_join *m)

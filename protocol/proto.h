@@ -130,6 +130,7 @@ typedef struct proto_welcome {
     float max_speed;
     float world_min[3];
     float world_max[3];
+    uint32_t idle_timeout_ms; /* the server closes a connection silent this long */
 } proto_welcome;
 
 typedef struct proto_join {
@@ -277,7 +278,7 @@ void proto_put_snapshot_end(proto_writer *w, size_t frame_at);
 
 /* Exact encoded sizes, for reserving output space. */
 #define PROTO_SIZE_HELLO (PROTO_HEADER_SIZE + 6u)
-#define PROTO_SIZE_WELCOME (PROTO_HEADER_SIZE + 2u + 8u + PROTO_TOKEN_SIZE + 2u + 4u + 4u + 24u)
+#define PROTO_SIZE_WELCOME (PROTO_HEADER_SIZE + 2u + 8u + PROTO_TOKEN_SIZE + 2u + 4u + 4u + 24u + 4u)
 #define PROTO_SIZE_JOIN_MAX (PROTO_HEADER_SIZE + 1u + PROTO_NAME_MAX + 12u)
 #define PROTO_SIZE_JOIN_OK (PROTO_HEADER_SIZE + 4u + 12u + 12u)
 #define PROTO_SIZE_MOVE (PROTO_HEADER_SIZE + 4u + 12u)

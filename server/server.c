@@ -283,7 +283,7 @@ static void on_hello(server *s, client *c, const proto_hello *m)
 
     proto_welcome wm = {.version = PROTO_VERSION, .session_id = (uint64_t)c->session_id,
                         .tick_hz = (uint16_t)s->cfg.tick_hz, .aoi_radius = s->cfg.aoi_radius,
-                        .max_speed = s->cfg.max_speed};
+                        .max_speed = s->cfg.max_speed, .idle_timeout_ms = s->cfg.idle_timeout_ms};
     memcpy(wm.token, c->token, sizeof wm.token);
     float half = s->cfg.world_size * 0.5f;
     wm.world_min[0] = wm.world_min[2] = -half;

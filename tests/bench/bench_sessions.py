@@ -67,7 +67,7 @@ def measure_window(pid, ramp, seconds):
 
 
 def run_bare(bindir, n, ramp, seconds):
-    srv, port = start([os.path.join(bindir, "bare_server")])
+    srv, port = start([os.path.join(bindir, "tests", "bare_server")])
     sw = swarm(bindir, port, n, ramp + seconds + 1, ["--no-handshake"])
     time.sleep(ramp)
     c0 = cpu_seconds(srv.pid)

@@ -2,6 +2,7 @@
 protocol (protocol/PROTOCOL.md) from Python, or drives real cvre-client
 processes and reads their JSON event lines."""
 import argparse
+import atexit
 import json
 import math
 import os
@@ -95,6 +96,7 @@ class Server:
         self.proc = subprocess.Popen(
             [os.path.join(bindir, "cvre-server"), "--port", "0", "--db", self.db, *extra],
             stdout=subprocess.PIPE, stderr=self.log, text=True)
+        atexit.register(self.proc.kill)  # a failed test must not leave it running
         line = self.proc.stdout.readline()
         assert line.startswith("listening on 127.0.0.1:"), f"unexpected first line {line!r}"
         self.port = int(line.rsplit(":", 1)[1])
@@ -196,6 +198,7 @@ class Client:
         self.proc = subprocess.Popen(
             [os.path.join(bindir, "cvre-client"), "--port", str(port), "--name", name, *extra],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        atexit.register(self.proc.kill)
         self.proc.stdin.write(script)
         self.proc.stdin.close()
         self.proc.stdin = None  # so that communicate() does not touch it

@@ -34,8 +34,9 @@ def test_clients_see_each_other():
     assert saw_at("alice", "bob", targets["bob"]), "alice never saw bob arrive"
     assert saw_at("bob", "alice", targets["alice"]), "bob never saw alice arrive"
     assert saw_at("alice", "alice", targets["alice"]), "alice's own authoritative position missing"
-    assert close_to(clients["alice"].of("done")[0]["pos"], targets["alice"])
-    assert close_to(clients["carol"].of("done")[-2]["pos"], (300, 0, 300))
+    moved = lambda who: [e["pos"] for e in clients[who].of("done") if e["command"] == "move"]
+    assert close_to(moved("alice")[0], targets["alice"])
+    assert close_to(moved("carol")[-1], (300, 0, 300))
     left = {(e["id"], e["reason"]) for e in clients["alice"].of("left")}
     assert (ids["bob"], "disconnected") in left, left
     assert (ids["carol"], "out_of_range") in left, left

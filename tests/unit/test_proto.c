@@ -123,7 +123,7 @@ typedef struct sample {
 static const proto_welcome sample_welcome = {
     PROTO_VERSION, 0x0102030405060708u,
     {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16},
-    20, 50.0f, 5.0f, {-100.0f, 0.0f, -100.0f}, {100.0f, 50.0f, 100.0f}};
+    20, 50.0f, 5.0f, {-100.0f, 0.0f, -100.0f}, {100.0f, 50.0f, 100.0f}, 30000};
 
 /* Encodes one message of each type with the writer and strips the header,
  * so the samples are exactly what a peer sends. */
@@ -237,6 +237,7 @@ static void test_welcome_roundtrip(void **state)
     in.tick_hz = 0xffff;
     in.max_speed = 0.0f;
     in.world_min[1] = in.world_max[1] = -0.0f; /* a flat world is allowed */
+    in.idle_timeout_ms = UINT32_MAX;
     proto_writer_init(&w, big, BIG);
     proto_put_welcome(&w, &in);
     assert_int_equal(w.err, PROTO_OK);
@@ -251,6 +252,14 @@ static void test_welcome_roundtrip(void **state)
     assert_same_floats(&m.u.welcome.max_speed, &in.max_speed, 1);
     assert_same_floats(m.u.welcome.world_min, in.world_min, 3);
     assert_same_floats(m.u.welcome.world_max, in.world_max, 3);
+    assert_true(m.u.welcome.idle_timeout_ms == in.idle_timeout_ms);
+    /* An idle timeout of 0 would make every connection idle at once. */
+    in.idle_timeout_ms = 0;
+    proto_writer_init(&w, big, BIG);
+    proto_put_welcome(&w, &in);
+    proto_frame f;
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(proto_decode(&f, &m), PROTO_ERR_BAD_VALUE);
 }
 
 static void test_join_roundtrip(void **state)

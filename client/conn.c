@@ -1,0 +1,706 @@
+/* conn.c: one client connection (see conn.h). */
+#include "conn.h"
+
+#include <errno.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "alloc.h"
+
+/* One read buffer shared by every conn of the process: a read lands here
+ * and is parsed in place, and only the unfinished tail of a frame is copied
+ * into the conn. 64 KiB drains a socket's worth of snapshots per call while
+ * 5,000 bots cost no more input memory than their partial frames. */
+#ifndef CONN_SCRATCH_SIZE
+#define CONN_SCRATCH_SIZE (64u * 1024u)
+#endif
+_Static_assert(CONN_SCRATCH_SIZE >= PROTO_HEADER_SIZE, "a read holds at least a header");
+
+/* Reads per readiness callback, so one busy connection cannot starve the
+ * others; the loop is level-triggered and calls back for the rest. */
+#ifndef CONN_READS_PER_WAKEUP
+#define CONN_READS_PER_WAKEUP 4
+#endif
+
+/* Addresses kept from the resolver; "localhost" gives two (::1, 127.0.0.1)
+ * and the first may be the one the server does not listen on. */
+#define CONN_ADDRS_MAX 4
+
+/* The largest frame a server may send us, header included. */
+#define CONN_IN_MAX (4u + PROTO_MAX_LEN)
+
+struct conn_ctx {
+    ev_loop *loop;
+    struct sockaddr_storage addrs[CONN_ADDRS_MAX];
+    socklen_t addr_lens[CONN_ADDRS_MAX];
+    int naddrs;
+    char peer[300];
+    conn *closing; /* ended, waiting for the before-sleep hook */
+    uint64_t opened, frames_in, bytes_in;
+    uint8_t scratch[CONN_SCRATCH_SIZE];
+};
+
+struct conn {
+    conn_ctx *ctx;
+    const conn_handler *h;
+    void *data;
+    conn *next_closing;
+    int in_closing; /* on ctx->closing */
+    int fd;
+    int state;
+    int addr_i;      /* address being tried */
+    unsigned armed;  /* events registered with the loop; 0 when not registered */
+    int raw;         /* no handshake */
+    int bye_sent;    /* no more frames after the bye */
+    int write_dead;  /* a send failed: output is dropped, the read side reports the end */
+    int ended;
+    conn_end end;
+    uint32_t seq;
+    uint64_t last_send;
+    uint64_t keepalive_stamp; /* of our own ping whose pong is not in yet; 0 when none */
+    uint8_t *in; /* unfinished frame, in_len bytes */
+    size_t in_len, in_cap;
+    uint8_t *out; /* unsent bytes */
+    size_t out_len, out_cap;
+    conn_view view;
+    float box[3];
+    char name[PROTO_NAME_MAX + 1];
+};
+
+static ev_io_fn on_io;
+
+static uint32_t ld_le32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+/* ---- context ----------------------------------------------------------- */
+
+/* Runs before each poll: the one safe point to tell owners about ends,
+ * because no callback of any conn is on the stack. on_close may free the
+ * conn and may open or end others, so the list is popped one at a time. */
+static void reap(ev_loop *loop, void *data)
+{
+    conn_ctx *ctx = data;
+    (void)loop;
+    while (ctx->closing) {
+        conn *c = ctx->closing;
+        ctx->closing = c->next_closing;
+        c->next_closing = NULL;
+        c->in_closing = 0;
+        if (c->fd >= 0) {
+            close(c->fd);
+            c->fd = -1;
+        }
+        c->h->on_close(c, &c->end, c->data);
+    }
+}
+
+conn_ctx *conn_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *err, size_t errlen)
+{
+    struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
+                             .ai_flags = AI_NUMERICSERV};
+    struct addrinfo *res = NULL;
+    char service[8];
+    snprintf(service, sizeof service, "%u", (unsigned)port);
+    int rc = getaddrinfo(host, service, &hints, &res);
+    if (rc != 0) {
+        snprintf(err, errlen, "cannot resolve '%s': %s", host,
+                 rc == EAI_SYSTEM ? strerror(errno) : gai_strerror(rc));
+        return NULL;
+    }
+    conn_ctx *ctx = xcalloc(1, sizeof *ctx);
+    ctx->loop = loop;
+    for (struct addrinfo *ai = res; ai && ctx->naddrs < CONN_ADDRS_MAX; ai = ai->ai_next) {
+        if (ai->ai_addrlen > sizeof ctx->addrs[0])
+            continue;
+        memcpy(&ctx->addrs[ctx->naddrs], ai->ai_addr, ai->ai_addrlen);
+        ctx->addr_lens[ctx->naddrs++] = ai->ai_addrlen;
+    }
+    freeaddrinfo(res);
+    if (ctx->naddrs == 0) {
+        snprintf(err, errlen, "cannot resolve '%s': no usable address", host);
+        free(ctx);
+        return NULL;
+    }
+    if (strchr(host, ':'))
+        snprintf(ctx->peer, sizeof ctx->peer, "[%s]:%u", host, (unsigned)port);
+    else
+        snprintf(ctx->peer, sizeof ctx->peer, "%s:%u", host, (unsigned)port);
+    ev_set_before_sleep(loop, reap, ctx);
+    return ctx;
+}
+
+void conn_ctx_free(conn_ctx *ctx)
+{
+    if (!ctx)
+        return;
+    ev_set_before_sleep(ctx->loop, NULL, NULL);
+    free(ctx);
+}
+
+uint64_t conn_ctx_opened(const conn_ctx *ctx) { return ctx->opened; }
+uint64_t conn_ctx_frames_in(const conn_ctx *ctx) { return ctx->frames_in; }
+uint64_t conn_ctx_bytes_in(const conn_ctx *ctx) { return ctx->bytes_in; }
+const char *conn_ctx_peer(const conn_ctx *ctx) { return ctx->peer; }
+
+/* ---- ending ------------------------------------------------------------ */
+
+/* Records the first end and takes the socket out of the loop at once, so no
+ * further callback arrives; the fd itself stays open until the reap, which
+ * keeps its number from being reused by a socket opened meanwhile. */
+static void end_conn(conn *c, int kind, int code)
+{
+    if (c->ended)
+        return;
+    c->ended = 1;
+    c->end = (conn_end){.kind = kind, .code = code, .after_bye = c->bye_sent,
+                        .was_open = c->state != CONN_CONNECTING};
+    c->state = CONN_CLOSED;
+    if (c->armed) {
+        ev_io_del(c->ctx->loop, c->fd);
+        c->armed = 0;
+    }
+    c->next_closing = c->ctx->closing;
+    c->ctx->closing = c;
+    c->in_closing = 1;
+}
+
+void conn_close(conn *c) { end_conn(c, CONN_END_LOCAL, 0); }
+
+/* Registers or re-arms the fd. Returns 0 or -errno, which the caller turns
+ * into the end that fits its stage (the loop refuses an fd past its size). */
+static int arm(conn *c, unsigned events)
+{
+    int rc = c->armed ? ev_io_mod(c->ctx->loop, c->fd, events)
+                      : ev_io_add(c->ctx->loop, c->fd, events, on_io, c);
+    if (rc == 0)
+        c->armed = events;
+    return rc;
+}
+
+/* Re-arms an established conn; failing to is fatal for it. */
+static void rearm(conn *c, unsigned events)
+{
+    int rc = arm(c, events);
+    if (rc < 0)
+        end_conn(c, CONN_END_SOCKET, -rc);
+}
+
+/* ---- output ------------------------------------------------------------ */
+
+/* Appends to the backlog, which grows on demand so that idle bots hold no
+ * output memory; the caller has checked CONN_OUT_MAX. */
+static void out_append(conn *c, const uint8_t *p, size_t n)
+{
+    if (c->out_len + n > c->out_cap) {
+        size_t cap = c->out_cap ? c->out_cap * 2 : 512;
+        while (cap < c->out_len + n)
+            cap *= 2;
+        if (cap > CONN_OUT_MAX)
+            cap = CONN_OUT_MAX;
+        c->out = xrealloc(c->out, cap);
+        c->out_cap = cap;
+    }
+    memcpy(c->out + c->out_len, p, n);
+    c->out_len += n;
+}
+
+/* A failed send does not end the conn: the server may have closed after an
+ * error message that is still waiting to be read. Output stops, and the read
+ * side, which the kernel now reports as readable, delivers what is left and
+ * then the end. */
+static void write_failed(conn *c)
+{
+    c->write_dead = 1;
+    c->out_len = 0;
+    if (c->armed & EV_WRITE)
+        rearm(c, EV_READ);
+}
+
+/* Once the bye is out, closing our half tells the server we are done even
+ * if it does not act on the bye itself. */
+static void maybe_shutdown(conn *c)
+{
+    if (c->bye_sent && c->out_len == 0 && !c->write_dead)
+        shutdown(c->fd, SHUT_WR);
+}
+
+/*
+ * Sends one whole frame: directly when nothing is queued, the unsent rest
+ * into the backlog (EV_WRITE armed). A frame that would push the backlog
+ * past CONN_OUT_MAX is dropped whole, so the stream never holds half a
+ * frame. Returns 0, -ENOBUFS when dropped, -ENOTCONN when the conn cannot
+ * send any more. Only called on an established connection.
+ */
+static int send_frame(conn *c, const uint8_t *p, size_t n)
+{
+    if (c->ended || c->write_dead || c->bye_sent)
+        return -ENOTCONN;
+    if (c->out_len + n > CONN_OUT_MAX)
+        return -ENOBUFS;
+    size_t done = 0;
+    if (c->out_len == 0) {
+        ssize_t k = send(c->fd, p, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (k < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
+            write_failed(c);
+            return -ENOTCONN;
+        }
+        done = k > 0 ? (size_t)k : 0;
+    }
+    c->last_send = ev_now(c->ctx->loop);
+    if (done < n) {
+        out_append(c, p + done, n - done);
+        if (!(c->armed & EV_WRITE))
+            rearm(c, EV_READ | EV_WRITE);
+    }
+    return 0;
+}
+
+/* Writes the backlog when the socket has room again. */
+static void flush(conn *c)
+{
+    while (c->out_len > 0) {
+        ssize_t k = send(c->fd, c->out, c->out_len, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (k < 0) {
+            if (errno == EINTR)
+                continue;
+            if (errno != EAGAIN && errno != EWOULDBLOCK)
+                write_failed(c);
+            return;
+        }
+        c->out_len -= (size_t)k;
+        memmove(c->out, c->out + k, c->out_len);
+    }
+    rearm(c, EV_READ);
+    maybe_shutdown(c);
+}
+
+/* ---- input ------------------------------------------------------------- */
+
+/* Frame types only a server sends; anything else from it is a protocol
+ * violation even when it decodes. */
+static int from_server(uint16_t type)
+{
+    switch (type) {
+    case PROTO_WELCOME:
+    case PROTO_JOIN_OK:
+    case PROTO_SNAPSHOT:
+    case PROTO_AVATAR_JOINED:
+    case PROTO_AVATAR_LEFT:
+    case PROTO_ERROR:
+    case PROTO_PING:
+    case PROTO_PONG:
+    case PROTO_BYE:
+        return 1;
+    default:
+        return 0;
+    }
+}
+
+static void send_join(conn *c)
+{
+    uint8_t buf[PROTO_SIZE_JOIN_MAX];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_join j = {.name = {c->name, (uint32_t)strlen(c->name)}};
+    memcpy(j.box, c->box, sizeof j.box);
+    proto_put_join(&w, &j);
+    send_frame(c, buf, w.len);
+}
+
+static void find_own(conn *c, const proto_snapshot *s)
+{
+    for (uint16_t i = 0; i < s->count; i++) {
+        if (ld_le32(s->entries + (size_t)i * PROTO_SNAPSHOT_ENTRY_SIZE) != c->view.avatar_id)
+            continue;
+        proto_avatar a;
+        proto_snapshot_entry(s, i, &a);
+        memcpy(c->view.pos, a.pos, sizeof a.pos);
+        c->view.pos_fresh = 1;
+        return;
+    }
+}
+
+/*
+ * Decodes one whole frame, advances the handshake and the view, and hands
+ * the message to the owner. A frame that does not decode, or is not legal
+ * from a server in our state, ends the conn with the status.
+ */
+static void dispatch(conn *c, const proto_frame *f)
+{
+    proto_msg m;
+    c->ctx->frames_in++;
+    int st = proto_decode(f, &m);
+    if (st == PROTO_OK && !from_server(m.type))
+        st = PROTO_ERR_UNEXPECTED;
+    c->view.pos_fresh = 0;
+    if (st == PROTO_OK) {
+        switch (m.type) {
+        case PROTO_WELCOME:
+            if (c->state != CONN_HELLO_SENT)
+                st = PROTO_ERR_UNEXPECTED;
+            else if (m.u.welcome.version != PROTO_VERSION)
+                st = PROTO_ERR_VERSION;
+            else {
+                c->view.welcome = m.u.welcome;
+                c->state = CONN_JOIN_SENT;
+                send_join(c);
+            }
+            break;
+        case PROTO_JOIN_OK:
+            if (c->state != CONN_JOIN_SENT) {
+                st = PROTO_ERR_UNEXPECTED;
+                break;
+            }
+            c->state = CONN_JOINED;
+            c->view.avatar_id = m.u.join_ok.avatar_id;
+            memcpy(c->view.pos, m.u.join_ok.pos, sizeof c->view.pos);
+            memcpy(c->view.box, m.u.join_ok.box, sizeof c->view.box);
+            c->view.pos_fresh = 1;
+            break;
+        case PROTO_SNAPSHOT:
+            c->view.ack = m.u.snapshot.ack_seq;
+            if (c->state == CONN_JOINED)
+                find_own(c, &m.u.snapshot);
+            break;
+        case PROTO_PONG:
+            if (c->keepalive_stamp != 0 && m.u.ping.stamp == c->keepalive_stamp) {
+                c->keepalive_stamp = 0;
+                return;
+            }
+            break;
+        case PROTO_PING: {
+            uint8_t buf[PROTO_SIZE_PING];
+            proto_writer w;
+            proto_writer_init(&w, buf, sizeof buf);
+            proto_put_pong(&w, m.u.ping.stamp);
+            send_frame(c, buf, w.len); /* a full backlog loses the pong; the server's idle timer copes */
+            break;
+        }
+        default:
+            break;
+        }
+    }
+    if (st != PROTO_OK) {
+        end_conn(c, CONN_END_PROTO, st);
+        return;
+    }
+    c->h->on_msg(c, &m, c->data);
+}
+
+/* Bytes the unfinished frame in c->in needs in all: a header until one is
+ * there, then what its length field says (checked by proto_frame_parse). */
+static size_t pending_need(const conn *c)
+{
+    if (c->in_len < PROTO_HEADER_SIZE)
+        return PROTO_HEADER_SIZE;
+    return 4u + (size_t)ld_le32(c->in);
+}
+
+static void in_reserve(conn *c, size_t need)
+{
+    if (need <= c->in_cap)
+        return;
+    size_t cap = 256;
+    while (cap < need)
+        cap *= 2;
+    if (cap > CONN_IN_MAX)
+        cap = CONN_IN_MAX;
+    c->in = xrealloc(c->in, cap);
+    c->in_cap = cap;
+}
+
+/* Parses the frames of a read that landed in the shared buffer; keeps the
+ * unfinished tail in the conn. */
+static void parse_scratch(conn *c, const uint8_t *buf, size_t n)
+{
+    size_t off = 0;
+    while (off < n && !c->ended) {
+        proto_frame f;
+        int st = proto_frame_parse(buf + off, n - off, PROTO_MAX_LEN, &f);
+        if (st == PROTO_OK) {
+            dispatch(c, &f);
+            off += f.size;
+        } else if (st == PROTO_INCOMPLETE) {
+            in_reserve(c, n - off);
+            memcpy(c->in, buf + off, n - off);
+            c->in_len = n - off;
+            return;
+        } else {
+            end_conn(c, CONN_END_PROTO, st);
+        }
+    }
+}
+
+/* Called after bytes were added to the unfinished frame. */
+static void parse_pending(conn *c)
+{
+    proto_frame f;
+    int st = proto_frame_parse(c->in, c->in_len, PROTO_MAX_LEN, &f);
+    if (st == PROTO_OK) {
+        c->in_len = 0; /* reads never go past the frame, so it is all of c->in */
+        dispatch(c, &f);
+    } else if (st != PROTO_INCOMPLETE) {
+        end_conn(c, CONN_END_PROTO, st);
+    }
+}
+
+/*
+ * Reads what the socket has, up to CONN_READS_PER_WAKEUP calls. Without an
+ * unfinished frame a read goes to the shared buffer; with one, the read asks
+ * for exactly the rest of that frame, so the conn's own buffer never holds
+ * more than one frame and a finished frame is parsed where it lies. A short
+ * read normally means the socket is drained and saves the call that would
+ * say EAGAIN; with drain set (the peer hung up) reading goes on until the
+ * end shows. Returns 1 when the socket said EAGAIN, 0 otherwise.
+ */
+static int read_some(conn *c, int drain)
+{
+    conn_ctx *ctx = c->ctx;
+    for (int i = 0; i < CONN_READS_PER_WAKEUP && !c->ended; i++) {
+        uint8_t *dst = ctx->scratch;
+        size_t want = sizeof ctx->scratch;
+        if (c->in_len > 0) {
+            size_t need = pending_need(c);
+            in_reserve(c, need);
+            dst = c->in + c->in_len;
+            want = need - c->in_len;
+        }
+        ssize_t n = recv(c->fd, dst, want, 0);
+        if (n < 0) {
+            if (errno == EINTR)
+                continue;
+            if (errno == EAGAIN || errno == EWOULDBLOCK)
+                return 1;
+            end_conn(c, CONN_END_SOCKET, errno);
+            return 0;
+        }
+        if (n == 0) {
+            if (c->in_len > 0)
+                end_conn(c, CONN_END_PROTO, PROTO_ERR_TRUNCATED);
+            else
+                end_conn(c, CONN_END_EOF, 0);
+            return 0;
+        }
+        ctx->bytes_in += (uint64_t)n;
+        if (dst == ctx->scratch) {
+            parse_scratch(c, dst, (size_t)n);
+        } else {
+            c->in_len += (size_t)n;
+            parse_pending(c);
+        }
+        if ((size_t)n < want && !drain)
+            return 0; /* drained for now */
+    }
+    return 0;
+}
+
+/* ---- connecting -------------------------------------------------------- */
+
+static void send_hello(conn *c)
+{
+    uint8_t buf[PROTO_SIZE_HELLO];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_hello(&w, &(proto_hello){.magic = PROTO_MAGIC, .version = PROTO_VERSION});
+    send_frame(c, buf, w.len);
+}
+
+static void connected(conn *c)
+{
+    c->ctx->opened++;
+    c->state = c->raw ? CONN_RAW : CONN_HELLO_SENT;
+    c->last_send = ev_now(c->ctx->loop);
+    rearm(c, EV_READ);
+    if (!c->raw && !c->ended)
+        send_hello(c);
+}
+
+/* Tries the resolved addresses from c->addr_i on; ends the conn with the
+ * last error when none is left. A refused address moves on to the next one,
+ * an exhausted process (EMFILE) does not. */
+static void connect_next(conn *c)
+{
+    conn_ctx *ctx = c->ctx;
+    int err = ECONNREFUSED;
+    for (; c->addr_i < ctx->naddrs; c->addr_i++) {
+        const struct sockaddr *sa = (const struct sockaddr *)&ctx->addrs[c->addr_i];
+        c->fd = socket(sa->sa_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+        if (c->fd < 0) {
+            err = errno;
+            if (err == EMFILE || err == ENFILE || err == ENOBUFS || err == ENOMEM)
+                break;
+            continue;
+        }
+        /* Moves are small and latency matters more than packet count. */
+        int one = 1;
+        setsockopt(c->fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+        if (connect(c->fd, sa, ctx->addr_lens[c->addr_i]) == 0) {
+            connected(c);
+            return;
+        }
+        if (errno == EINPROGRESS) {
+            int rc = arm(c, EV_WRITE);
+            if (rc == 0)
+                return;
+            err = -rc;
+            close(c->fd);
+            c->fd = -1;
+            break;
+        }
+        err = errno;
+        close(c->fd);
+        c->fd = -1;
+    }
+    end_conn(c, CONN_END_CONNECT, err);
+}
+
+static void finish_connect(conn *c)
+{
+    int err = 0;
+    socklen_t len = sizeof err;
+    if (getsockopt(c->fd, SOL_SOCKET, SO_ERROR, &err, &len) < 0)
+        err = errno;
+    if (err == 0) {
+        connected(c);
+        return;
+    }
+    ev_io_del(c->ctx->loop, c->fd);
+    c->armed = 0;
+    close(c->fd);
+    c->fd = -1;
+    c->addr_i++;
+    connect_next(c);
+}
+
+/* The loop's callback for every conn socket. */
+static void on_io(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    conn *c = data;
+    (void)loop;
+    (void)fd;
+    if (c->state == CONN_CONNECTING) {
+        finish_connect(c);
+        return;
+    }
+    int drained = 0;
+    if (events & (EV_READ | EV_ERROR))
+        drained = read_some(c, (events & EV_ERROR) != 0);
+    if (!c->ended && (events & EV_ERROR) && drained) {
+        /* An error with nothing left to read: level-triggered, it would
+         * wake us forever, so it ends the conn. */
+        int err = 0;
+        socklen_t len = sizeof err;
+        getsockopt(c->fd, SOL_SOCKET, SO_ERROR, &err, &len);
+        end_conn(c, CONN_END_SOCKET, err ? err : EPIPE);
+    }
+    if (!c->ended && (events & EV_WRITE))
+        flush(c);
+}
+
+/* ---- public ------------------------------------------------------------ */
+
+conn *conn_open(conn_ctx *ctx, const char *name, const float box[3], const conn_handler *handler,
+                void *data)
+{
+    conn *c = xcalloc(1, sizeof *c);
+    c->ctx = ctx;
+    c->h = handler;
+    c->data = data;
+    c->fd = -1;
+    c->state = CONN_CONNECTING;
+    c->raw = name == NULL;
+    if (name)
+        snprintf(c->name, sizeof c->name, "%s", name);
+    if (box)
+        memcpy(c->box, box, sizeof c->box);
+    connect_next(c);
+    return c;
+}
+
+void conn_free(conn *c)
+{
+    if (!c)
+        return;
+    if (c->in_closing) {
+        /* Ended but not reaped yet: unlink it so the hook never sees it. */
+        conn **p = &c->ctx->closing;
+        while (*p && *p != c)
+            p = &(*p)->next_closing;
+        if (*p)
+            *p = c->next_closing;
+    }
+    if (c->armed)
+        ev_io_del(c->ctx->loop, c->fd);
+    if (c->fd >= 0)
+        close(c->fd);
+    free(c->in);
+    free(c->out);
+    free(c);
+}
+
+int conn_state(const conn *c) { return c->state; }
+
+const conn_view *conn_get_view(const conn *c) { return &c->view; }
+
+uint32_t conn_send_move(conn *c, const float pos[3])
+{
+    if (c->state != CONN_JOINED && c->state != CONN_RAW)
+        return 0;
+    uint8_t buf[PROTO_SIZE_MOVE];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_move m = {.seq = c->seq + 1};
+    memcpy(m.pos, pos, sizeof m.pos);
+    proto_put_move(&w, &m);
+    if (send_frame(c, buf, w.len) < 0)
+        return 0;
+    return ++c->seq;
+}
+
+int conn_send_ping(conn *c, uint64_t stamp)
+{
+    if (c->state != CONN_JOINED)
+        return -ENOTCONN;
+    uint8_t buf[PROTO_SIZE_PING];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_ping(&w, stamp);
+    return send_frame(c, buf, w.len);
+}
+
+void conn_keepalive(conn *c)
+{
+    uint64_t now = ev_now(c->ctx->loop);
+    uint64_t quiet = (uint64_t)c->view.welcome.idle_timeout_ms * 1000000u / CONN_KEEPALIVE_FRACTION;
+    if (now - c->last_send >= quiet && conn_send_ping(c, now / 1000u) == 0)
+        c->keepalive_stamp = now / 1000u;
+}
+
+int conn_bye(conn *c, uint8_t reason)
+{
+    if (c->ended || c->bye_sent)
+        return 0;
+    if (c->state == CONN_CONNECTING) {
+        conn_close(c);
+        return 0;
+    }
+    uint8_t buf[PROTO_SIZE_BYE];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_bye(&w, reason);
+    if (send_frame(c, buf, w.len) < 0) {
+        conn_close(c); /* cannot even say bye: nothing more to wait for */
+        return 0;
+    }
+    c->bye_sent = 1;
+    maybe_shutdown(c);
+    return 1;
+}

@@ -1,0 +1,158 @@
+/*
+ * conn.h: one client connection to a cvre server, shared by the scripted
+ * client and the bot swarm.
+ *
+ * A conn owns a non-blocking TCP socket registered with an ev loop, a bounded
+ * input remainder and a bounded output backlog. It runs the handshake itself
+ * (hello on connect, join on welcome), answers pings, tracks what the server
+ * said about the own avatar (conn_view) and hands every decoded message to
+ * the owner's on_msg callback. A connection ends exactly once: the end is
+ * recorded, the socket leaves the loop at once, and on_close runs later from
+ * the loop's before-sleep hook, never from inside a callback of the conn, so
+ * on_close is the one place where the owner may conn_free() it.
+ *
+ * All conns of a process share a conn_ctx: the resolved server address, one
+ * read buffer and the totals the bot swarm reports.
+ */
+#ifndef CVRE_CLIENT_CONN_H
+#define CVRE_CLIENT_CONN_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "ev.h"
+#include "proto.h"
+
+/* A bot whose unsent output passes this many bytes is overloaded: further
+ * moves are dropped instead of growing memory. 64 KiB is a few seconds of
+ * moves at 20 Hz, so it is only reached when the server stops reading. */
+#ifndef CONN_OUT_MAX
+#define CONN_OUT_MAX (64u * 1024u)
+#endif
+_Static_assert(CONN_OUT_MAX >= PROTO_SIZE_JOIN_MAX + PROTO_SIZE_HELLO, "the handshake fits the backlog");
+
+/* The server closes a connection that sent no frame for the idle timeout it
+ * announces in the welcome; a joined connection with nothing else to send
+ * pings after a quarter of it, leaving room for the caller's check interval
+ * and a slow link. */
+#define CONN_KEEPALIVE_FRACTION 4u
+
+typedef struct conn_ctx conn_ctx;
+typedef struct conn conn;
+
+/* Where to connect and who to be; given to both the scripted client and the
+ * swarm (which appends "-<i>" to the name). */
+typedef struct conn_params {
+    const char *host;
+    uint16_t port;
+    const char *name;
+    float box[3];
+} conn_params;
+
+enum conn_state {
+    CONN_CONNECTING, /* TCP connect in progress */
+    CONN_HELLO_SENT, /* waiting for welcome */
+    CONN_JOIN_SENT,  /* waiting for join_ok */
+    CONN_JOINED,
+    CONN_RAW,    /* connected without a handshake (benchmarking a bare server) */
+    CONN_CLOSED, /* ended; on_close has run or is pending */
+};
+
+/* How a connection ended. */
+enum conn_end_kind {
+    CONN_END_EOF,     /* the server closed cleanly between frames */
+    CONN_END_LOCAL,   /* conn_close() */
+    CONN_END_CONNECT, /* could not connect; code is the errno */
+    CONN_END_SOCKET,  /* send/recv failed; code is the errno */
+    CONN_END_PROTO,   /* the server sent a bad frame; code is the proto status */
+};
+
+typedef struct conn_end {
+    int kind;      /* enum conn_end_kind */
+    int code;      /* errno or proto status, as kind says; 0 otherwise */
+    int after_bye; /* we had sent bye: the end was asked for */
+    int was_open;  /* the TCP connection had been established */
+} conn_end;
+
+/* What the server told us about our own avatar. Updated before on_msg sees
+ * the message that changed it. */
+typedef struct conn_view {
+    proto_welcome welcome; /* valid once the welcome arrived */
+    uint32_t avatar_id;    /* valid once joined */
+    float pos[3];          /* authoritative own position: spawn, then own snapshot entries */
+    float box[3];
+    uint32_t ack;  /* ack_seq of the latest snapshot */
+    int pos_fresh; /* the message being delivered carried our own entry */
+} conn_view;
+
+typedef struct conn_handler {
+    /* Every decoded message, including welcome, join_ok and pings (already
+     * answered). m and the strings in it are valid only during the call. The
+     * callback may send, conn_bye() or conn_close(), but not conn_free(). */
+    void (*on_msg)(conn *c, const proto_msg *m, void *data);
+    /* The end, once, from the before-sleep hook. The conn is CONN_CLOSED and
+     * may be freed here. */
+    void (*on_close)(conn *c, const conn_end *end, void *data);
+} conn_handler;
+
+/*
+ * Resolves host and port (numeric IPv4 or IPv6, or a name such as localhost)
+ * and takes over the loop's before-sleep hook, where ended connections are
+ * reaped. Returns NULL and a message in err on failure. The loop must
+ * outlive the ctx.
+ */
+conn_ctx *conn_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *err, size_t errlen);
+/* Frees the ctx; every conn must have been freed first. */
+void conn_ctx_free(conn_ctx *ctx);
+/* Totals over all conns since the ctx was created. */
+uint64_t conn_ctx_opened(const conn_ctx *ctx); /* TCP connections established */
+uint64_t conn_ctx_frames_in(const conn_ctx *ctx);
+uint64_t conn_ctx_bytes_in(const conn_ctx *ctx);
+/* "host:port" as given, for messages. */
+const char *conn_ctx_peer(const conn_ctx *ctx);
+
+/*
+ * Starts connecting. With a name, the conn says hello once connected and
+ * joins with name and box when welcomed; with name NULL it stays raw and
+ * sends only what the owner asks. Failures, even immediate ones, are
+ * reported through on_close, never here. handler must outlive the conn.
+ */
+conn *conn_open(conn_ctx *ctx, const char *name, const float box[3], const conn_handler *handler,
+                void *data);
+/* Closes the socket if still open and frees the conn; on_close is not called
+ * if it had not run yet. Not from inside the conn's own on_msg. */
+void conn_free(conn *c);
+
+int conn_state(const conn *c);
+const conn_view *conn_get_view(const conn *c);
+
+/*
+ * Sends a move to pos with the next sequence number. Returns that number
+ * (from 1 up), or 0 when nothing was sent: the conn is not joined or raw,
+ * or its backlog is full (overloaded), in which case the move is dropped and
+ * the sequence number is not used.
+ */
+uint32_t conn_send_move(conn *c, const float pos[3]);
+/* Sends a ping (legal only once joined); 0, or -ENOBUFS (backlog full) or
+ * -ENOTCONN. */
+int conn_send_ping(conn *c, uint64_t stamp);
+/* Pings with the current monotonic time in microseconds if the conn is
+ * joined and nothing was sent for a CONN_KEEPALIVE_FRACTION of the server's
+ * idle timeout; the pong is consumed
+ * here, not passed to on_msg, since nobody asked for it. The caller's check
+ * interval adds to the silence, so call it often (every 250 ms to 1 s). */
+void conn_keepalive(conn *c);
+
+/*
+ * Says bye: queues it, and once the backlog is flushed shuts down our half
+ * of the connection, so the server sees the end and closes; the conn then
+ * ends with after_bye set. The caller bounds the wait with conn_close().
+ * Returns 1 if this call sent the bye; 0 if it had been sent already, the
+ * conn had ended, or it could not be sent (still connecting, or the
+ * backlog is full), in which case the conn is closed instead.
+ */
+int conn_bye(conn *c, uint8_t reason);
+/* Ends the connection now (CONN_END_LOCAL); a no-op if it already ended. */
+void conn_close(conn *c);
+
+#endif

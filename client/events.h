@@ -1,0 +1,47 @@
+/*
+ * events.h: what the client prints on stdout, one JSON object per line,
+ * flushed at once, so that a program reading the pipe sees each event as it
+ * happens. Swarm events carry a "bot" field; bot < 0 leaves it out.
+ * Diagnostics go to stderr (log.h), never here.
+ */
+#ifndef CVRE_CLIENT_EVENTS_H
+#define CVRE_CLIENT_EVENTS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "conn.h"
+#include "proto.h"
+
+/* Totals a swarm reports in its stats and summary lines. */
+typedef struct events_counts {
+    uint64_t connected, joined, moves_sent, moves_dropped, frames_in, bytes_in, errors, disconnects;
+} events_counts;
+
+/* A message received from the server: welcome, join_ok, joined, left,
+ * snapshot, error, pong or bye. Pings are answered, not printed. now_us is
+ * the monotonic clock in microseconds, for the rtt of a pong. */
+void events_message(const proto_msg *m, uint64_t now_us);
+
+void events_error(int bot, unsigned code, const char *text, size_t len);
+void events_bye(int bot, unsigned reason);
+/* Our own bye, so a reader sees why the session ends: marked "from":"client". */
+void events_bye_sent(unsigned reason);
+void events_closed(int bot);
+
+/*
+ * Prints the error event for an end that was a failure on our side of the
+ * wire (could not connect, socket error, bad frame from the server; code 0
+ * unless it is a protocol status), with the server's address from peer.
+ * A socket error after our bye counts as a clean end. Returns 1 if it
+ * printed an error, 0 for a clean end.
+ */
+int events_conn_end(int bot, const conn_end *end, const char *peer);
+
+/* A script command finished; pos is the last authoritative own position. */
+void events_done(const char *command, const float pos[3]);
+
+void events_stats(const events_counts *k, double t);
+void events_summary(const events_counts *k, double duration);
+
+#endif

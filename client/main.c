@@ -1,0 +1,336 @@
+/*
+ * main.c: cvre-client, the thin client. Parses the flags, picks the mode
+ * (bot swarm, script, interactive) and runs it on one event loop, which also
+ * receives SIGINT and SIGTERM through a signalfd so that a signal ends the
+ * session with a bye rather than killing it mid-frame.
+ */
+#include <errno.h>
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/signalfd.h>
+#include <unistd.h>
+
+#include "bots.h"
+#include "ev.h"
+#include "log.h"
+#include "proto.h"
+#include "script.h"
+
+/* Flag bounds. A move per millisecond is the bot scheduler's resolution,
+ * and a move per 100 s keeps the period in range of a u64 of nanoseconds
+ * even when multiplied by the bot count; a million bots is far past what
+ * one process's descriptors allow anyway. */
+#define RATE_MIN 0.01
+#define RATE_MAX 1000.0
+#define BOTS_MAX 1000000u
+#define DURATION_MAX 86400.0
+#define RAMP_MAX 1e6
+/* Descriptors besides the bots' sockets: stdio, the signalfd, epoll. */
+#define SPARE_FDS 64
+
+typedef struct options {
+    conn_params net;
+    int name_given;
+    double rate;
+    const char *script;
+    unsigned bots;
+    int pattern;
+    double duration;
+    double ramp;
+    int no_handshake;
+} options;
+
+static void usage(FILE *f)
+{
+    fputs("usage: cvre-client [options]\n"
+          "  --host H           server address (default 127.0.0.1; IPv4, IPv6 or a name)\n"
+          "  --port P           server port (default 7878)\n"
+          "  --name NAME        display name (default user); for bots the prefix of <NAME>-<i>\n"
+          "  --box X,Y,Z        avatar box size in metres (default 0.6,1.8,0.6)\n"
+          "  --rate HZ          moves per second while walking (default 20)\n"
+          "  --script FILE      run the commands in FILE\n"
+          "  --bots N           run N bots instead of one user\n"
+          "  --pattern P        bots: random-walk (default) or circle\n"
+          "  --duration S       bots: seconds to run (default 10)\n"
+          "  --ramp N           bots: connections started per second (default 1000)\n"
+          "  --no-handshake     bots: skip hello and join, send only moves\n"
+          "  --help, --version\n"
+          "Without --bots or --script, commands come from standard input\n"
+          "(interactively on a terminal): move X Y Z, walk DX DZ SECONDS, wait MS,\n"
+          "ping, quit. Events are printed on stdout as JSON lines.\n",
+          f);
+}
+
+static int bad(const char *flag, const char *value, const char *want)
+{
+    fprintf(stderr, "cvre-client: %s: bad value '%s': %s (see --help)\n", flag, value, want);
+    return 2;
+}
+
+static int parse_double(const char *s, double lo, double hi, int lo_open, double *out)
+{
+    char *end;
+    double v = strtod(s, &end);
+    if (end == s || *end != '\0' || !isfinite(v) || v > hi || v < lo || (lo_open && v == lo))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static int parse_unsigned(const char *s, unsigned long lo, unsigned long hi, unsigned long *out)
+{
+    char *end;
+    if (*s < '0' || *s > '9')
+        return -1;
+    errno = 0;
+    unsigned long v = strtoul(s, &end, 10);
+    if (*end != '\0' || errno || v < lo || v > hi)
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static int parse_box(const char *s, float box[3])
+{
+    const char *p = s;
+    for (int i = 0; i < 3; i++) {
+        char *end;
+        double v = strtod(p, &end);
+        if (end == p || !isfinite(v) || v < PROTO_BOX_MIN || v > PROTO_BOX_MAX)
+            return -1;
+        if (*end != (i < 2 ? ',' : '\0'))
+            return -1;
+        box[i] = (float)v;
+        p = end + 1;
+    }
+    return 0;
+}
+
+/* Names travel as UTF-8 without control characters; catching the length
+ * and control characters here gives a better message than the server's
+ * refusal. */
+static int name_ok(const char *name, size_t max)
+{
+    size_t n = strlen(name);
+    if (n == 0 || n > max)
+        return 0;
+    for (size_t i = 0; i < n; i++)
+        if ((unsigned char)name[i] < 0x20u || name[i] == 0x7f)
+            return 0;
+    return 1;
+}
+
+static unsigned digits(unsigned v)
+{
+    unsigned d = 1;
+    while (v >= 10) {
+        v /= 10;
+        d++;
+    }
+    return d;
+}
+
+/* Fills *o from argv. Returns -1 to go on, or the exit code: 0 after --help
+ * or --version, 2 after a usage error (already reported). */
+static int parse_args(int argc, char **argv, options *o)
+{
+    *o = (options){.net = {.host = "127.0.0.1", .port = 7878, .name = "user", .box = {0.6f, 1.8f, 0.6f}},
+                   .rate = 20.0, .pattern = BOTS_RANDOM_WALK, .duration = 10.0, .ramp = 1000.0};
+    for (int i = 1; i < argc; i++) {
+        const char *arg = argv[i];
+        if (strncmp(arg, "--", 2) != 0) {
+            fprintf(stderr, "cvre-client: unexpected argument '%s' (see --help)\n", arg);
+            return 2;
+        }
+        if (strcmp(arg, "--help") == 0) {
+            usage(stdout);
+            return 0;
+        }
+        if (strcmp(arg, "--version") == 0) {
+            printf("cvre-client %s\n", CVRE_VERSION);
+            return 0;
+        }
+        if (strcmp(arg, "--no-handshake") == 0) {
+            o->no_handshake = 1;
+            continue;
+        }
+        /* Every other flag takes a value: --flag VALUE or --flag=VALUE. */
+        char flag[32];
+        const char *eq = strchr(arg, '='), *val;
+        size_t flen = eq ? (size_t)(eq - arg) : strlen(arg);
+        if (flen >= sizeof flag) {
+            fprintf(stderr, "cvre-client: unknown flag '%s' (see --help)\n", arg);
+            return 2;
+        }
+        memcpy(flag, arg, flen);
+        flag[flen] = '\0';
+        static const char *const known[] = {"--host", "--port", "--name", "--box", "--rate", "--script",
+                                            "--bots", "--pattern", "--duration", "--ramp"};
+        size_t k = 0;
+        while (k < sizeof known / sizeof known[0] && strcmp(known[k], flag) != 0)
+            k++;
+        if (k == sizeof known / sizeof known[0]) {
+            fprintf(stderr, "cvre-client: unknown flag '%s' (see --help)\n", flag);
+            return 2;
+        }
+        if (eq) {
+            val = eq + 1;
+        } else if (i + 1 < argc) {
+            val = argv[++i];
+        } else {
+            fprintf(stderr, "cvre-client: %s needs a value (see --help)\n", flag);
+            return 2;
+        }
+
+        unsigned long u;
+        if (strcmp(flag, "--host") == 0) {
+            if (!*val)
+                return bad(flag, val, "an address or host name");
+            o->net.host = val;
+        } else if (strcmp(flag, "--port") == 0) {
+            if (parse_unsigned(val, 1, 65535, &u) < 0)
+                return bad(flag, val, "a port number 1..65535");
+            o->net.port = (uint16_t)u;
+        } else if (strcmp(flag, "--name") == 0) {
+            if (!name_ok(val, PROTO_NAME_MAX))
+                return bad(flag, val, "1 to 32 bytes, no control characters");
+            o->net.name = val;
+            o->name_given = 1;
+        } else if (strcmp(flag, "--box") == 0) {
+            if (parse_box(val, o->net.box) < 0)
+                return bad(flag, val, "X,Y,Z with each edge in [0.1, 4] metres");
+        } else if (strcmp(flag, "--rate") == 0) {
+            if (parse_double(val, RATE_MIN, RATE_MAX, 0, &o->rate) < 0)
+                return bad(flag, val, "moves per second, 0.01 to 1000");
+        } else if (strcmp(flag, "--script") == 0) {
+            o->script = val;
+        } else if (strcmp(flag, "--bots") == 0) {
+            if (parse_unsigned(val, 1, BOTS_MAX, &u) < 0)
+                return bad(flag, val, "a count from 1 to 1000000");
+            o->bots = (unsigned)u;
+        } else if (strcmp(flag, "--pattern") == 0) {
+            if (strcmp(val, "random-walk") == 0)
+                o->pattern = BOTS_RANDOM_WALK;
+            else if (strcmp(val, "circle") == 0)
+                o->pattern = BOTS_CIRCLE;
+            else
+                return bad(flag, val, "random-walk or circle");
+        } else if (strcmp(flag, "--duration") == 0) {
+            if (parse_double(val, 0.0, DURATION_MAX, 1, &o->duration) < 0)
+                return bad(flag, val, "seconds, more than 0 and at most 86400");
+        } else {
+            if (parse_double(val, 0.0, RAMP_MAX, 1, &o->ramp) < 0)
+                return bad(flag, val, "connections per second, more than 0 and at most 1000000");
+        }
+    }
+    if (o->no_handshake && o->bots == 0) {
+        fprintf(stderr, "cvre-client: --no-handshake needs --bots\n");
+        return 2;
+    }
+    if (o->bots > 0) {
+        if (!o->name_given)
+            o->net.name = "bot";
+        if (strlen(o->net.name) + 1 + digits(o->bots - 1) > PROTO_NAME_MAX) {
+            fprintf(stderr, "cvre-client: --name: '%s-%u' would be longer than %u bytes\n",
+                    o->net.name, o->bots - 1, PROTO_NAME_MAX);
+            return 2;
+        }
+    }
+    return -1;
+}
+
+/* Lifts the descriptor limit to the hard limit, since every bot is a
+ * socket. Returns how many fds the loop should be able to watch. */
+static int raise_nofile(unsigned nbots)
+{
+    unsigned long want = (unsigned long)nbots + SPARE_FDS;
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) < 0)
+        return (int)want;
+    if (rl.rlim_cur < rl.rlim_max) {
+        rl.rlim_cur = rl.rlim_max;
+        if (setrlimit(RLIMIT_NOFILE, &rl) < 0)
+            getrlimit(RLIMIT_NOFILE, &rl);
+    }
+    if (rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < want) {
+        log_warn("only %lu file descriptors allowed: some of the %u bots will fail to connect",
+                 (unsigned long)rl.rlim_cur, nbots);
+        want = (unsigned long)rl.rlim_cur;
+    }
+    return (int)want;
+}
+
+/* The running mode; exactly one of the two is set. */
+typedef struct mode {
+    script *script;
+    bots *bots;
+} mode;
+
+static void on_signal(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    mode *m = data;
+    struct signalfd_siginfo si;
+    (void)loop;
+    (void)events;
+    while (read(fd, &si, sizeof si) == (ssize_t)sizeof si) {
+        if (m->bots)
+            bots_interrupt(m->bots);
+        else
+            script_interrupt(m->script);
+    }
+}
+
+int main(int argc, char **argv)
+{
+    options o;
+    int code = parse_args(argc, argv, &o);
+    if (code >= 0)
+        return code;
+
+    signal(SIGPIPE, SIG_IGN);
+    int max_fd = o.bots ? raise_nofile(o.bots) : SPARE_FDS;
+
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    sigprocmask(SIG_BLOCK, &set, NULL);
+    int sfd = signalfd(-1, &set, SFD_NONBLOCK | SFD_CLOEXEC);
+    ev_loop *loop = ev_create(max_fd);
+    if (sfd < 0 || !loop) {
+        log_error("cannot set up the event loop: %s", strerror(errno));
+        return 1;
+    }
+
+    mode m = {0};
+    code = 1;
+    if (o.bots) {
+        bots_opts bo = {.net = o.net, .rate = o.rate, .count = o.bots, .pattern = o.pattern,
+                        .duration = o.duration, .ramp = o.ramp, .no_handshake = o.no_handshake};
+        m.bots = bots_create(loop, &bo, &code);
+    } else {
+        script_opts so = {.net = o.net, .rate = o.rate, .file = o.script};
+        m.script = script_create(loop, &so, &code);
+    }
+    if (m.bots || m.script) {
+        int rc = ev_io_add(loop, sfd, EV_READ, on_signal, &m);
+        if (rc == 0)
+            rc = ev_run(loop);
+        if (rc < 0) {
+            log_error("event loop: %s", strerror(-rc));
+            code = 1;
+        } else {
+            code = m.bots ? bots_exit_code(m.bots) : script_exit_code(m.script);
+        }
+        bots_free(m.bots);
+        script_free(m.script);
+        ev_io_del(loop, sfd);
+    }
+    close(sfd);
+    ev_destroy(loop);
+    return code;
+}

@@ -1,0 +1,56 @@
+/*
+ * script.h: the scripted and interactive client: one connection that runs
+ * commands (move, walk, wait, ping, quit) in order once joined, while every
+ * received event is printed (events.h).
+ *
+ * Commands come from a file, read and checked whole before connecting; from
+ * standard input when it is a pipe or a terminal, line by line as they are
+ * typed; or from standard input read whole when it is a regular file.
+ */
+#ifndef CVRE_CLIENT_SCRIPT_H
+#define CVRE_CLIENT_SCRIPT_H
+
+#include "conn.h"
+#include "ev.h"
+
+/* Longest command line; longer ones are an error, not silently cut. */
+#define SCRIPT_LINE_MAX 1024
+
+enum script_op { SCRIPT_MOVE, SCRIPT_WALK, SCRIPT_WAIT, SCRIPT_PING, SCRIPT_QUIT };
+
+typedef struct script_cmd {
+    int op;        /* enum script_op */
+    double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms */
+} script_cmd;
+
+/*
+ * Parses one line (without its newline). Returns 1 and fills *cmd for a
+ * command, 0 for a blank or comment line, -1 with a message in err (which
+ * does not name the line; the caller knows it) for anything else, including
+ * numbers that are not finite or do not fit their range.
+ */
+int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errlen);
+
+typedef struct script_opts {
+    conn_params net;
+    double rate;      /* moves per second while walking */
+    const char *file; /* NULL: standard input */
+} script_opts;
+
+typedef struct script script;
+
+/*
+ * Loads the commands (or sets up reading them) and starts connecting.
+ * Returns NULL with *exit_code set when it cannot start: 2 for a bad script,
+ * 1 for an unreadable file or an unresolvable host. Stops the loop when the
+ * connection has ended.
+ */
+script *script_create(ev_loop *loop, const script_opts *opts, int *exit_code);
+/* SIGINT or SIGTERM: say bye and end; a second one ends at once. */
+void script_interrupt(script *s);
+/* 0 after a clean end, 1 if the connection failed or ended before quit,
+ * 2 after a script error. Meaningful once the loop has stopped. */
+int script_exit_code(const script *s);
+void script_free(script *s);
+
+#endif
