@@ -87,23 +87,6 @@ static double rand_unit(bots *b)
     return (double)((b->rng * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
 }
 
-static int start_timer(bots *b, uint64_t delay, uint64_t period, ev_timer_fn *fn)
-{
-    int id = ev_timer_start(b->loop, delay, period, fn, b);
-    if (id < 0) {
-        log_error("cannot start a timer: %s", strerror(-id));
-        abort();
-    }
-    return id;
-}
-
-static void stop_timer(bots *b, int *id)
-{
-    if (*id >= 0)
-        ev_timer_stop(b->loop, *id);
-    *id = -1;
-}
-
 /* ---- movement ---------------------------------------------------------- */
 
 /* Folds v back into [lo, hi] like a ball off a wall; returns 1 if it
@@ -341,10 +324,10 @@ static void finish(bots *b)
     if (b->finished)
         return;
     b->finished = 1;
-    stop_timer(b, &b->tick_timer);
-    stop_timer(b, &b->stats_timer);
-    stop_timer(b, &b->end_timer);
-    stop_timer(b, &b->linger_timer);
+    conn_timer_stop(b->loop, &b->tick_timer);
+    conn_timer_stop(b->loop, &b->stats_timer);
+    conn_timer_stop(b->loop, &b->end_timer);
+    conn_timer_stop(b->loop, &b->linger_timer);
     fill_counts(b);
     events_summary(&b->k, elapsed_s(b));
     ev_stop(b->loop);
@@ -365,7 +348,7 @@ static void begin_end(bots *b)
     if (b->ending)
         return;
     b->ending = 1;
-    stop_timer(b, &b->tick_timer);
+    conn_timer_stop(b->loop, &b->tick_timer);
     for (unsigned i = 0; i < b->started; i++) {
         conn *c = b->bot[i].c;
         if (!c)
@@ -378,7 +361,7 @@ static void begin_end(bots *b)
     if (b->open == 0)
         finish(b);
     else
-        b->linger_timer = start_timer(b, BOTS_LINGER_NS, 0, on_linger);
+        b->linger_timer = conn_timer_start(b->loop, BOTS_LINGER_NS, 0, on_linger, b);
 }
 
 static void on_duration(ev_loop *loop, void *data)
@@ -412,9 +395,9 @@ bots *bots_create(ev_loop *loop, const bots_opts *o, int *exit_code)
     b->rng = ((uint64_t)time(NULL) << 20 ^ (uint64_t)getpid()) | 1u;
     b->period_ns = (uint64_t)((double)NS_PER_S / o->rate);
     b->t0 = b->cycle_at = ev_clock(loop);
-    b->tick_timer = start_timer(b, 0, BOTS_TICK_NS, on_tick);
-    b->stats_timer = start_timer(b, BOTS_STATS_NS, BOTS_STATS_NS, on_stats);
-    b->end_timer = start_timer(b, (uint64_t)(o->duration * (double)NS_PER_S), 0, on_duration);
+    b->tick_timer = conn_timer_start(b->loop, 0, BOTS_TICK_NS, on_tick, b);
+    b->stats_timer = conn_timer_start(b->loop, BOTS_STATS_NS, BOTS_STATS_NS, on_stats, b);
+    b->end_timer = conn_timer_start(b->loop, (uint64_t)(o->duration * (double)NS_PER_S), 0, on_duration, b);
     b->linger_timer = -1;
     return b;
 }
@@ -433,10 +416,10 @@ void bots_free(bots *b)
 {
     if (!b)
         return;
-    stop_timer(b, &b->tick_timer);
-    stop_timer(b, &b->stats_timer);
-    stop_timer(b, &b->end_timer);
-    stop_timer(b, &b->linger_timer);
+    conn_timer_stop(b->loop, &b->tick_timer);
+    conn_timer_stop(b->loop, &b->stats_timer);
+    conn_timer_stop(b->loop, &b->end_timer);
+    conn_timer_stop(b->loop, &b->linger_timer);
     for (unsigned i = 0; i < b->o.count; i++)
         conn_free(b->bot[i].c);
     conn_ctx_free(b->ctx);

@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "alloc.h"
+#include "log.h"
 
 /* One read buffer shared by every conn of the process: a read lands here
  * and is parsed in place, and only the unfinished tail of a frame is copied
@@ -703,4 +704,21 @@ int conn_bye(conn *c, uint8_t reason)
     c->bye_sent = 1;
     maybe_shutdown(c);
     return 1;
+}
+
+int conn_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_timer_fn *fn, void *data)
+{
+    int id = ev_timer_start(loop, delay_ns, period_ns, fn, data);
+    if (id < 0) {
+        log_error("cannot start a timer: %s", strerror(-id));
+        abort();
+    }
+    return id;
+}
+
+void conn_timer_stop(ev_loop *loop, int *id)
+{
+    if (*id >= 0)
+        ev_timer_stop(loop, *id);
+    *id = -1;
 }

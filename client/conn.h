@@ -28,6 +28,12 @@
  * moves at 20 Hz, so it is only reached when the server stops reading. */
 #ifndef CONN_OUT_MAX
 #define CONN_OUT_MAX (64u * 1024u)
+/* ev_timer_start for the client loop, where failing to get a timer (a small
+ * allocation) is not recoverable: it logs and aborts. Returns the id. */
+int conn_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_timer_fn *fn, void *data);
+/* Stops *id if it is running (>= 0) and sets it to -1. */
+void conn_timer_stop(ev_loop *loop, int *id);
+
 #endif
 _Static_assert(CONN_OUT_MAX >= PROTO_SIZE_JOIN_MAX + PROTO_SIZE_HELLO, "the handshake fits the backlog");
 
@@ -154,5 +160,11 @@ void conn_keepalive(conn *c);
 int conn_bye(conn *c, uint8_t reason);
 /* Ends the connection now (CONN_END_LOCAL); a no-op if it already ended. */
 void conn_close(conn *c);
+
+/* ev_timer_start for the client loop, where failing to get a timer (a small
+ * allocation) is not recoverable: it logs and aborts. Returns the id. */
+int conn_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_timer_fn *fn, void *data);
+/* Stops *id if it is running (>= 0) and sets it to -1. */
+void conn_timer_stop(ev_loop *loop, int *id);
 
 #endif

@@ -42,41 +42,6 @@ static void put_vec3(const char *key, const float v[3])
     putchar(']');
 }
 
-/* Length of the well-formed UTF-8 character at s (n > 0 bytes left), or 0
- * if it is not one; JSON text must be valid UTF-8. */
-static size_t utf8_len(const unsigned char *s, size_t n)
-{
-    size_t len;
-    uint32_t c = s[0], min;
-    if (c < 0x80u)
-        return 1;
-    if ((c & 0xe0u) == 0xc0u) {
-        len = 2;
-        min = 0x80u;
-        c &= 0x1fu;
-    } else if ((c & 0xf0u) == 0xe0u) {
-        len = 3;
-        min = 0x800u;
-        c &= 0x0fu;
-    } else if ((c & 0xf8u) == 0xf0u) {
-        len = 4;
-        min = 0x10000u;
-        c &= 0x07u;
-    } else {
-        return 0;
-    }
-    if (len > n)
-        return 0;
-    for (size_t i = 1; i < len; i++) {
-        if ((s[i] & 0xc0u) != 0x80u)
-            return 0;
-        c = c << 6 | (s[i] & 0x3fu);
-    }
-    if (c < min || c > 0x10ffffu || (c >= 0xd800u && c <= 0xdfffu))
-        return 0;
-    return len;
-}
-
 /* A JSON string from len bytes: quotes, backslashes and control characters
  * escaped, bytes that are not UTF-8 replaced by U+FFFD. The server's strings
  * are already clean; local messages (strerror, paths) need not be. */
@@ -103,7 +68,8 @@ static void put_string(const char *key, const char *s, size_t len)
             printf("\\u%04x", ch);
             i++;
         } else {
-            size_t k = utf8_len(p + i, len - i);
+            uint32_t cp;
+            size_t k = proto_utf8_next(p + i, len - i, &cp);
             if (k == 0) {
                 fputs("\\ufffd", stdout);
                 i++;

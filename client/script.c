@@ -173,25 +173,6 @@ static void fail(script *s, int code)
         s->exit_code = code;
 }
 
-/* Timers are small allocations in the loop; like any allocation in the
- * client loop, failing to get one is not recoverable. */
-static int start_timer(script *s, uint64_t delay, uint64_t period, ev_timer_fn *fn)
-{
-    int id = ev_timer_start(s->loop, delay, period, fn, s);
-    if (id < 0) {
-        log_error("cannot start a timer: %s", strerror(-id));
-        abort();
-    }
-    return id;
-}
-
-static void stop_timer(script *s, int *id)
-{
-    if (*id >= 0)
-        ev_timer_stop(s->loop, *id);
-    *id = -1;
-}
-
 static double dist3(const float a[3], const float b[3])
 {
     double dx = (double)a[0] - b[0], dy = (double)a[1] - b[1], dz = (double)a[2] - b[2];
@@ -209,7 +190,7 @@ static const char *op_name(int op)
 /* Ends the running command; move, walk and wait report where we are. */
 static void cmd_done(script *s)
 {
-    stop_timer(s, &s->cmd_timer);
+    conn_timer_stop(s->loop, &s->cmd_timer);
     s->running = 0;
     if (s->cur.op == SCRIPT_MOVE || s->cur.op == SCRIPT_WALK || s->cur.op == SCRIPT_WAIT)
         events_done(op_name(s->cur.op), conn_get_view(s->c)->pos);
@@ -236,11 +217,11 @@ static void quit(script *s)
     if (s->quitting)
         return;
     s->quitting = 1;
-    stop_timer(s, &s->cmd_timer);
+    conn_timer_stop(s->loop, &s->cmd_timer);
     s->running = 0;
     if (conn_bye(s->c, PROTO_BYE_QUIT))
         events_bye_sent(PROTO_BYE_QUIT);
-    s->linger_timer = start_timer(s, QUIT_LINGER_NS, 0, on_linger);
+    s->linger_timer = conn_timer_start(s->loop, QUIT_LINGER_NS, 0, on_linger, s);
 }
 
 /* One step of a move: the next point on the straight line from the last
@@ -346,7 +327,7 @@ static void cmd_start(script *s, const script_cmd *cmd)
             return;
         }
         move_step(s);
-        s->cmd_timer = start_timer(s, s->period_ns, s->period_ns, on_cmd_timer);
+        s->cmd_timer = conn_timer_start(s->loop, s->period_ns, s->period_ns, on_cmd_timer, s);
         break;
     case SCRIPT_WALK: {
         double n = round(cmd->arg[2] * s->rate);
@@ -354,11 +335,11 @@ static void cmd_start(script *s, const script_cmd *cmd)
         s->walk_k = 0;
         s->walk_n = n < 1.0 ? 1u : (unsigned)n;
         walk_step(s, now);
-        s->cmd_timer = start_timer(s, s->period_ns, s->period_ns, on_cmd_timer);
+        s->cmd_timer = conn_timer_start(s->loop, s->period_ns, s->period_ns, on_cmd_timer, s);
         break;
     }
     case SCRIPT_WAIT:
-        s->cmd_timer = start_timer(s, (uint64_t)(cmd->arg[0] * (double)NS_PER_MS), 0, on_cmd_timer);
+        s->cmd_timer = conn_timer_start(s->loop, (uint64_t)(cmd->arg[0] * (double)NS_PER_MS), 0, on_cmd_timer, s);
         break;
     case SCRIPT_PING:
         s->ping_stamp = ev_clock(s->loop) / 1000u;
@@ -367,7 +348,7 @@ static void cmd_start(script *s, const script_cmd *cmd)
             cmd_done(s);
             return;
         }
-        s->cmd_timer = start_timer(s, PING_WAIT_NS, 0, on_cmd_timer);
+        s->cmd_timer = conn_timer_start(s->loop, PING_WAIT_NS, 0, on_cmd_timer, s);
         break;
     default:
         s->running = 0;
@@ -431,8 +412,8 @@ static void on_close(conn *c, const conn_end *end, void *data)
     events_closed(-1);
     if (!s->quitting)
         fail(s, 1);
-    stop_timer(s, &s->cmd_timer);
-    stop_timer(s, &s->linger_timer);
+    conn_timer_stop(s->loop, &s->cmd_timer);
+    conn_timer_stop(s->loop, &s->linger_timer);
     ev_stop(s->loop);
 }
 
@@ -615,7 +596,7 @@ script *script_create(ev_loop *loop, const script_opts *o, int *exit_code)
         return NULL;
     }
     s->c = conn_open(s->ctx, o->net.name, o->net.box, &handler, s);
-    s->keepalive_timer = start_timer(s, KEEPALIVE_CHECK_NS, KEEPALIVE_CHECK_NS, on_keepalive);
+    s->keepalive_timer = conn_timer_start(s->loop, KEEPALIVE_CHECK_NS, KEEPALIVE_CHECK_NS, on_keepalive, s);
     prompt(s);
     return s;
 }
@@ -636,9 +617,9 @@ void script_free(script *s)
     if (!s)
         return;
     input_over(s);
-    stop_timer(s, &s->cmd_timer);
-    stop_timer(s, &s->keepalive_timer);
-    stop_timer(s, &s->linger_timer);
+    conn_timer_stop(s->loop, &s->cmd_timer);
+    conn_timer_stop(s->loop, &s->keepalive_timer);
+    conn_timer_stop(s->loop, &s->linger_timer);
     conn_free(s->c);
     conn_ctx_free(s->ctx);
     free(s->q);

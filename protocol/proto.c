@@ -101,15 +101,10 @@ static inline uint8_t *st_bytes(uint8_t *p, const void *src, size_t n)
 
 /* ---- UTF-8 ------------------------------------------------------------ */
 
-/*
- * Decodes the character at s, of which n > 0 bytes are readable. Returns its
- * length in bytes and stores its code point in *cp, or returns 0 when the
- * bytes there are not one well-formed character: a stray continuation byte,
- * a sequence cut short, an overlong form, a surrogate or a value past
- * U+10FFFF. Rejecting those keeps one byte form per character, so names
- * compare equal exactly when their bytes do.
- */
-static size_t utf8_next(const uint8_t *s, size_t n, uint32_t *cp)
+/* Rejecting overlong forms, surrogates and values past U+10FFFF (see
+ * proto.h) keeps one byte form per character, so names compare equal
+ * exactly when their bytes do. */
+size_t proto_utf8_next(const uint8_t *s, size_t n, uint32_t *cp)
 {
     uint32_t c = s[0];
     uint32_t min;
@@ -157,7 +152,7 @@ static int text_ok(const uint8_t *s, size_t n)
 
     while (i < n) {
         uint32_t cp;
-        size_t k = utf8_next(s + i, n - i, &cp);
+        size_t k = proto_utf8_next(s + i, n - i, &cp);
 
         if (k == 0 || is_control(cp))
             return 0;
@@ -556,7 +551,7 @@ static size_t clean_message(uint8_t *dst, const char *src)
         n++;
     while (i < n && i < PROTO_MESSAGE_MAX) {
         uint32_t cp;
-        size_t k = utf8_next(s + i, n - i, &cp);
+        size_t k = proto_utf8_next(s + i, n - i, &cp);
 
         if (k == 0 || is_control(cp)) {
             dst[i++] = '?';

@@ -6,13 +6,19 @@
 
 #include "alloc.h"
 
+/* A cell keeps its handles with their coordinates, so a query scans memory
+ * in order instead of chasing every handle to its entry. */
+typedef struct item {
+    uint32_t h;
+    float x, z;
+} item;
+
 typedef struct cell {
-    uint32_t *items; /* handles */
+    item *items;
     uint32_t n, cap;
 } cell;
 
 typedef struct entry {
-    float x, z;
     uint32_t cell; /* index in cells */
     uint32_t at;   /* index in that cell's items */
 } entry;
@@ -75,12 +81,12 @@ static uint32_t cell_of(const grid *g, float x, float z)
     return coord(z, g->min_z, g->inv_cell, g->nz) * g->nx + coord(x, g->min_x, g->inv_cell, g->nx);
 }
 
-static int cell_add(grid *g, uint32_t ci, uint32_t h)
+static int cell_add(grid *g, uint32_t ci, uint32_t h, float x, float z)
 {
     cell *c = &g->cells[ci];
     if (c->n == c->cap) {
         uint32_t cap = c->cap ? c->cap * 2 : 8;
-        uint32_t *items = cvre_realloc(c->items, cap * sizeof *items);
+        item *items = cvre_realloc(c->items, cap * sizeof *items);
         if (!items)
             return -ENOMEM;
         c->items = items;
@@ -88,7 +94,7 @@ static int cell_add(grid *g, uint32_t ci, uint32_t h)
     }
     g->entries[h].cell = ci;
     g->entries[h].at = c->n;
-    c->items[c->n++] = h;
+    c->items[c->n++] = (item){h, x, z};
     return 0;
 }
 
@@ -99,31 +105,30 @@ static void cell_del(grid *g, uint32_t ci, uint32_t at)
     if (at == --c->n)
         return; /* it was the last: nothing moves (its entry may already
                    describe its new cell, see grid_move) */
-    uint32_t last = c->items[c->n];
-    c->items[at] = last;
-    g->entries[last].at = at;
+    c->items[at] = c->items[c->n];
+    g->entries[c->items[at].h].at = at;
 }
 
-int grid_insert(grid *g, uint32_t h, float x, float z)
-{
-    g->entries[h].x = x;
-    g->entries[h].z = z;
-    return cell_add(g, cell_of(g, x, z), h);
-}
+int grid_insert(grid *g, uint32_t h, float x, float z) { return cell_add(g, cell_of(g, x, z), h, x, z); }
 
 int grid_move(grid *g, uint32_t h, float x, float z)
 {
     uint32_t ci = cell_of(g, x, z);
-    g->entries[h].x = x;
-    g->entries[h].z = z;
     uint32_t old = g->entries[h].cell, at = g->entries[h].at;
-    if (ci == old)
+    if (ci == old) {
+        g->cells[ci].items[at].x = x;
+        g->cells[ci].items[at].z = z;
         return 0;
+    }
     /* Add before removing: if the add fails the handle stays in its old
-     * cell, still consistent, merely filed under a neighbouring cell. */
-    int rc = cell_add(g, ci, h);
-    if (rc < 0)
+     * cell with its new coordinates, still consistent, merely filed under a
+     * neighbouring cell (a query may miss it until its next move). */
+    int rc = cell_add(g, ci, h, x, z);
+    if (rc < 0) {
+        g->cells[old].items[at].x = x;
+        g->cells[old].items[at].z = z;
         return rc;
+    }
     cell_del(g, old, at);
     return 0;
 }
@@ -140,11 +145,10 @@ uint32_t grid_query(const grid *g, float x, float z, float r, uint32_t *out, uin
         for (uint32_t cx = x0; cx <= x1; cx++) {
             const cell *c = &g->cells[cz * g->nx + cx];
             for (uint32_t i = 0; i < c->n; i++) {
-                const entry *e = &g->entries[c->items[i]];
-                float dx = e->x - x, dz = e->z - z;
+                float dx = c->items[i].x - x, dz = c->items[i].z - z;
                 if (dx * dx + dz * dz <= r2) {
                     if (n < max)
-                        out[n] = c->items[i];
+                        out[n] = c->items[i].h;
                     n++;
                 }
             }

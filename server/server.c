@@ -54,7 +54,7 @@ typedef struct client {
     uint32_t last_seq;
     uint32_t sent_ack;
     uint32_t last_sent_tick;
-    uint32_t *known; /* ids of the avatars this client has been told of, sorted */
+    uint32_t *known; /* ids of the avatars this client has been told of, in no order */
     uint32_t nknown, known_cap;
     uint64_t connected_ns, last_frame_ns, close_deadline_ns, soft_since_ns;
     char end_reason[PROTO_MESSAGE_MAX + 16];
@@ -94,6 +94,8 @@ struct server {
     /* Per-tick scratch, sized for the largest area of interest. */
     const world_avatar **vis, **joined, **snap;
     uint32_t *left;
+    /* Per avatar slot: which id was stamped, and when (update_view). */
+    uint32_t *mark_id, *mark_stamp, stamp;
     session_event *events;
     uint32_t nevents, events_cap;
     int64_t last_session_id;
@@ -519,30 +521,44 @@ static int known_reserve(client *c, uint32_t n)
 /* Tells c what changed in its area of interest since its last update:
  * avatars that came into view (joined), went out of view or disconnected
  * (left), and the positions that changed (snapshot, with its own entry and
- * the last move applied). Both lists are sorted by id, so one merge finds
- * the differences. A client whose output is backed up is skipped; it gets
- * the accumulated changes once it reads again. */
+ * the last move applied). The known and visible sets are compared through
+ * per-slot stamps, in time linear in their sizes with no sorting: known
+ * avatars are stamped S, the visible ones among them restamped S + 1, and
+ * known ones left at S are gone. A client whose output is backed up is
+ * skipped; it gets the accumulated changes once it reads again. */
 static void update_view(server *s, client *c, uint32_t tick)
 {
     if (conn_out_pending(&c->c) > SRV_OUTBUF_SOFT)
         return;
     const world_avatar *me = world_get(s->world, c->avatar_id);
     uint32_t n = world_neighbours(s->world, c->avatar_id, s->vis, SRV_AOI_MAX - 1);
-    uint32_t nleft = 0, njoined = 0, nsnap = 0, i = 0, j = 0;
+    uint32_t nleft = 0, njoined = 0, nsnap = 0;
+    if (s->stamp >= UINT32_MAX - 2) { /* wrapped: forget every old stamp */
+        memset(s->mark_stamp, 0, s->cfg.max_clients * sizeof *s->mark_stamp);
+        s->stamp = 0;
+    }
+    uint32_t S = s->stamp += 2;
+    for (uint32_t k = 0; k < c->nknown; k++) {
+        uint32_t slot = world_slot(c->known[k]);
+        s->mark_id[slot] = c->known[k];
+        s->mark_stamp[slot] = S;
+    }
     if (me->changed_tick > c->last_sent_tick)
         s->snap[nsnap++] = me;
-    while (i < c->nknown || j < n) {
-        if (j == n || (i < c->nknown && c->known[i] < s->vis[j]->id)) {
-            s->left[nleft++] = c->known[i++];
-        } else if (i == c->nknown || c->known[i] > s->vis[j]->id) {
-            s->joined[njoined++] = s->vis[j++];
+    for (uint32_t k = 0; k < n; k++) {
+        const world_avatar *v = s->vis[k];
+        uint32_t slot = world_slot(v->id);
+        if (s->mark_stamp[slot] == S && s->mark_id[slot] == v->id) {
+            s->mark_stamp[slot] = S + 1;
+            if (v->changed_tick > c->last_sent_tick)
+                s->snap[nsnap++] = v;
         } else {
-            if (s->vis[j]->changed_tick > c->last_sent_tick)
-                s->snap[nsnap++] = s->vis[j];
-            i++;
-            j++;
+            s->joined[njoined++] = v;
         }
     }
+    for (uint32_t k = 0; k < c->nknown; k++)
+        if (s->mark_stamp[world_slot(c->known[k])] == S)
+            s->left[nleft++] = c->known[k];
     int ack_changed = me->ack_seq != c->sent_ack;
     if (!nleft && !njoined && !nsnap && !ack_changed) {
         c->last_sent_tick = tick;
@@ -897,6 +913,8 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     s->joined = xcalloc(SRV_AOI_MAX, sizeof *s->joined);
     s->snap = xcalloc(SRV_AOI_MAX, sizeof *s->snap);
     s->left = xcalloc(cfg->max_clients, sizeof *s->left);
+    s->mark_id = xcalloc(cfg->max_clients, sizeof *s->mark_id);
+    s->mark_stamp = xcalloc(cfg->max_clients, sizeof *s->mark_stamp);
     s->st.tick_cap = (uint32_t)cfg->tick_hz * (cfg->stats_interval_ms / 1000u + 1u) * 2u;
     s->st.tick_us = xcalloc(s->st.tick_cap, sizeof *s->st.tick_us);
 
@@ -974,6 +992,8 @@ void server_destroy(server *s)
     free(s->joined);
     free(s->snap);
     free(s->left);
+    free(s->mark_id);
+    free(s->mark_stamp);
     free(s->events);
     free(s->st.tick_us);
     free(s);

@@ -8,8 +8,7 @@
 #include "grid.h"
 #include "srv_limits.h"
 
-#define SLOT_BITS 16u
-#define SLOT_MASK ((1u << SLOT_BITS) - 1u)
+#define SLOT_MASK ((1u << WORLD_SLOT_BITS) - 1u)
 
 typedef struct avatar {
     world_avatar pub;
@@ -81,7 +80,7 @@ void world_destroy(world *w)
 
 static avatar *lookup(const world *w, uint32_t id)
 {
-    uint32_t slot = id & SLOT_MASK;
+    uint32_t slot = world_slot(id);
     if (slot >= w->cfg.capacity)
         return NULL;
     avatar *a = &w->avatars[slot];
@@ -116,7 +115,7 @@ const world_avatar *world_add(world *w, const char *name, uint32_t name_len, con
         gen = 1;
     memset(a, 0, sizeof *a);
     a->gen = gen;
-    a->pub.id = slot | (uint32_t)gen << SLOT_BITS;
+    a->pub.id = slot | (uint32_t)gen << WORLD_SLOT_BITS;
     memcpy(a->pub.name, name, name_len);
     memcpy(a->pub.box, box, sizeof a->pub.box);
     double ang = rnd(w) * 2.0 * M_PI, r = w->cfg.spawn_radius * sqrt(rnd(w));
@@ -139,7 +138,7 @@ void world_remove(world *w, uint32_t id)
     avatar *a = lookup(w, id);
     if (!a)
         return;
-    uint32_t slot = id & SLOT_MASK;
+    uint32_t slot = world_slot(id);
     grid_remove(w->grid, slot);
     a->used = 0;
     w->free_slots[w->nfree++] = slot;
@@ -180,7 +179,7 @@ static void apply(world *w, avatar *a)
     a->pub.changed_tick = w->step;
     /* On out-of-memory the grid keeps the avatar in its old cell, which only
      * delays when neighbours see it; the move itself stands. */
-    (void)grid_move(w->grid, a->pub.id & SLOT_MASK, p[0], p[2]);
+    (void)grid_move(w->grid, world_slot(a->pub.id), p[0], p[2]);
 }
 
 void world_step(world *w)
@@ -195,12 +194,6 @@ uint32_t world_tick(const world *w) { return w->step; }
 
 uint32_t world_count(const world *w) { return w->count; }
 
-static int by_id(const void *x, const void *y)
-{
-    uint32_t a = (*(const world_avatar *const *)x)->id, b = (*(const world_avatar *const *)y)->id;
-    return (a > b) - (a < b);
-}
-
 uint32_t world_neighbours(world *w, uint32_t id, const world_avatar **out, uint32_t max)
 {
     const avatar *me = lookup(w, id);
@@ -209,8 +202,7 @@ uint32_t world_neighbours(world *w, uint32_t id, const world_avatar **out, uint3
     uint32_t n = grid_query(w->grid, me->pub.pos[0], me->pub.pos[2], w->cfg.aoi_radius, w->scratch, w->cfg.capacity);
     uint32_t k = 0;
     for (uint32_t i = 0; i < n && k < max; i++)
-        if (w->scratch[i] != (id & SLOT_MASK))
+        if (w->scratch[i] != world_slot(id))
             out[k++] = &w->avatars[w->scratch[i]].pub;
-    qsort(out, k, sizeof *out, by_id);
     return k;
 }

@@ -16,6 +16,11 @@
 
 typedef struct world world;
 
+/* An avatar id is its slot (below the world's capacity) plus a generation
+ * in the upper bits, so per-avatar tables can be indexed by slot. */
+#define WORLD_SLOT_BITS 16u
+static inline uint32_t world_slot(uint32_t id) { return id & ((1u << WORLD_SLOT_BITS) - 1u); }
+
 typedef struct world_config {
     float min[3], max[3]; /* world bounds */
     float max_speed;      /* m/s */
@@ -57,8 +62,8 @@ void world_step(world *w);
 uint32_t world_tick(const world *w);
 
 /* The other avatars within the area-of-interest radius of avatar id,
- * written to out (room for max) sorted by id. Returns how many were
- * written. */
+ * written to out (room for max) in no particular order. Returns how many
+ * were written. */
 uint32_t world_neighbours(world *w, uint32_t id, const world_avatar **out, uint32_t max);
 
 uint32_t world_count(const world *w);
