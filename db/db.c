@@ -114,7 +114,7 @@ db *db_open(const char *path, int mode, char *err, size_t errlen)
     }
     int flags = mode == DB_READONLY ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
     if (sqlite3_open_v2(path, &d->sql, flags | SQLITE_OPEN_NOMUTEX, NULL) != SQLITE_OK) {
-        fail(d, "cannot open %s: %s", path, d->sql ? sqlite3_errmsg(d->sql) : "out of memory");
+        fail(d, "cannot open: %s", d->sql ? sqlite3_errmsg(d->sql) : "out of memory");
         goto fail;
     }
     sqlite3_busy_timeout(d->sql, DB_BUSY_TIMEOUT_MS);
@@ -124,7 +124,7 @@ db *db_open(const char *path, int mode, char *err, size_t errlen)
         if (v < 0)
             goto fail;
         if (v != db_migration_count) {
-            fail(d, "%s has schema version %d, this build expects %d%s", path, v, db_migration_count,
+            fail(d, "schema version %d, this build expects %d%s", v, db_migration_count,
                  v == 0 ? " (not a cvre database, or empty)" : "");
             goto fail;
         }
@@ -143,7 +143,7 @@ db *db_open(const char *path, int mode, char *err, size_t errlen)
         }
     return d;
 fail:
-    snprintf(err, errlen, "%s", d->err);
+    snprintf(err, errlen, "%s: %s", path, d->err);
     db_close(d);
     return NULL;
 }

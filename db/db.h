@@ -17,7 +17,8 @@ typedef struct db db;
 
 enum { DB_READWRITE = 0, DB_READONLY = 1 };
 
-/* Opens path. On failure returns NULL and writes a message to err. */
+/* Opens path. On failure returns NULL and writes "PATH: what went wrong"
+ * to err. */
 db *db_open(const char *path, int mode, char *err, size_t errlen);
 /* Finalizes statements and closes; a WAL database is checkpointed. */
 void db_close(db *d);

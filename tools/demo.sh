@@ -11,9 +11,10 @@ cmake --build build -j "$(nproc)" >/dev/null
 port=${CVRE_PORT:-7878}
 ./build/cvre-server --port "$port" --db cvre-demo.db "$@" &
 server=$!
-trap 'kill -TERM $server 2>/dev/null; wait $server' INT TERM EXIT
 sleep 0.5
 ./build/cvre-client --port "$port" --bots 8 --rate 5 --pattern random-walk --duration 86400 --name wanderer >/dev/null &
+bots=$!
+trap 'kill -TERM $bots $server 2>/dev/null; wait $server' INT TERM EXIT
 echo "cvre demo: server on 127.0.0.1:$port (database cvre-demo.db), 8 bots walking." >&2
 echo "In another terminal: ./build/cvre-client --port $port --name you" >&2
 wait $server

@@ -7,6 +7,7 @@ import json
 import math
 import os
 import select
+import shutil
 import socket
 import struct
 import subprocess
@@ -15,6 +16,7 @@ import tempfile
 import time
 
 MAGIC = 0x45525643
+TEMP_DIRS = []  # removed when every test passed; kept (with server logs) otherwise
 T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINED=7,
          AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12)
 E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
@@ -91,6 +93,7 @@ class Server:
     def __init__(self, bindir, *extra, db=None):
         self.bindir = bindir
         self.tmp = tempfile.mkdtemp(prefix="cvre-it-")
+        TEMP_DIRS.append(self.tmp)
         self.db = db or os.path.join(self.tmp, "cvre.db")
         self.log = open(os.path.join(self.tmp, "server.log"), "w+")
         self.proc = subprocess.Popen(
@@ -231,4 +234,9 @@ def run(tests):
             failed += 1
             print(f"FAIL {t.__name__}: {type(e).__name__}: {e}", flush=True)
     print(f"{len(tests) - failed} passed, {failed} failed")
+    if failed:
+        print("server logs kept in: " + " ".join(TEMP_DIRS))
+    else:
+        for d in TEMP_DIRS:
+            shutil.rmtree(d, ignore_errors=True)
     sys.exit(1 if failed else 0)
