@@ -1,5 +1,6 @@
-# Turns the migration files (FILES, sorted) into a C array of SQL strings (OUT)
-# so that every binary carries the schema it expects.
+# Turns the migration files (FILES, sorted, separated by "|") into a C array
+# of SQL strings (OUT) so that every binary carries the schema it expects.
+string(REPLACE "|" ";" FILES "${FILES}")
 set(body "")
 set(n 0)
 foreach(f ${FILES})
