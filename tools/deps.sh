@@ -2,7 +2,8 @@
 # Installs the Debian 12 packages cvre needs to build, test and run, if any
 # is missing. Needs root (apt-get). The same list is in docker/Dockerfile.
 set -euo pipefail
-packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3)
+packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
+          libflann-dev python3-sklearn time)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

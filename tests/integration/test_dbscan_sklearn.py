@@ -218,6 +218,12 @@ def main():
     for keep, mp in ((0.55, 4), (0.45, 3), (0.7, 6), (0.3, 2)):
         x = g[rng.random(len(g)) < keep].astype(np.float32)
         check_points(f"lattice eps=1.0 keep={keep} min={mp}", x, np.arange(len(x)), 1.0, mp)
+    # Far from the origin, where float spacing is coarse: distances are still
+    # exact multiples of eps (1e6 has float spacing 0.0625).
+    x = g[rng.random(len(g)) < 0.5].astype(np.float64)
+    check_points("lattice at 1e4, eps=1.0", (x + 1e4).astype(np.float32), np.arange(len(x)), 1.0, 4)
+    check_points("lattice at 1e6, eps=0.0625", (x * 0.0625 + 1e6).astype(np.float32), np.arange(len(x)),
+                 0.0625, 4)
     # Chains at exactly eps and border points between two clusters.
     x = np.array([[i, 0, 0] for i in range(10)] + [[i, 2, 0] for i in range(10)] + [[4, 1, 0], [5, 1, 0]],
                  np.float32)

