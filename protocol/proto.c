@@ -16,9 +16,13 @@
 
 _Static_assert(sizeof(float) == sizeof(uint32_t), "floats travel as IEEE-754 binary32");
 _Static_assert(PROTO_MAX_LEN_PREJOIN <= PROTO_MAX_LEN, "the pre-join cap is the smaller one");
-_Static_assert(PROTO_MESSAGE_MAX <= 0xffu && PROTO_NAME_MAX <= 0xffu, "string lengths are a u8");
+_Static_assert(PROTO_MESSAGE_MAX <= 0xffu && PROTO_NAME_MAX <= 0xffu && PROTO_OBJECT_NAME_MAX <= 0xffu &&
+                   PROTO_FORMAT_MAX <= 0xffu,
+               "string lengths are a u8");
 _Static_assert(PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES) - 4u <= PROTO_MAX_LEN,
                "a full snapshot fits the cap");
+_Static_assert(PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX) - 4u <= PROTO_MAX_LEN,
+               "an object info with every box and the longest strings fits the cap");
 
 /* Offsets inside an encoded snapshot frame, from the start of the frame. */
 #define SNAP_COUNT_AT (PROTO_HEADER_SIZE + 8u)
@@ -352,6 +356,95 @@ static void decode_snapshot(reader *r, proto_snapshot *m)
     }
 }
 
+static void get_transform(reader *r, proto_transform *t)
+{
+    get_vec3(r, t->pos);
+    t->yaw = get_f32(r);
+    t->scale = get_f32(r);
+    if (!(t->scale >= PROTO_SCALE_MIN && t->scale <= PROTO_SCALE_MAX))
+        fail(r, PROTO_ERR_BAD_VALUE);
+}
+
+/* A non-zero id: zero is kept free to mean "none" (object_info.upload_id). */
+static uint32_t get_id(reader *r)
+{
+    uint32_t id = get_u32(r);
+    if (id == 0)
+        fail(r, PROTO_ERR_BAD_VALUE);
+    return id;
+}
+
+static void decode_upload_begin(reader *r, proto_upload_begin *m)
+{
+    m->upload_id = get_id(r);
+    m->total_size = get_u32(r);
+    if (m->total_size == 0)
+        fail(r, PROTO_ERR_BAD_VALUE);
+    m->name = get_str(r, 1, PROTO_OBJECT_NAME_MAX);
+    m->format = get_str(r, 0, PROTO_FORMAT_MAX);
+    /* A format is a file extension: anything else is no format. */
+    for (uint32_t i = 0; r->err == PROTO_OK && i < m->format.len; i++) {
+        char ch = m->format.ptr[i];
+        if (!((ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9')))
+            fail(r, PROTO_ERR_BAD_STRING);
+    }
+    m->up_axis = get_u8(r);
+    if (m->up_axis > PROTO_UP_Z)
+        fail(r, PROTO_ERR_BAD_VALUE);
+    m->unit_scale = get_f32(r);
+    if (!(m->unit_scale >= PROTO_SCALE_MIN && m->unit_scale <= PROTO_SCALE_MAX))
+        fail(r, PROTO_ERR_BAD_VALUE);
+}
+
+static void decode_upload_chunk(reader *r, proto_upload_chunk *m)
+{
+    m->upload_id = get_id(r);
+    m->offset = get_u32(r);
+    m->len = (uint32_t)r->left;
+    if (r->err == PROTO_OK && (m->len == 0 || m->len > PROTO_CHUNK_MAX))
+        fail(r, m->len ? PROTO_ERR_BAD_VALUE : PROTO_ERR_SHORT);
+    m->data = take(r, m->len);
+}
+
+static void decode_object_info(reader *r, proto_object_info *m)
+{
+    m->object_id = get_id(r);
+    m->upload_id = get_u32(r);
+    m->owner = get_str(r, 1, PROTO_NAME_MAX);
+    m->name = get_str(r, 1, PROTO_OBJECT_NAME_MAX);
+    get_transform(r, &m->at);
+    m->ecm_version = get_id(r);
+    m->tri_count = get_u32(r);
+    m->box_count = get_u16(r);
+    if (m->box_count > PROTO_OBJECT_BOXES_MAX)
+        fail(r, PROTO_ERR_BAD_VALUE);
+    m->boxes = r->p;
+    /* Each max is compared with its min right after it is read, as for
+     * WELCOME's world bounds, so the status names the first bad field. */
+    for (uint16_t i = 0; i < m->box_count && r->err == PROTO_OK; i++) {
+        float lo[3];
+
+        get_vec3(r, lo);
+        for (int k = 0; k < 3; k++) {
+            float hi = get_f32(r);
+            if (!(lo[k] <= hi))
+                fail(r, PROTO_ERR_BAD_VALUE);
+        }
+    }
+}
+
+static void decode_collision(reader *r, proto_collision *m)
+{
+    m->object_id = get_id(r);
+    m->ecm_version = get_id(r);
+    m->box_index = get_u16(r);
+    m->inside = get_u8(r);
+    if (m->inside > 1)
+        fail(r, PROTO_ERR_BAD_VALUE);
+    get_vec3(r, m->point);
+    get_vec3(r, m->normal);
+}
+
 int proto_decode(const proto_frame *f, proto_msg *m)
 {
     reader rd = {f->payload, f->payload_len, PROTO_OK};
@@ -408,6 +501,37 @@ int proto_decode(const proto_frame *f, proto_msg *m)
         if (m->u.bye.reason > PROTO_BYE_KICKED)
             fail(r, PROTO_ERR_BAD_VALUE);
         break;
+    case PROTO_OBJECT_UPLOAD_BEGIN:
+        decode_upload_begin(r, &m->u.upload_begin);
+        break;
+    case PROTO_OBJECT_UPLOAD_CHUNK:
+        decode_upload_chunk(r, &m->u.upload_chunk);
+        break;
+    case PROTO_OBJECT_UPLOAD_END:
+        m->u.upload_end.upload_id = get_id(r);
+        get_transform(r, &m->u.upload_end.at);
+        break;
+    case PROTO_OBJECT_PLACE:
+        m->u.object_place.object_id = get_id(r);
+        get_transform(r, &m->u.object_place.at);
+        break;
+    case PROTO_OBJECT_REMOVE:
+    case PROTO_OBJECT_REMOVED:
+        m->u.object_id = get_id(r);
+        break;
+    case PROTO_OBJECT_INFO:
+        decode_object_info(r, &m->u.object_info);
+        break;
+    case PROTO_OBJECT_REJECTED:
+        m->u.object_rejected.request_id = get_u32(r);
+        m->u.object_rejected.code = get_u16(r);
+        if (m->u.object_rejected.code < PROTO_ERR_FRAME_EMPTY)
+            fail(r, PROTO_ERR_BAD_VALUE);
+        m->u.object_rejected.message = get_str(r, 0, PROTO_MESSAGE_MAX);
+        break;
+    case PROTO_COLLISION:
+        decode_collision(r, &m->u.collision);
+        break;
     default:
         return PROTO_ERR_UNKNOWN_TYPE;
     }
@@ -424,6 +548,17 @@ void proto_snapshot_entry(const proto_snapshot *s, uint16_t i, proto_avatar *out
     out->id = ld_u32(p);
     for (int k = 0; k < 3; k++)
         out->pos[k] = bits_to_f32(ld_u32(p + 4 + 4 * k));
+}
+
+void proto_object_box(const proto_object_info *o, uint16_t i, float min[3], float max[3])
+{
+    const uint8_t *p = o->boxes + (size_t)i * PROTO_BOX_ENTRY_SIZE;
+
+    assert(i < o->box_count);
+    for (int k = 0; k < 3; k++) {
+        min[k] = bits_to_f32(ld_u32(p + 4 * k));
+        max[k] = bits_to_f32(ld_u32(p + 12 + 4 * k));
+    }
 }
 
 const char *proto_strerror(int status)
@@ -448,6 +583,10 @@ const char *proto_strerror(int status)
     case PROTO_ERR_SERVER_FULL: return "server full";
     case PROTO_ERR_BAD_SEQ: return "move sequence did not increase";
     case PROTO_ERR_INTERNAL: return "internal server error";
+    case PROTO_ERR_UPLOAD: return "upload refused";
+    case PROTO_ERR_IMPORT: return "model could not be imported";
+    case PROTO_ERR_NO_OBJECT: return "no such object";
+    case PROTO_ERR_NOT_OWNER: return "not the owner";
     default: return "unknown status";
     }
 }
@@ -467,16 +606,18 @@ const char *proto_type_name(uint16_t type)
     case PROTO_PING: return "ping";
     case PROTO_PONG: return "pong";
     case PROTO_BYE: return "bye";
-    /* Reserved ids get their future names so a log line says what an older
-     * server was sent, although they do not decode yet. */
     case PROTO_OBJECT_UPLOAD_BEGIN: return "object_upload_begin";
     case PROTO_OBJECT_UPLOAD_CHUNK: return "object_upload_chunk";
     case PROTO_OBJECT_UPLOAD_END: return "object_upload_end";
     case PROTO_OBJECT_PLACE: return "object_place";
+    /* The reserved ids among these (object_move, ecm_update, admin_*) get
+     * their future names so a log line says what an older server was sent,
+     * although they do not decode yet. */
     case PROTO_OBJECT_MOVE: return "object_move";
     case PROTO_OBJECT_REMOVE: return "object_remove";
     case PROTO_OBJECT_INFO: return "object_info";
     case PROTO_OBJECT_REMOVED: return "object_removed";
+    case PROTO_OBJECT_REJECTED: return "object_rejected";
     case PROTO_COLLISION: return "collision";
     case PROTO_ECM_UPDATE: return "ecm_update";
     case PROTO_ADMIN_REQUEST: return "admin_request";
@@ -519,14 +660,14 @@ static uint8_t *frame_open(proto_writer *w, uint16_t type, size_t payload_len)
     return st_u16(p, type);
 }
 
-/* Bytes of s to send as a name: at most PROTO_NAME_MAX, backing off so the
- * cut does not split a UTF-8 character (the server would refuse the half). */
-static uint8_t name_len(proto_str s)
+/* Bytes of s to send as a string of at most max bytes, backing off so the
+ * cut does not split a UTF-8 character (the receiver would refuse the half). */
+static uint8_t str_len(proto_str s, uint32_t max)
 {
     uint32_t n = s.len;
 
-    if (n > PROTO_NAME_MAX) {
-        n = PROTO_NAME_MAX;
+    if (n > max) {
+        n = max;
         while (n > 0 && ((uint8_t)s.ptr[n] & 0xc0u) == 0x80u)
             n--;
     }
@@ -594,7 +735,7 @@ void proto_put_welcome(proto_writer *w, const proto_welcome *m)
 
 void proto_put_join(proto_writer *w, const proto_join *m)
 {
-    uint8_t n = name_len(m->name);
+    uint8_t n = str_len(m->name, PROTO_NAME_MAX);
     uint8_t *p = frame_open(w, PROTO_JOIN, 1u + n + 12u);
 
     if (!p)
@@ -627,7 +768,7 @@ void proto_put_move(proto_writer *w, const proto_move *m)
 
 void proto_put_avatar_joined(proto_writer *w, const proto_avatar_joined *m)
 {
-    uint8_t n = name_len(m->name);
+    uint8_t n = str_len(m->name, PROTO_NAME_MAX);
     uint8_t *p = frame_open(w, PROTO_AVATAR_JOINED, 4u + 1u + n + 24u);
 
     if (!p)
@@ -730,4 +871,137 @@ void proto_put_snapshot_end(proto_writer *w, size_t frame_at)
     entries = (w->len - frame_at - SNAP_ENTRIES_AT) / PROTO_SNAPSHOT_ENTRY_SIZE;
     st_u32(w->buf + frame_at, (uint32_t)(w->len - frame_at - 4));
     st_u16(w->buf + frame_at + SNAP_COUNT_AT, (uint16_t)entries);
+}
+
+static uint8_t *st_str(uint8_t *p, proto_str s, uint8_t n)
+{
+    p = st_u8(p, n);
+    return st_bytes(p, s.ptr, n);
+}
+
+static uint8_t *st_transform(uint8_t *p, const proto_transform *t)
+{
+    p = st_vec3(p, t->pos);
+    p = st_f32(p, t->yaw);
+    return st_f32(p, t->scale);
+}
+
+void proto_put_upload_begin(proto_writer *w, const proto_upload_begin *m)
+{
+    uint8_t nn = str_len(m->name, PROTO_OBJECT_NAME_MAX), nf = str_len(m->format, PROTO_FORMAT_MAX);
+    uint8_t *p = frame_open(w, PROTO_OBJECT_UPLOAD_BEGIN, 8u + 1u + nn + 1u + nf + 1u + 4u);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->upload_id);
+    p = st_u32(p, m->total_size);
+    p = st_str(p, m->name, nn);
+    p = st_str(p, m->format, nf);
+    p = st_u8(p, m->up_axis);
+    st_f32(p, m->unit_scale);
+}
+
+void proto_put_upload_chunk(proto_writer *w, const proto_upload_chunk *m)
+{
+    uint8_t *p;
+
+    if (m->len > PROTO_CHUNK_MAX) {
+        if (w->err == PROTO_OK)
+            w->err = PROTO_ERR_FRAME_TOO_LONG;
+        return;
+    }
+    p = frame_open(w, PROTO_OBJECT_UPLOAD_CHUNK, 8u + m->len);
+    if (!p)
+        return;
+    p = st_u32(p, m->upload_id);
+    p = st_u32(p, m->offset);
+    st_bytes(p, m->data, m->len);
+}
+
+void proto_put_upload_end(proto_writer *w, const proto_upload_end *m)
+{
+    uint8_t *p = frame_open(w, PROTO_OBJECT_UPLOAD_END, 4u + PROTO_SIZE_TRANSFORM);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->upload_id);
+    st_transform(p, &m->at);
+}
+
+void proto_put_object_place(proto_writer *w, const proto_object_place *m)
+{
+    uint8_t *p = frame_open(w, PROTO_OBJECT_PLACE, 4u + PROTO_SIZE_TRANSFORM);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->object_id);
+    st_transform(p, &m->at);
+}
+
+static void put_id(proto_writer *w, uint16_t type, uint32_t id)
+{
+    uint8_t *p = frame_open(w, type, 4u);
+
+    if (p)
+        st_u32(p, id);
+}
+
+void proto_put_object_remove(proto_writer *w, uint32_t object_id) { put_id(w, PROTO_OBJECT_REMOVE, object_id); }
+
+void proto_put_object_removed(proto_writer *w, uint32_t object_id) { put_id(w, PROTO_OBJECT_REMOVED, object_id); }
+
+void proto_put_object_rejected(proto_writer *w, uint32_t request_id, uint16_t code, const char *message)
+{
+    uint8_t text[PROTO_MESSAGE_MAX];
+    size_t n = clean_message(text, message);
+    uint8_t *p = frame_open(w, PROTO_OBJECT_REJECTED, 4u + 2u + 1u + n);
+
+    if (!p)
+        return;
+    p = st_u32(p, request_id);
+    p = st_u16(p, code);
+    p = st_u8(p, (uint8_t)n);
+    st_bytes(p, text, n);
+}
+
+void proto_put_collision(proto_writer *w, const proto_collision *m)
+{
+    uint8_t *p = frame_open(w, PROTO_COLLISION, PROTO_SIZE_COLLISION - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->object_id);
+    p = st_u32(p, m->ecm_version);
+    p = st_u16(p, m->box_index);
+    p = st_u8(p, m->inside);
+    p = st_vec3(p, m->point);
+    st_vec3(p, m->normal);
+}
+
+void proto_put_object_info(proto_writer *w, const proto_object_info *m, const float (*min)[3], const float (*max)[3])
+{
+    uint8_t no = str_len(m->owner, PROTO_NAME_MAX), nn = str_len(m->name, PROTO_OBJECT_NAME_MAX);
+    uint8_t *p;
+
+    if (m->box_count > PROTO_OBJECT_BOXES_MAX) {
+        if (w->err == PROTO_OK)
+            w->err = PROTO_ERR_FRAME_TOO_LONG;
+        return;
+    }
+    p = frame_open(w, PROTO_OBJECT_INFO,
+                   8u + 1u + no + 1u + nn + PROTO_SIZE_TRANSFORM + 10u + (size_t)m->box_count * PROTO_BOX_ENTRY_SIZE);
+    if (!p)
+        return;
+    p = st_u32(p, m->object_id);
+    p = st_u32(p, m->upload_id);
+    p = st_str(p, m->owner, no);
+    p = st_str(p, m->name, nn);
+    p = st_transform(p, &m->at);
+    p = st_u32(p, m->ecm_version);
+    p = st_u32(p, m->tri_count);
+    p = st_u16(p, m->box_count);
+    for (uint16_t i = 0; i < m->box_count; i++) {
+        p = st_vec3(p, min[i]);
+        p = st_vec3(p, max[i]);
+    }
 }

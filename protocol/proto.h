@@ -40,6 +40,16 @@
 #define PROTO_BOX_MAX 4.0f
 #define PROTO_SNAPSHOT_ENTRY_SIZE 16u /* u32 id + 3 x f32 */
 #define PROTO_SNAPSHOT_HEAD_SIZE 10u  /* u32 tick + u32 ack + u16 count */
+/* Objects. A model file travels in chunks of at most PROTO_CHUNK_MAX bytes,
+ * small enough that uploads interleave with everyone's moves; the total size
+ * is capped by the server (cvre-server --max-upload). */
+#define PROTO_CHUNK_MAX 16384u
+#define PROTO_OBJECT_NAME_MAX 64u  /* label, e.g. the file name */
+#define PROTO_FORMAT_MAX 8u        /* format hint: "obj", "glb"... */
+#define PROTO_OBJECT_BOXES_MAX 1024u /* collision boxes sent per object */
+#define PROTO_SCALE_MIN 0.001f     /* uniform object scale */
+#define PROTO_SCALE_MAX 1000.0f
+#define PROTO_BOX_ENTRY_SIZE 24u   /* 2 x vec3 */
 #define PROTO_SNAPSHOT_MAX_ENTRIES \
     ((PROTO_MAX_LEN - 2u - PROTO_SNAPSHOT_HEAD_SIZE) / PROTO_SNAPSHOT_ENTRY_SIZE)
 
@@ -47,6 +57,8 @@ _Static_assert(PROTO_MAX_LEN_PREJOIN >= 2u + 1u + PROTO_NAME_MAX + 12u,
                "a join must fit before join");
 _Static_assert(PROTO_MAX_LEN <= 16u * 1024u * 1024u, "frames stay small");
 _Static_assert(PROTO_SNAPSHOT_MAX_ENTRIES <= 0xffffu, "count is a u16");
+_Static_assert(PROTO_CHUNK_MAX + 16u <= PROTO_MAX_LEN, "a chunk fits a frame");
+_Static_assert(128u + PROTO_OBJECT_BOXES_MAX * PROTO_BOX_ENTRY_SIZE <= PROTO_MAX_LEN, "boxes fit a frame");
 
 /* Message types. Direction: C = client to server, S = server to client. */
 enum proto_type {
@@ -62,17 +74,18 @@ enum proto_type {
     PROTO_PING = 10,         /* C or S; the other side answers pong */
     PROTO_PONG = 11,         /* C or S */
     PROTO_BYE = 12,          /* C or S */
+    PROTO_OBJECT_UPLOAD_BEGIN = 32, /* C */
+    PROTO_OBJECT_UPLOAD_CHUNK = 33, /* C */
+    PROTO_OBJECT_UPLOAD_END = 34,   /* C: the upload is complete; place it */
+    PROTO_OBJECT_PLACE = 35,        /* C: move, turn or rescale an object */
+    PROTO_OBJECT_REMOVE = 37,       /* C */
+    PROTO_OBJECT_INFO = 38,         /* S: an object, its transform and boxes */
+    PROTO_OBJECT_REMOVED = 39,      /* S */
+    PROTO_OBJECT_REJECTED = 40,     /* S: a request refused; the connection stays */
+    PROTO_COLLISION = 48,           /* S: your avatar was blocked */
     /* Reserved for the issues that follow; not decodable yet. */
-    PROTO_RESERVED_FIRST = 32,
-    PROTO_OBJECT_UPLOAD_BEGIN = 32,
-    PROTO_OBJECT_UPLOAD_CHUNK = 33,
-    PROTO_OBJECT_UPLOAD_END = 34,
-    PROTO_OBJECT_PLACE = 35,
+    PROTO_RESERVED_FIRST = 36,
     PROTO_OBJECT_MOVE = 36,
-    PROTO_OBJECT_REMOVE = 37,
-    PROTO_OBJECT_INFO = 38,
-    PROTO_OBJECT_REMOVED = 39,
-    PROTO_COLLISION = 48,
     PROTO_ECM_UPDATE = 49,
     PROTO_ADMIN_REQUEST = 64,
     PROTO_ADMIN_REPLY = 65,
@@ -101,7 +114,12 @@ enum proto_status {
     PROTO_ERR_TIMEOUT = 29,        /* handshake, idle or partial-frame timeout */
     PROTO_ERR_SERVER_FULL = 30,
     PROTO_ERR_BAD_SEQ = 32,        /* move sequence did not increase (31 and 33 are reserved) */
-    PROTO_ERR_INTERNAL = 34
+    PROTO_ERR_INTERNAL = 34,
+    /* Sent in OBJECT_REJECTED, which does not close the connection. */
+    PROTO_ERR_UPLOAD = 35,         /* upload refused: size, sequence, too many at once */
+    PROTO_ERR_IMPORT = 36,         /* the file is not a model the importer can read */
+    PROTO_ERR_NO_OBJECT = 37,      /* no such object */
+    PROTO_ERR_NOT_OWNER = 38       /* only the owner may place or remove it */
 };
 
 /* Why an avatar left a client's view (proto_avatar_left.reason). */
@@ -187,6 +205,68 @@ typedef struct proto_bye {
     uint8_t reason; /* enum proto_bye_reason */
 } proto_bye;
 
+/* Where an object stands: world = R_y(yaw) * (scale * local) + pos. */
+typedef struct proto_transform {
+    float pos[3];
+    float yaw;   /* radians about +y, finite */
+    float scale; /* uniform, in [PROTO_SCALE_MIN, PROTO_SCALE_MAX] */
+} proto_transform;
+
+enum proto_up_axis { PROTO_UP_Y = 0, PROTO_UP_Z = 1 };
+
+typedef struct proto_upload_begin {
+    uint32_t upload_id;  /* chosen by the client, non-zero, names the upload */
+    uint32_t total_size; /* bytes of the model file, >= 1 */
+    proto_str name;      /* 1..PROTO_OBJECT_NAME_MAX */
+    proto_str format;    /* 0..PROTO_FORMAT_MAX, [a-z0-9]; empty: detect */
+    uint8_t up_axis;     /* enum proto_up_axis */
+    float unit_scale;    /* file units to metres, in [PROTO_SCALE_MIN, PROTO_SCALE_MAX] */
+} proto_upload_begin;
+
+typedef struct proto_upload_chunk {
+    uint32_t upload_id;
+    uint32_t offset;     /* bytes sent before this chunk */
+    const uint8_t *data; /* 1..PROTO_CHUNK_MAX bytes, to the end of the frame */
+    uint32_t len;
+} proto_upload_chunk;
+
+typedef struct proto_upload_end {
+    uint32_t upload_id;
+    proto_transform at;
+} proto_upload_end;
+
+typedef struct proto_object_place {
+    uint32_t object_id;
+    proto_transform at;
+} proto_object_place;
+
+typedef struct proto_object_info {
+    uint32_t object_id;
+    uint32_t upload_id; /* the upload this object came from, for its uploader; else 0 */
+    proto_str owner;    /* owner's display name */
+    proto_str name;
+    proto_transform at;
+    uint32_t ecm_version;
+    uint32_t tri_count;
+    uint16_t box_count; /* <= PROTO_OBJECT_BOXES_MAX: proto_object_box() */
+    const uint8_t *boxes;
+} proto_object_info;
+
+typedef struct proto_object_rejected {
+    uint32_t request_id; /* the upload id or object id the request named */
+    uint16_t code;       /* enum proto_status, >= 16 */
+    proto_str message;
+} proto_object_rejected;
+
+typedef struct proto_collision {
+    uint32_t object_id;
+    uint32_t ecm_version;
+    uint16_t box_index;
+    uint8_t inside;   /* 1: the avatar was already inside the box */
+    float point[3];   /* contact point, world */
+    float normal[3];  /* contact normal, world, unit */
+} proto_collision;
+
 typedef struct proto_msg {
     uint16_t type;
     union {
@@ -201,6 +281,14 @@ typedef struct proto_msg {
         proto_error error;
         proto_ping ping; /* also pong */
         proto_bye bye;
+        proto_upload_begin upload_begin;
+        proto_upload_chunk upload_chunk;
+        proto_upload_end upload_end;
+        proto_object_place object_place;
+        uint32_t object_id; /* object_remove, object_removed */
+        proto_object_info object_info;
+        proto_object_rejected object_rejected;
+        proto_collision collision;
     } u;
 } proto_msg;
 
@@ -234,6 +322,8 @@ int proto_decode(const proto_frame *f, proto_msg *m);
 
 /* Entry i (< s->count) of a decoded snapshot. */
 void proto_snapshot_entry(const proto_snapshot *s, uint16_t i, proto_avatar *out);
+/* Box i (< o->box_count) of a decoded object info: world min and max. */
+void proto_object_box(const proto_object_info *o, uint16_t i, float min[3], float max[3]);
 
 /* Short English description of a status code; never NULL. */
 const char *proto_strerror(int status);
@@ -275,6 +365,17 @@ void proto_put_error(proto_writer *w, uint16_t code, const char *message);
 void proto_put_ping(proto_writer *w, uint64_t stamp);
 void proto_put_pong(proto_writer *w, uint64_t stamp);
 void proto_put_bye(proto_writer *w, uint8_t reason);
+void proto_put_upload_begin(proto_writer *w, const proto_upload_begin *m);
+void proto_put_upload_chunk(proto_writer *w, const proto_upload_chunk *m);
+void proto_put_upload_end(proto_writer *w, const proto_upload_end *m);
+void proto_put_object_place(proto_writer *w, const proto_object_place *m);
+void proto_put_object_remove(proto_writer *w, uint32_t object_id);
+void proto_put_object_removed(proto_writer *w, uint32_t object_id);
+void proto_put_object_rejected(proto_writer *w, uint32_t request_id, uint16_t code, const char *message);
+void proto_put_collision(proto_writer *w, const proto_collision *m);
+/* m->boxes is ignored: the boxes come from min/max, box_count of each
+ * (at most PROTO_OBJECT_BOXES_MAX; more is an error). */
+void proto_put_object_info(proto_writer *w, const proto_object_info *m, const float (*min)[3], const float (*max)[3]);
 
 /* A snapshot is built in three steps: begin, one add per entry (at most
  * PROTO_SNAPSHOT_MAX_ENTRIES), end, which patches the count and length.
@@ -295,5 +396,12 @@ void proto_put_snapshot_end(proto_writer *w, size_t frame_at);
 #define PROTO_SIZE_PING (PROTO_HEADER_SIZE + 8u)
 #define PROTO_SIZE_BYE (PROTO_HEADER_SIZE + 1u)
 #define PROTO_SIZE_SNAPSHOT(n) (PROTO_HEADER_SIZE + PROTO_SNAPSHOT_HEAD_SIZE + (n) * PROTO_SNAPSHOT_ENTRY_SIZE)
+#define PROTO_SIZE_TRANSFORM 20u
+#define PROTO_SIZE_OBJECT_INFO(n) \
+    (PROTO_HEADER_SIZE + 8u + 2u + PROTO_NAME_MAX + PROTO_OBJECT_NAME_MAX + PROTO_SIZE_TRANSFORM + 10u + \
+     (n) * PROTO_BOX_ENTRY_SIZE)
+#define PROTO_SIZE_OBJECT_REMOVED (PROTO_HEADER_SIZE + 4u)
+#define PROTO_SIZE_OBJECT_REJECTED_MAX (PROTO_HEADER_SIZE + 4u + 2u + 1u + PROTO_MESSAGE_MAX)
+#define PROTO_SIZE_COLLISION (PROTO_HEADER_SIZE + 4u + 4u + 2u + 1u + 24u)
 
 #endif

@@ -40,6 +40,25 @@ static unsigned long n_frames, n_decoded;
 /* The largest frame there is. */
 static uint8_t reenc[PROTO_MAX_LEN + 4];
 
+/* Every type that decodes, for the checks and the generator. */
+static const uint16_t types[] = {
+    PROTO_HELLO, PROTO_WELCOME, PROTO_JOIN, PROTO_JOIN_OK, PROTO_MOVE, PROTO_SNAPSHOT,
+    PROTO_AVATAR_JOINED, PROTO_AVATAR_LEFT, PROTO_ERROR, PROTO_PING, PROTO_PONG, PROTO_BYE,
+    PROTO_OBJECT_UPLOAD_BEGIN, PROTO_OBJECT_UPLOAD_CHUNK, PROTO_OBJECT_UPLOAD_END,
+    PROTO_OBJECT_PLACE, PROTO_OBJECT_REMOVE, PROTO_OBJECT_INFO, PROTO_OBJECT_REMOVED,
+    PROTO_OBJECT_REJECTED, PROTO_COLLISION,
+};
+#define NTYPES (sizeof types / sizeof types[0])
+
+static int defined_type(uint16_t t)
+{
+    for (size_t i = 0; i < NTYPES; i++) {
+        if (types[i] == t)
+            return 1;
+    }
+    return 0;
+}
+
 /* ---- the target --------------------------------------------------------- */
 
 static int same_floats(const float *a, const float *b, size_t n)
@@ -50,6 +69,12 @@ static int same_floats(const float *a, const float *b, size_t n)
 static int same_str(proto_str a, proto_str b)
 {
     return a.len == b.len && memcmp(a.ptr, b.ptr, a.len) == 0;
+}
+
+static int same_transform(const proto_transform *a, const proto_transform *b)
+{
+    return same_floats(a->pos, b->pos, 3) && same_floats(&a->yaw, &b->yaw, 1) &&
+           same_floats(&a->scale, &b->scale, 1);
 }
 
 static int same_msg(const proto_msg *a, const proto_msg *b)
@@ -65,7 +90,8 @@ static int same_msg(const proto_msg *a, const proto_msg *b)
                memcmp(x->token, y->token, PROTO_TOKEN_SIZE) == 0 && x->tick_hz == y->tick_hz &&
                same_floats(&x->aoi_radius, &y->aoi_radius, 1) &&
                same_floats(&x->max_speed, &y->max_speed, 1) &&
-               same_floats(x->world_min, y->world_min, 3) && same_floats(x->world_max, y->world_max, 3);
+               same_floats(x->world_min, y->world_min, 3) && same_floats(x->world_max, y->world_max, 3) &&
+               x->idle_timeout_ms == y->idle_timeout_ms;
     }
     case PROTO_JOIN:
         return same_str(a->u.join.name, b->u.join.name) && same_floats(a->u.join.box, b->u.join.box, 3);
@@ -103,15 +129,72 @@ static int same_msg(const proto_msg *a, const proto_msg *b)
         return a->u.ping.stamp == b->u.ping.stamp;
     case PROTO_BYE:
         return a->u.bye.reason == b->u.bye.reason;
+    case PROTO_OBJECT_UPLOAD_BEGIN: {
+        const proto_upload_begin *x = &a->u.upload_begin, *y = &b->u.upload_begin;
+        return x->upload_id == y->upload_id && x->total_size == y->total_size && same_str(x->name, y->name) &&
+               same_str(x->format, y->format) && x->up_axis == y->up_axis &&
+               same_floats(&x->unit_scale, &y->unit_scale, 1);
+    }
+    case PROTO_OBJECT_UPLOAD_CHUNK: {
+        const proto_upload_chunk *x = &a->u.upload_chunk, *y = &b->u.upload_chunk;
+        return x->upload_id == y->upload_id && x->offset == y->offset && x->len == y->len &&
+               memcmp(x->data, y->data, x->len) == 0;
+    }
+    case PROTO_OBJECT_UPLOAD_END:
+        return a->u.upload_end.upload_id == b->u.upload_end.upload_id &&
+               same_transform(&a->u.upload_end.at, &b->u.upload_end.at);
+    case PROTO_OBJECT_PLACE:
+        return a->u.object_place.object_id == b->u.object_place.object_id &&
+               same_transform(&a->u.object_place.at, &b->u.object_place.at);
+    case PROTO_OBJECT_REMOVE:
+    case PROTO_OBJECT_REMOVED:
+        return a->u.object_id == b->u.object_id;
+    case PROTO_OBJECT_INFO: {
+        const proto_object_info *x = &a->u.object_info, *y = &b->u.object_info;
+        if (x->object_id != y->object_id || x->upload_id != y->upload_id || !same_str(x->owner, y->owner) ||
+            !same_str(x->name, y->name) || !same_transform(&x->at, &y->at) ||
+            x->ecm_version != y->ecm_version || x->tri_count != y->tri_count || x->box_count != y->box_count)
+            return 0;
+        for (uint16_t i = 0; i < x->box_count; i++) {
+            float p[2][3], q[2][3];
+            proto_object_box(x, i, p[0], p[1]);
+            proto_object_box(y, i, q[0], q[1]);
+            if (!same_floats(p[0], q[0], 3) || !same_floats(p[1], q[1], 3))
+                return 0;
+        }
+        return 1;
+    }
+    case PROTO_OBJECT_REJECTED: {
+        const proto_object_rejected *x = &a->u.object_rejected, *y = &b->u.object_rejected;
+        return x->request_id == y->request_id && x->code == y->code && same_str(x->message, y->message);
+    }
+    case PROTO_COLLISION: {
+        const proto_collision *x = &a->u.collision, *y = &b->u.collision;
+        return x->object_id == y->object_id && x->ecm_version == y->ecm_version &&
+               x->box_index == y->box_index && x->inside == y->inside && same_floats(x->point, y->point, 3) &&
+               same_floats(x->normal, y->normal, 3);
+    }
     default:
         return 0;
     }
 }
 
+/* The writer takes error texts as C strings; decoded text never holds a
+ * NUL, so a copy with one appended is the same text. */
+static const char *c_text(proto_str s, char out[PROTO_MESSAGE_MAX + 1])
+{
+    memcpy(out, s.ptr, s.len);
+    out[s.len] = 0;
+    return out;
+}
+
 /* Appends m to w with the matching put. m must have decoded cleanly, so
- * its type is one of the twelve defined ones. */
+ * its type is one of the defined ones. */
 static void encode(proto_writer *w, const proto_msg *m)
 {
+    static float box_min[PROTO_OBJECT_BOXES_MAX][3], box_max[PROTO_OBJECT_BOXES_MAX][3];
+    char text[PROTO_MESSAGE_MAX + 1];
+
     switch (m->type) {
     case PROTO_HELLO: proto_put_hello(w, &m->u.hello); break;
     case PROTO_WELCOME: proto_put_welcome(w, &m->u.welcome); break;
@@ -130,17 +213,27 @@ static void encode(proto_writer *w, const proto_msg *m)
     }
     case PROTO_AVATAR_JOINED: proto_put_avatar_joined(w, &m->u.avatar_joined); break;
     case PROTO_AVATAR_LEFT: proto_put_avatar_left(w, &m->u.avatar_left); break;
-    case PROTO_ERROR: {
-        /* The writer takes a C string; decoded text never holds a NUL. */
-        char text[PROTO_MESSAGE_MAX + 1];
-        memcpy(text, m->u.error.message.ptr, m->u.error.message.len);
-        text[m->u.error.message.len] = 0;
-        proto_put_error(w, m->u.error.code, text);
-        break;
-    }
+    case PROTO_ERROR: proto_put_error(w, m->u.error.code, c_text(m->u.error.message, text)); break;
     case PROTO_PING: proto_put_ping(w, m->u.ping.stamp); break;
     case PROTO_PONG: proto_put_pong(w, m->u.ping.stamp); break;
     case PROTO_BYE: proto_put_bye(w, m->u.bye.reason); break;
+    case PROTO_OBJECT_UPLOAD_BEGIN: proto_put_upload_begin(w, &m->u.upload_begin); break;
+    case PROTO_OBJECT_UPLOAD_CHUNK: proto_put_upload_chunk(w, &m->u.upload_chunk); break;
+    case PROTO_OBJECT_UPLOAD_END: proto_put_upload_end(w, &m->u.upload_end); break;
+    case PROTO_OBJECT_PLACE: proto_put_object_place(w, &m->u.object_place); break;
+    case PROTO_OBJECT_REMOVE: proto_put_object_remove(w, m->u.object_id); break;
+    case PROTO_OBJECT_REMOVED: proto_put_object_removed(w, m->u.object_id); break;
+    case PROTO_OBJECT_INFO:
+        /* The writer takes boxes as arrays, as the server holds them. */
+        for (uint16_t i = 0; i < m->u.object_info.box_count; i++)
+            proto_object_box(&m->u.object_info, i, box_min[i], box_max[i]);
+        proto_put_object_info(w, &m->u.object_info, (const float (*)[3])box_min, (const float (*)[3])box_max);
+        break;
+    case PROTO_OBJECT_REJECTED:
+        proto_put_object_rejected(w, m->u.object_rejected.request_id, m->u.object_rejected.code,
+                                  c_text(m->u.object_rejected.message, text));
+        break;
+    case PROTO_COLLISION: proto_put_collision(w, &m->u.collision); break;
     }
 }
 
@@ -150,6 +243,77 @@ static int inside(const proto_frame *f, const void *p, size_t n)
     return b >= f->payload && n <= f->payload_len && (size_t)(b - f->payload) <= f->payload_len - n;
 }
 
+static int finite3(const float v[3])
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+static int transform_ok(const proto_transform *t)
+{
+    return finite3(t->pos) && isfinite(t->yaw) && t->scale >= PROTO_SCALE_MIN && t->scale <= PROTO_SCALE_MAX;
+}
+
+/* The decoder's promises for the object messages. */
+static void check_object(const proto_frame *f, const proto_msg *m)
+{
+    switch (m->type) {
+    case PROTO_OBJECT_UPLOAD_BEGIN: {
+        const proto_upload_begin *u = &m->u.upload_begin;
+        CHECK(u->upload_id != 0 && u->total_size != 0 && u->up_axis <= PROTO_UP_Z);
+        CHECK(inside(f, u->name.ptr, u->name.len) && u->name.len >= 1 && u->name.len <= PROTO_OBJECT_NAME_MAX);
+        CHECK(inside(f, u->format.ptr, u->format.len) && u->format.len <= PROTO_FORMAT_MAX);
+        for (uint32_t i = 0; i < u->format.len; i++)
+            CHECK((u->format.ptr[i] >= 'a' && u->format.ptr[i] <= 'z') ||
+                  (u->format.ptr[i] >= '0' && u->format.ptr[i] <= '9'));
+        CHECK(u->unit_scale >= PROTO_SCALE_MIN && u->unit_scale <= PROTO_SCALE_MAX);
+        break;
+    }
+    case PROTO_OBJECT_UPLOAD_CHUNK: {
+        const proto_upload_chunk *c = &m->u.upload_chunk;
+        CHECK(c->upload_id != 0 && c->len >= 1 && c->len <= PROTO_CHUNK_MAX);
+        CHECK(c->len == f->payload_len - 8 && c->data == f->payload + 8);
+        break;
+    }
+    case PROTO_OBJECT_UPLOAD_END:
+        CHECK(m->u.upload_end.upload_id != 0 && transform_ok(&m->u.upload_end.at));
+        break;
+    case PROTO_OBJECT_PLACE:
+        CHECK(m->u.object_place.object_id != 0 && transform_ok(&m->u.object_place.at));
+        break;
+    case PROTO_OBJECT_REMOVE:
+    case PROTO_OBJECT_REMOVED:
+        CHECK(m->u.object_id != 0);
+        break;
+    case PROTO_OBJECT_INFO: {
+        const proto_object_info *o = &m->u.object_info;
+        const size_t n = (size_t)o->box_count * PROTO_BOX_ENTRY_SIZE;
+        CHECK(o->object_id != 0 && o->ecm_version != 0 && transform_ok(&o->at));
+        CHECK(inside(f, o->owner.ptr, o->owner.len) && inside(f, o->name.ptr, o->name.len));
+        CHECK(o->box_count <= PROTO_OBJECT_BOXES_MAX);
+        CHECK(f->payload_len == 40u + o->owner.len + o->name.len + n);
+        CHECK(inside(f, o->boxes, n));
+        for (uint16_t i = 0; i < o->box_count; i++) {
+            float lo[3], hi[3];
+            proto_object_box(o, i, lo, hi);
+            CHECK(finite3(lo) && finite3(hi));
+            for (int k = 0; k < 3; k++)
+                CHECK(lo[k] <= hi[k]);
+        }
+        break;
+    }
+    case PROTO_OBJECT_REJECTED:
+        CHECK(m->u.object_rejected.code >= PROTO_ERR_FRAME_EMPTY);
+        CHECK(inside(f, m->u.object_rejected.message.ptr, m->u.object_rejected.message.len));
+        break;
+    case PROTO_COLLISION:
+        CHECK(m->u.collision.object_id != 0 && m->u.collision.ecm_version != 0 && m->u.collision.inside <= 1);
+        CHECK(finite3(m->u.collision.point) && finite3(m->u.collision.normal));
+        break;
+    default:
+        break;
+    }
+}
+
 /* Checks a message the decoder accepted, then its round trip. */
 static void check_decoded(const proto_frame *f, const proto_msg *m)
 {
@@ -157,7 +321,8 @@ static void check_decoded(const proto_frame *f, const proto_msg *m)
     proto_frame g;
     proto_msg again;
 
-    CHECK(m->type == f->type && m->type >= PROTO_HELLO && m->type <= PROTO_BYE);
+    CHECK(m->type == f->type && defined_type(m->type));
+    check_object(f, m);
     if (m->type == PROTO_JOIN)
         CHECK(inside(f, m->u.join.name.ptr, m->u.join.name.len));
     if (m->type == PROTO_AVATAR_JOINED)
@@ -310,10 +475,51 @@ static size_t rnd_text(char *out, size_t max)
     return n;
 }
 
+/* A non-zero id, now and then 0 (which only a decoder refuses). */
+static uint32_t rnd_id(void)
+{
+    switch (below(32)) {
+    case 0: return 0;
+    case 1: return (uint32_t)rnd();
+    default: return 1 + below(1000);
+    }
+}
+
+/* Mostly a scale in range, its bounds, now and then anything. */
+static float rnd_scale(void)
+{
+    switch (below(16)) {
+    case 0: return rnd_float();
+    case 1: return PROTO_SCALE_MIN;
+    case 2: return PROTO_SCALE_MAX;
+    case 3: return bits_f32(0x3a83126eu); /* just under the minimum */
+    default: return (float)(1 + below(100000)) / 1000.0f;
+    }
+}
+
+static void rnd_transform(proto_transform *t)
+{
+    rnd_vec3(t->pos);
+    t->yaw = below(4) ? (float)below(6284) / 1000.0f - 3.142f : rnd_float();
+    t->scale = rnd_scale();
+}
+
+/* A format hint: mostly a valid extension, sometimes not, sometimes cut. */
+static proto_str rnd_format(void)
+{
+    static const char *const formats[] = {"", "obj", "glb", "gltf", "stl", "ply", "3ds", "12345678",
+                                          "OBJ", ".obj", "abcdefghij", "abcdefg\xc3\xa9", "\xc3\xa9"};
+    const char *f = formats[below(16) ? below(8) : below(sizeof formats / sizeof formats[0])];
+    proto_str s = {f, (uint32_t)strlen(f)};
+    return s;
+}
+
 /* Appends one message of the given type with random contents. */
 static void gen_frame(proto_writer *w, uint16_t type)
 {
-    char text[PROTO_MESSAGE_MAX + 16];
+    static uint8_t data[PROTO_CHUNK_MAX + 1];
+    static float box_min[PROTO_OBJECT_BOXES_MAX + 1][3], box_max[PROTO_OBJECT_BOXES_MAX + 1][3];
+    char text[PROTO_MESSAGE_MAX + 16], text2[PROTO_MESSAGE_MAX + 16];
 
     switch (type) {
     case PROTO_HELLO: {
@@ -336,6 +542,7 @@ static void gen_frame(proto_writer *w, uint16_t type)
             m.world_min[i] = -(float)below(5000);
             m.world_max[i] = (float)below(5000);
         }
+        m.idle_timeout_ms = below(16) ? 1 + below(120000) : (uint32_t)rnd();
         proto_put_welcome(w, &m);
         break;
     }
@@ -407,7 +614,106 @@ static void gen_frame(proto_writer *w, uint16_t type)
         break;
     case PROTO_PING: proto_put_ping(w, rnd()); break;
     case PROTO_PONG: proto_put_pong(w, rnd()); break;
-    default: proto_put_bye(w, (uint8_t)below(4)); break;
+    case PROTO_BYE: proto_put_bye(w, (uint8_t)below(4)); break;
+    case PROTO_OBJECT_UPLOAD_BEGIN: {
+        proto_upload_begin m;
+        m.upload_id = rnd_id();
+        m.total_size = below(32) ? 1 + below(1u << 24) : (uint32_t)rnd();
+        m.name.ptr = text;
+        m.name.len = (uint32_t)rnd_text(text, PROTO_OBJECT_NAME_MAX);
+        m.format = rnd_format();
+        m.up_axis = (uint8_t)(below(16) ? below(2) : below(256));
+        m.unit_scale = rnd_scale();
+        proto_put_upload_begin(w, &m);
+        break;
+    }
+    case PROTO_OBJECT_UPLOAD_CHUNK: {
+        /* Mostly small; now and then the largest, one byte more (the
+         * writer refuses it) or none (the decoder does). */
+        proto_upload_chunk m;
+        m.upload_id = rnd_id();
+        m.offset = below(2) ? below(1u << 24) : (uint32_t)rnd();
+        switch (below(64)) {
+        case 0: m.len = PROTO_CHUNK_MAX; break;
+        case 1: m.len = PROTO_CHUNK_MAX + 1; break;
+        case 2: m.len = 0; break;
+        case 3: m.len = 1 + below(PROTO_CHUNK_MAX); break;
+        default: m.len = 1 + below(64); break;
+        }
+        for (uint32_t i = 0; i < m.len; i++)
+            data[i] = (uint8_t)rnd();
+        m.data = data;
+        proto_put_upload_chunk(w, &m);
+        break;
+    }
+    case PROTO_OBJECT_UPLOAD_END: {
+        proto_upload_end m;
+        m.upload_id = rnd_id();
+        rnd_transform(&m.at);
+        proto_put_upload_end(w, &m);
+        break;
+    }
+    case PROTO_OBJECT_PLACE: {
+        proto_object_place m;
+        m.object_id = rnd_id();
+        rnd_transform(&m.at);
+        proto_put_object_place(w, &m);
+        break;
+    }
+    case PROTO_OBJECT_REMOVE: proto_put_object_remove(w, rnd_id()); break;
+    case PROTO_OBJECT_REMOVED: proto_put_object_removed(w, rnd_id()); break;
+    case PROTO_OBJECT_INFO: {
+        /* Now and then the most boxes, or one box too many. */
+        proto_object_info m;
+        m.object_id = rnd_id();
+        m.upload_id = below(2) ? 0 : rnd_id();
+        /* Two random texts would rarely both be valid: one is often plain. */
+        m.owner.ptr = text;
+        m.owner.len = (uint32_t)rnd_text(text, PROTO_NAME_MAX);
+        m.name.ptr = text2;
+        if (below(2))
+            m.name.len = (uint32_t)snprintf(text2, sizeof text2, "object %u.obj", (unsigned)below(1000));
+        else
+            m.name.len = (uint32_t)rnd_text(text2, PROTO_OBJECT_NAME_MAX);
+        rnd_transform(&m.at);
+        m.ecm_version = rnd_id();
+        m.tri_count = (uint32_t)rnd();
+        m.box_count = (uint16_t)(below(4) ? below(8) : below(200));
+        if (below(512) == 0)
+            m.box_count = (uint16_t)(PROTO_OBJECT_BOXES_MAX + below(2));
+        m.boxes = NULL;
+        for (uint16_t i = 0; i < m.box_count; i++) {
+            rnd_vec3(box_min[i]);
+            for (int k = 0; k < 3; k++) {
+                /* Mostly a proper box, flat now and then, rarely inside out. */
+                switch (below(256)) {
+                case 0: box_max[i][k] = box_min[i][k] - 1.0f; break;
+                case 1: box_max[i][k] = box_min[i][k]; break;
+                default: box_max[i][k] = box_min[i][k] + (float)below(100); break;
+                }
+            }
+        }
+        proto_put_object_info(w, &m, (const float (*)[3])box_min, (const float (*)[3])box_max);
+        break;
+    }
+    case PROTO_OBJECT_REJECTED: {
+        uint32_t id = rnd_id();
+        uint16_t code = (uint16_t)(below(16) ? PROTO_ERR_UPLOAD + below(4) : rnd());
+        rnd_text(text, PROTO_MESSAGE_MAX);
+        proto_put_object_rejected(w, id, code, text);
+        break;
+    }
+    default: {
+        proto_collision m;
+        m.object_id = rnd_id();
+        m.ecm_version = rnd_id();
+        m.box_index = (uint16_t)below(1100);
+        m.inside = (uint8_t)(below(16) ? below(2) : below(256));
+        rnd_vec3(m.point);
+        rnd_vec3(m.normal);
+        proto_put_collision(w, &m);
+        break;
+    }
     }
 }
 
@@ -514,7 +820,7 @@ static int run_random(unsigned long long runs, uint64_t seed)
         proto_writer_init(&w, in, sizeof in);
         for (uint32_t i = 0; i < frames; i++) {
             starts[nstarts++] = w.len;
-            gen_frame(&w, (uint16_t)(1 + below(PROTO_BYE)));
+            gen_frame(&w, types[below(NTYPES)]);
         }
         len = w.len;
         for (uint32_t i = 0; i < muts; i++)
@@ -535,7 +841,8 @@ static int write_seeds(const char *dir)
     static uint8_t buf[PROTO_MAX_LEN + 4];
 
     rng = 1;
-    for (uint16_t t = PROTO_HELLO; t <= PROTO_BYE; t++) {
+    for (size_t i = 0; i < NTYPES; i++) {
+        const uint16_t t = types[i];
         char path[4096];
         proto_writer w;
         proto_frame f;
@@ -555,7 +862,7 @@ static int write_seeds(const char *dir)
             return 1;
         }
     }
-    printf("fuzz_proto: wrote %d seeds to %s\n", PROTO_BYE, dir);
+    printf("fuzz_proto: wrote %zu seeds to %s\n", NTYPES, dir);
     return 0;
 }
 

@@ -3,8 +3,10 @@
  *
  * Round trips go through the public writer and decoder only. Malformed
  * input is built by hand from a table of valid sample payloads, one per
- * type, that records where each string and float sits, so every class of
- * error is tried against every type it applies to.
+ * type, that records where each string, float, scale and non-zero id sits,
+ * so every class of error is tried against every type it applies to;
+ * what only one type has (a chunk's open-ended data, an object's boxes)
+ * gets tests of its own.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -104,20 +106,33 @@ static int decode_raw(uint16_t type, const uint8_t *payload, size_t n)
 
 /* ---- sample payloads ---------------------------------------------------- */
 
-#define MAX_FLOATS 12
+#define MAX_FLOATS 20
+#define SAMPLE_MAX 128 /* bytes of the largest sample payload */
+#define NSAMPLES 21    /* one per defined type */
+
+/* A string inside a sample: where its length byte sits, how many bytes of
+ * text follow, and the bounds the decoder holds it to. */
+typedef struct sample_str {
+    size_t at;
+    size_t len;
+    uint32_t min, max;
+} sample_str;
 
 /* One valid payload per type and what sits where in it. */
 typedef struct sample {
     uint16_t type;
-    uint8_t payload[64];
+    uint8_t payload[SAMPLE_MAX];
     size_t len;
-    int has_str;
-    size_t str_at;  /* offset of the string's length byte */
-    size_t str_len; /* bytes of text after it */
+    sample_str strs[2];
+    size_t nstrs;
     size_t floats[MAX_FLOATS]; /* offsets of every f32 */
     size_t nfloats;
-    size_t boxes[3]; /* offsets of the box edges, if any */
+    size_t boxes[3]; /* offsets of the avatar box edges, if any */
     size_t nboxes;
+    size_t scale; /* offset of the object scale or unit scale, if any (else 0) */
+    size_t ids[2]; /* offsets of the u32 ids that must not be 0 */
+    size_t nids;
+    size_t data_at; /* upload chunk: the data runs from here to the end (else 0) */
 } sample;
 
 static const proto_welcome sample_welcome = {
@@ -125,12 +140,16 @@ static const proto_welcome sample_welcome = {
     {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16},
     20, 50.0f, 5.0f, {-100.0f, 0.0f, -100.0f}, {100.0f, 50.0f, 100.0f}, 30000};
 
+/* The boxes of the object_info sample. */
+static const float sample_min[2][3] = {{-1.0f, 0.0f, -1.0f}, {2.0f, 0.0f, 2.0f}};
+static const float sample_max[2][3] = {{1.0f, 2.0f, 1.0f}, {3.0f, 0.5f, 3.0f}};
+
 /* Encodes one message of each type with the writer and strips the header,
  * so the samples are exactly what a peer sends. */
 static size_t build_samples(sample *s)
 {
     size_t n = 0;
-    uint8_t b[128];
+    uint8_t b[SAMPLE_MAX + PROTO_HEADER_SIZE];
     proto_writer w;
     const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
     const proto_join join = {{"ann", 3}, {0.5f, 1.8f, 0.5f}};
@@ -139,9 +158,17 @@ static size_t build_samples(sample *s)
     const proto_avatar e0 = {7, {1.0f, 2.0f, 3.0f}}, e1 = {8, {-1.0f, -2.0f, -3.0f}};
     const proto_avatar_joined aj = {8, {"bob", 3}, {4.0f, 0.0f, 4.0f}, {1.0f, 1.0f, 1.0f}};
     const proto_avatar_left al = {8, PROTO_LEFT_OUT_OF_RANGE};
+    const proto_upload_begin ub = {5, 1000, {"chair", 5}, {"obj", 3}, PROTO_UP_Z, 0.01f};
+    const uint8_t bytes[3] = {'a', 0, 0xff};
+    const proto_upload_chunk uc = {5, 0, bytes, 3};
+    const proto_upload_end ue = {5, {{1.0f, 2.0f, 3.0f}, 0.5f, 2.0f}};
+    const proto_object_place op = {9, {{-1.0f, 0.0f, -2.0f}, -3.0f, 0.5f}};
+    const proto_object_info oi = {9, 5, {"ann", 3}, {"chair", 5}, {{4.0f, 0.0f, 4.0f}, 1.5f, 1.0f},
+                                  1, 12, 2, NULL};
+    const proto_collision co = {9, 1, 0, 0, {1.0f, 0.0f, 2.0f}, {-1.0f, 0.0f, 0.0f}};
     size_t at;
 
-    memset(s, 0, 13 * sizeof *s);
+    memset(s, 0, NSAMPLES * sizeof *s);
 #define ADD(T, put)                                                      \
     do {                                                                 \
         proto_writer_init(&w, b, sizeof b);                              \
@@ -157,6 +184,17 @@ static size_t build_samples(sample *s)
         s[n].nfloats = sizeof offs / sizeof offs[0];                     \
         memcpy(s[n].floats, offs, sizeof offs);                          \
     } while (0)
+#define STR(at_, len_, min_, max_)                                       \
+    do {                                                                 \
+        const sample_str str = {(at_), (len_), (min_), (max_)};          \
+        s[n].strs[s[n].nstrs++] = str;                                   \
+    } while (0)
+#define IDS(...)                                                         \
+    do {                                                                 \
+        const size_t offs[] = {__VA_ARGS__};                             \
+        s[n].nids = sizeof offs / sizeof offs[0];                        \
+        memcpy(s[n].ids, offs, sizeof offs);                             \
+    } while (0)
 
     ADD(PROTO_HELLO, proto_put_hello(&w, &hello));
     n++;
@@ -164,7 +202,7 @@ static size_t build_samples(sample *s)
     FLOATS(28, 32, 36, 40, 44, 48, 52, 56);
     n++;
     ADD(PROTO_JOIN, proto_put_join(&w, &join));
-    s[n].has_str = 1, s[n].str_at = 0, s[n].str_len = 3;
+    STR(0, 3, 1, PROTO_NAME_MAX);
     FLOATS(4, 8, 12);
     s[n].boxes[0] = 4, s[n].boxes[1] = 8, s[n].boxes[2] = 12, s[n].nboxes = 3;
     n++;
@@ -181,14 +219,14 @@ static size_t build_samples(sample *s)
     FLOATS(14, 18, 22, 30, 34, 38);
     n++;
     ADD(PROTO_AVATAR_JOINED, proto_put_avatar_joined(&w, &aj));
-    s[n].has_str = 1, s[n].str_at = 4, s[n].str_len = 3;
+    STR(4, 3, 1, PROTO_NAME_MAX);
     FLOATS(8, 12, 16, 20, 24, 28);
     s[n].boxes[0] = 20, s[n].boxes[1] = 24, s[n].boxes[2] = 28, s[n].nboxes = 3;
     n++;
     ADD(PROTO_AVATAR_LEFT, proto_put_avatar_left(&w, &al));
     n++;
     ADD(PROTO_ERROR, proto_put_error(&w, PROTO_ERR_BAD_SEQ, "oops"));
-    s[n].has_str = 1, s[n].str_at = 2, s[n].str_len = 4;
+    STR(2, 4, 0, PROTO_MESSAGE_MAX);
     n++;
     ADD(PROTO_PING, proto_put_ping(&w, 42));
     n++;
@@ -196,15 +234,82 @@ static size_t build_samples(sample *s)
     n++;
     ADD(PROTO_BYE, proto_put_bye(&w, PROTO_BYE_QUIT));
     n++;
+    ADD(PROTO_OBJECT_UPLOAD_BEGIN, proto_put_upload_begin(&w, &ub));
+    STR(8, 5, 1, PROTO_OBJECT_NAME_MAX);
+    STR(14, 3, 0, PROTO_FORMAT_MAX);
+    FLOATS(19);
+    s[n].scale = 19;
+    IDS(0);
+    n++;
+    ADD(PROTO_OBJECT_UPLOAD_CHUNK, proto_put_upload_chunk(&w, &uc));
+    IDS(0);
+    s[n].data_at = 8;
+    n++;
+    ADD(PROTO_OBJECT_UPLOAD_END, proto_put_upload_end(&w, &ue));
+    FLOATS(4, 8, 12, 16, 20);
+    s[n].scale = 20;
+    IDS(0);
+    n++;
+    ADD(PROTO_OBJECT_PLACE, proto_put_object_place(&w, &op));
+    FLOATS(4, 8, 12, 16, 20);
+    s[n].scale = 20;
+    IDS(0);
+    n++;
+    ADD(PROTO_OBJECT_REMOVE, proto_put_object_remove(&w, 9));
+    IDS(0);
+    n++;
+    ADD(PROTO_OBJECT_INFO, proto_put_object_info(&w, &oi, sample_min, sample_max));
+    STR(8, 3, 1, PROTO_NAME_MAX);
+    STR(12, 5, 1, PROTO_OBJECT_NAME_MAX);
+    FLOATS(18, 22, 26, 30, 34, 48, 52, 56, 60, 64, 68, 72, 76, 80, 84, 88, 92);
+    s[n].scale = 34;
+    IDS(0, 38);
+    n++;
+    ADD(PROTO_OBJECT_REMOVED, proto_put_object_removed(&w, 9));
+    IDS(0);
+    n++;
+    ADD(PROTO_OBJECT_REJECTED, proto_put_object_rejected(&w, 5, PROTO_ERR_UPLOAD, "too big"));
+    STR(6, 7, 0, PROTO_MESSAGE_MAX);
+    n++;
+    ADD(PROTO_COLLISION, proto_put_collision(&w, &co));
+    FLOATS(11, 15, 19, 23, 27, 31);
+    IDS(0, 4);
+    n++;
 #undef ADD
 #undef FLOATS
+#undef STR
+#undef IDS
     /* The offsets above are this file's copy of PROTOCOL.md; check them. */
+    assert_int_equal(n, NSAMPLES);
     for (size_t i = 0; i < n; i++) {
         assert_int_equal(decode_raw(s[i].type, s[i].payload, s[i].len), PROTO_OK);
         for (size_t k = 0; k < s[i].nfloats; k++)
             assert_true(s[i].floats[k] + 4 <= s[i].len);
+        for (size_t k = 0; k < s[i].nstrs; k++) {
+            assert_int_equal(s[i].payload[s[i].strs[k].at], s[i].strs[k].len);
+            assert_true(s[i].strs[k].at + 1 + s[i].strs[k].len <= s[i].len);
+        }
     }
     return n;
+}
+
+/* Decodes sample s with its string k replaced by text[0..n), and returns
+ * the status. The fields around the string keep their values. */
+static int splice_status(const sample *s, size_t k, const char *text, size_t n)
+{
+    uint8_t p[SAMPLE_MAX + 256];
+    const sample_str *st = &s->strs[k];
+    const size_t tail = st->at + 1 + st->len;
+    size_t len = st->at;
+
+    assert_true(n <= 255);
+    memcpy(p, s->payload, len);
+    p[len++] = (uint8_t)n;
+    memcpy(p + len, text, n);
+    len += n;
+    memcpy(p + len, s->payload + tail, s->len - tail);
+    len += s->len - tail;
+    return decode_raw(s->type, p, len);
 }
 
 /* ---- round trips -------------------------------------------------------- */
@@ -501,6 +606,290 @@ static void test_bye_roundtrip(void **state)
     }
 }
 
+static void test_upload_begin_roundtrip(void **state)
+{
+    static const struct {
+        const char *name, *format;
+        uint8_t up_axis;
+        float unit_scale;
+        uint32_t id, size;
+    } cases[] = {
+        {"a", "", PROTO_UP_Y, PROTO_SCALE_MIN, 1, 1},
+        {"chair.obj", "obj", PROTO_UP_Z, 0.01f, 0xffffffffu, 16u * 1024u * 1024u},
+        {"Zoë's \xf0\x9f\x98\x80 lamp", "glb", PROTO_UP_Y, PROTO_SCALE_MAX, 0x80000000u, 0xffffffffu},
+        {"abcdefghijklmnopqrstuvwxyz0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ-_", /* 64 bytes */
+         "12345678", PROTO_UP_Z, 1.0f, 7, 12345},
+    };
+    (void)state;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const size_t nn = strlen(cases[i].name), nf = strlen(cases[i].format);
+        const proto_upload_begin in = {cases[i].id, cases[i].size, {cases[i].name, (uint32_t)nn},
+                                       {cases[i].format, (uint32_t)nf}, cases[i].up_axis,
+                                       cases[i].unit_scale};
+
+        assert_true(nn <= PROTO_OBJECT_NAME_MAX && nf <= PROTO_FORMAT_MAX);
+        proto_writer_init(&w, big, BIG);
+        proto_put_upload_begin(&w, &in);
+        assert_int_equal(w.err, PROTO_OK);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 15 + nn + nf);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_UPLOAD_BEGIN);
+        assert_int_equal(m.u.upload_begin.upload_id, in.upload_id);
+        assert_int_equal(m.u.upload_begin.total_size, in.total_size);
+        assert_str(m.u.upload_begin.name, cases[i].name, nn);
+        assert_ptr_equal(m.u.upload_begin.name.ptr, (const char *)big + PROTO_HEADER_SIZE + 9);
+        assert_str(m.u.upload_begin.format, cases[i].format, nf);
+        assert_int_equal(m.u.upload_begin.up_axis, in.up_axis);
+        assert_same_floats(&m.u.upload_begin.unit_scale, &in.unit_scale, 1);
+    }
+}
+
+/* A chunk of 1 byte, of PROTO_CHUNK_MAX bytes and in between; the data is
+ * the rest of the frame, not the rest of the buffer, so chunks back to back
+ * decode one by one. */
+static void test_upload_chunk_roundtrip(void **state)
+{
+    static uint8_t data[PROTO_CHUNK_MAX];
+    const uint32_t lens[] = {1, 2, 1000, PROTO_CHUNK_MAX - 1, PROTO_CHUNK_MAX};
+    proto_writer w;
+    proto_msg m;
+    size_t off = 0;
+
+    (void)state;
+    for (size_t i = 0; i < sizeof data; i++)
+        data[i] = (uint8_t)(i * 7u + 3u);
+    proto_writer_init(&w, big, BIG);
+    for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++) {
+        const proto_upload_chunk in = {(uint32_t)i + 1u, (uint32_t)i * 0x01010101u, data, lens[i]};
+        proto_put_upload_chunk(&w, &in);
+    }
+    assert_int_equal(w.err, PROTO_OK);
+    for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++) {
+        const size_t size = PROTO_HEADER_SIZE + 8 + lens[i];
+
+        decode_all(big + off, size, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_UPLOAD_CHUNK);
+        assert_int_equal(m.u.upload_chunk.upload_id, i + 1);
+        assert_int_equal(m.u.upload_chunk.offset, (uint32_t)i * 0x01010101u);
+        assert_int_equal(m.u.upload_chunk.len, lens[i]);
+        assert_ptr_equal(m.u.upload_chunk.data, big + off + PROTO_HEADER_SIZE + 8);
+        assert_memory_equal(m.u.upload_chunk.data, data, lens[i]);
+        off += size;
+    }
+    assert_int_equal(off, w.len);
+    /* The largest chunk fits the joined cap with room to spare. */
+    assert_true(2u + 8u + PROTO_CHUNK_MAX <= PROTO_MAX_LEN);
+}
+
+static const proto_transform odd_transforms[] = {
+    {{0.0f, 0.0f, 0.0f}, 0.0f, 1.0f},
+    {{-0.0f, FLT_MAX, -FLT_MAX}, -0.0f, PROTO_SCALE_MIN},
+    {{FLT_MIN, -1e-30f, 12345.678f}, 3.14159265f, PROTO_SCALE_MAX},
+    {{1.0f, 2.0f, 3.0f}, -1e30f /* any finite yaw */, 0.5f},
+    {{-4096.0f, 0.25f, 8.0f}, FLT_MAX, 999.0f},
+};
+
+static void test_upload_end_roundtrip(void **state)
+{
+    (void)state;
+    for (size_t i = 0; i < sizeof odd_transforms / sizeof odd_transforms[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_upload_end in = {(uint32_t)(0xfffffff0u + i), odd_transforms[i]};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_upload_end(&w, &in);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 4 + PROTO_SIZE_TRANSFORM);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_UPLOAD_END);
+        assert_int_equal(m.u.upload_end.upload_id, in.upload_id);
+        assert_same_floats(m.u.upload_end.at.pos, in.at.pos, 3);
+        assert_same_floats(&m.u.upload_end.at.yaw, &in.at.yaw, 1);
+        assert_same_floats(&m.u.upload_end.at.scale, &in.at.scale, 1);
+    }
+}
+
+static void test_object_place_roundtrip(void **state)
+{
+    (void)state;
+    for (size_t i = 0; i < sizeof odd_transforms / sizeof odd_transforms[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_object_place in = {(uint32_t)(1u + i * 0x10000u), odd_transforms[i]};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_object_place(&w, &in);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 4 + PROTO_SIZE_TRANSFORM);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_PLACE);
+        assert_int_equal(m.u.object_place.object_id, in.object_id);
+        assert_same_floats(m.u.object_place.at.pos, in.at.pos, 3);
+        assert_same_floats(&m.u.object_place.at.yaw, &in.at.yaw, 1);
+        assert_same_floats(&m.u.object_place.at.scale, &in.at.scale, 1);
+    }
+}
+
+static void test_object_remove_roundtrip(void **state)
+{
+    const uint32_t ids[] = {1, 2, 0x80000000u, UINT32_MAX};
+
+    (void)state;
+    for (size_t i = 0; i < sizeof ids / sizeof ids[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_object_remove(&w, ids[i]);
+        proto_put_object_removed(&w, ids[i]);
+        assert_int_equal(w.err, PROTO_OK);
+        assert_int_equal(w.len, 2 * PROTO_SIZE_OBJECT_REMOVED);
+        decode_all(big, PROTO_SIZE_OBJECT_REMOVED, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_REMOVE);
+        assert_int_equal(m.u.object_id, ids[i]);
+        decode_all(big + PROTO_SIZE_OBJECT_REMOVED, PROTO_SIZE_OBJECT_REMOVED, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_REMOVED);
+        assert_int_equal(m.u.object_id, ids[i]);
+    }
+}
+
+/* Writes an object info with n boxes (derived from the index), the given
+ * owner and name, decodes it and checks every field and every box. With
+ * n == 0 the box arrays are NULL: the writer must not read them. */
+static void object_info_roundtrip(uint16_t n, const char *owner, const char *name, uint32_t upload_id)
+{
+    static float mn[PROTO_OBJECT_BOXES_MAX][3], mx[PROTO_OBJECT_BOXES_MAX][3];
+    const size_t no = strlen(owner), nn = strlen(name);
+    const proto_object_info in = {0xfffffffeu, upload_id, {owner, (uint32_t)no}, {name, (uint32_t)nn},
+                                  {{1.0f, -0.0f, -2.5f}, -3.0f, PROTO_SCALE_MAX}, 7, UINT32_MAX, n, NULL};
+    proto_writer w;
+    proto_msg m;
+
+    for (uint16_t i = 0; i < n; i++) {
+        mn[i][0] = (float)i;
+        mn[i][1] = -(float)i;
+        mn[i][2] = (float)i * 0.5f - 3.0f;
+        mx[i][0] = mn[i][0] + 1.0f;
+        mx[i][1] = mn[i][1]; /* a flat box */
+        mx[i][2] = mn[i][2] + 2.5f;
+    }
+    if (n > 0) {
+        mn[0][0] = 0.0f; /* 0.0 <= -0.0: both bit patterns survive */
+        mx[0][0] = -0.0f;
+    }
+    proto_writer_init(&w, big, BIG);
+    proto_put_object_info(&w, &in, n ? (const float (*)[3])mn : NULL, n ? (const float (*)[3])mx : NULL);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, PROTO_HEADER_SIZE + 40 + no + nn + (size_t)n * PROTO_BOX_ENTRY_SIZE);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_OBJECT_INFO);
+    assert_int_equal(m.u.object_info.object_id, in.object_id);
+    assert_int_equal(m.u.object_info.upload_id, upload_id);
+    assert_str(m.u.object_info.owner, owner, no);
+    assert_ptr_equal(m.u.object_info.owner.ptr, (const char *)big + PROTO_HEADER_SIZE + 9);
+    assert_str(m.u.object_info.name, name, nn);
+    assert_same_floats(m.u.object_info.at.pos, in.at.pos, 3);
+    assert_same_floats(&m.u.object_info.at.yaw, &in.at.yaw, 1);
+    assert_same_floats(&m.u.object_info.at.scale, &in.at.scale, 1);
+    assert_int_equal(m.u.object_info.ecm_version, 7);
+    assert_int_equal(m.u.object_info.tri_count, UINT32_MAX);
+    assert_int_equal(m.u.object_info.box_count, n);
+    assert_ptr_equal(m.u.object_info.boxes, big + PROTO_HEADER_SIZE + 40 + no + nn);
+    for (uint16_t i = 0; i < m.u.object_info.box_count; i++) {
+        float lo[3], hi[3];
+
+        proto_object_box(&m.u.object_info, i, lo, hi);
+        assert_same_floats(lo, mn[i], 3);
+        assert_same_floats(hi, mx[i], 3);
+    }
+}
+
+static void test_object_info_no_boxes(void **state)
+{
+    (void)state;
+    object_info_roundtrip(0, "a", "b", 0);
+}
+
+static void test_object_info_one_box(void **state)
+{
+    (void)state;
+    object_info_roundtrip(1, "Zoë", "chair.obj", 42);
+}
+
+/* The most boxes with the longest strings: exactly PROTO_SIZE_OBJECT_INFO,
+ * and within the joined cap. */
+static void test_object_info_max_boxes(void **state)
+{
+    char owner[PROTO_NAME_MAX + 1], name[PROTO_OBJECT_NAME_MAX + 1];
+
+    (void)state;
+    memset(owner, 'o', PROTO_NAME_MAX);
+    owner[PROTO_NAME_MAX] = 0;
+    memset(name, 'n', PROTO_OBJECT_NAME_MAX);
+    name[PROTO_OBJECT_NAME_MAX] = 0;
+    object_info_roundtrip(PROTO_OBJECT_BOXES_MAX, owner, name, UINT32_MAX);
+    assert_int_equal(PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX),
+                     PROTO_HEADER_SIZE + 40 + PROTO_NAME_MAX + PROTO_OBJECT_NAME_MAX +
+                         PROTO_OBJECT_BOXES_MAX * PROTO_BOX_ENTRY_SIZE);
+    assert_true(PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX) - 4 <= PROTO_MAX_LEN);
+}
+
+static void test_object_rejected_roundtrip(void **state)
+{
+    static const struct {
+        uint32_t request_id;
+        uint16_t code;
+        const char *text;
+    } cases[] = {
+        {0, PROTO_ERR_FRAME_EMPTY, ""},
+        {5, PROTO_ERR_UPLOAD, "upload 5: 20000000 bytes over the cap of 16777216"},
+        {5, PROTO_ERR_IMPORT, "obj: line 3: no vertices"},
+        {9, PROTO_ERR_NO_OBJECT, "no object 9"},
+        {UINT32_MAX, PROTO_ERR_NOT_OWNER, "object “chair” belongs to Zoë"},
+        {1, 0xffff, "a code from a later version"},
+    };
+    (void)state;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        proto_writer w;
+        proto_msg m;
+        const size_t n = strlen(cases[i].text);
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_object_rejected(&w, cases[i].request_id, cases[i].code, cases[i].text);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 7 + n);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_OBJECT_REJECTED);
+        assert_int_equal(m.u.object_rejected.request_id, cases[i].request_id);
+        assert_int_equal(m.u.object_rejected.code, cases[i].code);
+        assert_str(m.u.object_rejected.message, cases[i].text, n);
+    }
+}
+
+static void test_collision_roundtrip(void **state)
+{
+    (void)state;
+    for (uint8_t inside = 0; inside <= 1; inside++) {
+        proto_writer w;
+        proto_msg m;
+        const proto_collision in = {inside ? UINT32_MAX : 1u, inside ? 1u : UINT32_MAX,
+                                    inside ? (uint16_t)0xffff : (uint16_t)0, inside,
+                                    {-0.0f, FLT_MAX, bits_f32(1)}, {0.0f, 1.0f, -0.0f}};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_collision(&w, &in);
+        assert_int_equal(w.len, PROTO_SIZE_COLLISION);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_COLLISION);
+        assert_int_equal(m.u.collision.object_id, in.object_id);
+        assert_int_equal(m.u.collision.ecm_version, in.ecm_version);
+        assert_int_equal(m.u.collision.box_index, in.box_index);
+        assert_int_equal(m.u.collision.inside, inside);
+        assert_same_floats(m.u.collision.point, in.point, 3);
+        assert_same_floats(m.u.collision.normal, in.normal, 3);
+    }
+}
+
 /* The *_MAX size macros are what the largest strings produce. */
 static void test_max_sizes(void **state)
 {
@@ -523,6 +912,83 @@ static void test_max_sizes(void **state)
     proto_writer_init(&w, big, BIG);
     proto_put_error(&w, PROTO_ERR_INTERNAL, text);
     assert_int_equal(w.len, PROTO_SIZE_ERROR_MAX);
+    proto_writer_init(&w, big, BIG);
+    proto_put_object_rejected(&w, 1, PROTO_ERR_IMPORT, text);
+    assert_int_equal(w.len, PROTO_SIZE_OBJECT_REJECTED_MAX);
+}
+
+/* Object names are cut at PROTO_OBJECT_NAME_MAX bytes, owners at
+ * PROTO_NAME_MAX and formats at PROTO_FORMAT_MAX, never inside a character,
+ * and object_rejected texts are cleaned like error texts. */
+static void test_object_string_truncation(void **state)
+{
+    static const struct {
+        const char *in;
+        size_t want;
+    } names[] = {
+        {"0123456789012345678901234567890123456789012345678901234567890123456789", 64},
+        {"012345678901234567890123456789012345678901234567890123456789012\xc3\xa9", 63},
+        {"01234567890123456789012345678901234567890123456789012345678901\xf0\x9f\x98\x80", 62},
+        {"0123456789012345678901234567890123456789012345678901234567890\xe2\x82\xac", 64}, /* ends at 64 */
+    }, formats[] = {
+        {"abcdefghij", 8},
+        {"abcdefg\xc3\xa9", 7}, /* the cut leaves a format that decodes */
+        {"abcdefgh\xc3\xa9", 8},
+    }, owners[] = {
+        {"abcdefghijklmnopqrstuvwxyz0123456789", 32},
+        {"abcdefghijklmnopqrstuvwxyz0123\xf0\x9f\x98\x80", 30},
+    };
+    char text[300], want[300];
+    proto_writer w;
+    proto_msg m;
+
+    (void)state;
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        const proto_upload_begin ub = {1, 1, {names[i].in, (uint32_t)strlen(names[i].in)}, {"obj", 3},
+                                       PROTO_UP_Y, 1.0f};
+        const proto_object_info oi = {1, 0, {"ann", 3}, {names[i].in, (uint32_t)strlen(names[i].in)},
+                                      {{0, 0, 0}, 0, 1}, 1, 0, 0, NULL};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_upload_begin(&w, &ub);
+        decode_all(big, w.len, &m);
+        assert_str(m.u.upload_begin.name, names[i].in, names[i].want);
+        assert_str(m.u.upload_begin.format, "obj", 3);
+        proto_writer_init(&w, big, BIG);
+        proto_put_object_info(&w, &oi, NULL, NULL);
+        decode_all(big, w.len, &m);
+        assert_str(m.u.object_info.name, names[i].in, names[i].want);
+    }
+    for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++) {
+        const proto_upload_begin ub = {1, 1, {"x", 1}, {formats[i].in, (uint32_t)strlen(formats[i].in)},
+                                       PROTO_UP_Y, 1.0f};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_upload_begin(&w, &ub);
+        decode_all(big, w.len, &m);
+        assert_str(m.u.upload_begin.format, formats[i].in, formats[i].want);
+    }
+    for (size_t i = 0; i < sizeof owners / sizeof owners[0]; i++) {
+        const proto_object_info oi = {1, 0, {owners[i].in, (uint32_t)strlen(owners[i].in)}, {"x", 1},
+                                      {{0, 0, 0}, 0, 1}, 1, 0, 0, NULL};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_object_info(&w, &oi, NULL, NULL);
+        decode_all(big, w.len, &m);
+        assert_str(m.u.object_info.owner, owners[i].in, owners[i].want);
+    }
+
+    memset(text, 'x', 250);
+    text[250] = 0;
+    proto_writer_init(&w, big, BIG);
+    proto_put_object_rejected(&w, 3, PROTO_ERR_IMPORT, text);
+    decode_all(big, w.len, &m);
+    assert_str(m.u.object_rejected.message, text, PROTO_MESSAGE_MAX);
+    proto_writer_init(&w, big, BIG);
+    proto_put_object_rejected(&w, 3, PROTO_ERR_IMPORT, "line 1:\n\x7f\xff bad \xc3(");
+    decode_all(big, w.len, &m);
+    strcpy(want, "line 1:??? bad ?(");
+    assert_str(m.u.object_rejected.message, want, strlen(want));
 }
 
 /* Names are cut at PROTO_NAME_MAX bytes, never inside a character. */
@@ -676,9 +1142,14 @@ static void test_worked_examples(void **state)
     static const uint8_t move_bytes[] = {0x12, 0x00, 0x00, 0x00, 0x05, 0x00, 0x01, 0x00,
                                          0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
                                          0x00, 0x00, 0x00, 0x00, 0x20, 0xc0};
+    static const uint8_t place_bytes[] = {0x1a, 0x00, 0x00, 0x00, 0x23, 0x00, 0x03, 0x00,
+                                          0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+                                          0x00, 0x00, 0x00, 0x00, 0x20, 0x41, 0xdb, 0x0f,
+                                          0xc9, 0x3f, 0x00, 0x00, 0x00, 0x40};
     proto_writer w;
     const proto_hello hello = {PROTO_MAGIC, 1};
     const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
+    const proto_object_place place = {3, {{0.0f, 0.0f, 10.0f}, 1.57079632679f, 2.0f}};
 
     (void)state;
     assert_int_equal(PROTO_VERSION, 1);
@@ -690,6 +1161,10 @@ static void test_worked_examples(void **state)
     proto_put_move(&w, &move);
     assert_int_equal(w.len, sizeof move_bytes);
     assert_memory_equal(big, move_bytes, sizeof move_bytes);
+    proto_writer_init(&w, big, BIG);
+    proto_put_object_place(&w, &place);
+    assert_int_equal(w.len, sizeof place_bytes);
+    assert_memory_equal(big, place_bytes, sizeof place_bytes);
 }
 
 /* ---- writer overflow ---------------------------------------------------- */
@@ -742,6 +1217,13 @@ static void test_writer_overflow_sticky(void **state)
     const proto_avatar_joined aj = {1, {"a", 1}, {0, 0, 0}, {1, 1, 1}};
     const proto_avatar_left al = {1, 0};
     const proto_avatar a = {1, {0, 0, 0}};
+    const proto_upload_begin ub = {1, 1, {"a", 1}, {"", 0}, PROTO_UP_Y, 1};
+    const uint8_t byte = 1;
+    const proto_upload_chunk uc = {1, 0, &byte, 1};
+    const proto_upload_end ue = {1, {{0, 0, 0}, 0, 1}};
+    const proto_object_place op = {1, {{0, 0, 0}, 0, 1}};
+    const proto_object_info oi = {1, 0, {"a", 1}, {"b", 1}, {{0, 0, 0}, 0, 1}, 1, 0, 0, NULL};
+    const proto_collision co = {1, 1, 0, 0, {0, 0, 0}, {0, 1, 0}};
 
     (void)state;
     memset(b, 0xee, sizeof b);
@@ -762,6 +1244,15 @@ static void test_writer_overflow_sticky(void **state)
     proto_put_avatar_left(&w, &al);
     proto_put_error(&w, PROTO_ERR_INTERNAL, "x");
     proto_put_pong(&w, 4);
+    proto_put_upload_begin(&w, &ub);
+    proto_put_upload_chunk(&w, &uc);
+    proto_put_upload_end(&w, &ue);
+    proto_put_object_place(&w, &op);
+    proto_put_object_remove(&w, 1);
+    proto_put_object_info(&w, &oi, NULL, NULL);
+    proto_put_object_removed(&w, 1);
+    proto_put_object_rejected(&w, 1, PROTO_ERR_UPLOAD, "");
+    proto_put_collision(&w, &co);
     at = proto_put_snapshot_begin(&w, 1, 1);
     assert_int_equal(at, w.len);
     proto_put_snapshot_add(&w, at, &a);
@@ -793,6 +1284,91 @@ static void test_writer_null_buffer(void **state)
     proto_put_snapshot_end(&w, at);
     assert_int_equal(at, 0);
     assert_int_equal(w.len, 0);
+}
+
+/* A chunk over PROTO_CHUNK_MAX is not written: the writer fails, keeps
+ * the frames before it, and stays failed. A chunk of exactly
+ * PROTO_CHUNK_MAX fits a buffer of exactly its size. */
+static void test_writer_chunk_over_max(void **state)
+{
+    static uint8_t data[PROTO_CHUNK_MAX + 1];
+    static uint8_t b[PROTO_HEADER_SIZE + 8 + PROTO_CHUNK_MAX];
+    proto_writer w;
+    proto_upload_chunk c = {1, 0, data, PROTO_CHUNK_MAX};
+
+    (void)state;
+    proto_writer_init(&w, b, sizeof b);
+    proto_put_upload_chunk(&w, &c);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, sizeof b);
+
+    proto_writer_init(&w, big, BIG);
+    proto_put_ping(&w, 1);
+    c.len = PROTO_CHUNK_MAX + 1;
+    proto_put_upload_chunk(&w, &c);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, PROTO_SIZE_PING);
+    c.len = 1;
+    proto_put_upload_chunk(&w, &c);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, PROTO_SIZE_PING);
+
+    /* Over the cap on a writer that has already failed: still that error. */
+    proto_writer_init(&w, NULL, 0);
+    proto_put_ping(&w, 1);
+    c.len = UINT32_MAX;
+    proto_put_upload_chunk(&w, &c);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, 0);
+}
+
+/* More than PROTO_OBJECT_BOXES_MAX boxes are not written either. */
+static void test_writer_info_over_max(void **state)
+{
+    static float mn[PROTO_OBJECT_BOXES_MAX + 1][3], mx[PROTO_OBJECT_BOXES_MAX + 1][3];
+    proto_writer w;
+    proto_msg m;
+    proto_object_info oi = {1, 0, {"a", 1}, {"b", 1}, {{0, 0, 0}, 0, 1}, 1, 0, PROTO_OBJECT_BOXES_MAX + 1, NULL};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_bye(&w, 0);
+    proto_put_object_info(&w, &oi, (const float (*)[3])mn, (const float (*)[3])mx);
+    assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+    assert_int_equal(w.len, PROTO_SIZE_BYE);
+    oi.box_count = 0xffff;
+    proto_put_object_info(&w, &oi, NULL, NULL);
+    assert_int_equal(w.len, PROTO_SIZE_BYE);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.type, PROTO_BYE);
+}
+
+/* What the writer cannot fix is still encoded and the decoder refuses it:
+ * an empty chunk, an id 0, a scale out of range. */
+static void test_bad_objects_encode(void **state)
+{
+    proto_writer w;
+    proto_frame f;
+    proto_msg m;
+    const proto_upload_chunk empty = {1, 0, NULL, 0};
+    const proto_upload_end zero = {0, {{0, 0, 0}, 0, 1}};
+    const proto_object_place tiny = {1, {{0, 0, 0}, 0, 0}};
+
+    (void)state;
+    proto_writer_init(&w, big, BIG);
+    proto_put_upload_chunk(&w, &empty);
+    assert_int_equal(w.err, PROTO_OK);
+    assert_int_equal(w.len, PROTO_HEADER_SIZE + 8);
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(proto_decode(&f, &m), PROTO_ERR_SHORT);
+    proto_writer_init(&w, big, BIG);
+    proto_put_upload_end(&w, &zero);
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(proto_decode(&f, &m), PROTO_ERR_BAD_VALUE);
+    proto_writer_init(&w, big, BIG);
+    proto_put_object_place(&w, &tiny);
+    assert_int_equal(proto_frame_parse(big, w.len, PROTO_MAX_LEN, &f), PROTO_OK);
+    assert_int_equal(proto_decode(&f, &m), PROTO_ERR_BAD_VALUE);
 }
 
 static void test_snapshot_begin_no_room(void **state)
@@ -975,30 +1551,36 @@ static void test_unknown_and_reserved_types(void **state)
 
     (void)state;
     for (uint32_t t = 0; t <= 0xffff; t++) {
-        if (t >= PROTO_HELLO && t <= PROTO_BYE)
+        if ((t >= PROTO_HELLO && t <= PROTO_BYE) || (t >= PROTO_OBJECT_UPLOAD_BEGIN && t <= PROTO_OBJECT_REJECTED &&
+                                                     t != PROTO_OBJECT_MOVE) || t == PROTO_COLLISION)
             continue;
         assert_int_equal(decode_raw((uint16_t)t, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
         assert_int_equal(decode_raw((uint16_t)t, NULL, 0), PROTO_ERR_UNKNOWN_TYPE);
     }
-    for (uint16_t t = PROTO_RESERVED_FIRST; t <= PROTO_RESERVED_LAST; t++)
-        assert_int_equal(decode_raw(t, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
+    assert_int_equal(decode_raw(PROTO_OBJECT_MOVE, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
+    assert_int_equal(decode_raw(PROTO_ECM_UPDATE, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
+    assert_int_equal(decode_raw(PROTO_ADMIN_REQUEST, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
 }
 
 /* Every proper prefix of every sample is short, except a cut inside a
- * string's text, which is a string running past the end of the frame. */
+ * string's text, which is a string running past the end of the frame, and
+ * a cut inside an upload chunk's data, which is a shorter chunk. */
 static void test_short_every_type(void **state)
 {
-    sample s[13];
+    sample s[NSAMPLES];
     size_t n = build_samples(s);
 
     (void)state;
-    assert_int_equal(n, 12);
     for (size_t i = 0; i < n; i++) {
         for (size_t k = 0; k < s[i].len; k++) {
             int want = PROTO_ERR_SHORT;
 
-            if (s[i].has_str && k > s[i].str_at && k <= s[i].str_at + s[i].str_len)
-                want = PROTO_ERR_BAD_STRING;
+            for (size_t j = 0; j < s[i].nstrs; j++) {
+                if (k > s[i].strs[j].at && k <= s[i].strs[j].at + s[i].strs[j].len)
+                    want = PROTO_ERR_BAD_STRING;
+            }
+            if (s[i].data_at && k > s[i].data_at)
+                want = PROTO_OK;
             if (decode_raw(s[i].type, s[i].payload, k) != want)
                 fail_msg("%s cut at %zu: got %d want %d", proto_type_name(s[i].type), k,
                          decode_raw(s[i].type, s[i].payload, k), want);
@@ -1006,18 +1588,21 @@ static void test_short_every_type(void **state)
     }
 }
 
+/* Bytes after the layout are trailing, except after an upload chunk's head,
+ * where they are more data (the chunk cap is test_upload_chunk_sizes'). */
 static void test_trailing_every_type(void **state)
 {
-    sample s[13];
+    sample s[NSAMPLES];
     size_t n = build_samples(s);
 
     (void)state;
     for (size_t i = 0; i < n; i++) {
-        uint8_t p[96] = {0};
+        uint8_t p[SAMPLE_MAX + 32] = {0};
 
         memcpy(p, s[i].payload, s[i].len);
         for (size_t extra = 1; extra <= 17; extra++)
-            assert_int_equal(decode_raw(s[i].type, p, s[i].len + extra), PROTO_ERR_TRAILING);
+            assert_int_equal(decode_raw(s[i].type, p, s[i].len + extra),
+                             s[i].data_at ? PROTO_OK : PROTO_ERR_TRAILING);
     }
 }
 
@@ -1027,7 +1612,7 @@ static void test_not_finite_every_float(void **state)
 {
     static const uint32_t bad[] = {0x7fc00000u, 0x7f800001u, 0xffc00000u, 0x7fffffffu,
                                    0x7f800000u, 0xff800000u};
-    sample s[13];
+    sample s[NSAMPLES];
     size_t n = build_samples(s);
     size_t tried = 0;
 
@@ -1035,7 +1620,7 @@ static void test_not_finite_every_float(void **state)
     for (size_t i = 0; i < n; i++) {
         for (size_t k = 0; k < s[i].nfloats; k++) {
             for (size_t b = 0; b < sizeof bad / sizeof bad[0]; b++) {
-                uint8_t p[64];
+                uint8_t p[SAMPLE_MAX];
 
                 memcpy(p, s[i].payload, s[i].len);
                 wr_u32(p + s[i].floats[k], bad[b]);
@@ -1046,7 +1631,9 @@ static void test_not_finite_every_float(void **state)
             }
         }
     }
-    assert_int_equal(tried, (8 + 3 + 6 + 3 + 6 + 6) * 6);
+    /* welcome, join, join_ok, move, snapshot, avatar_joined, then
+     * upload_begin, upload_end, place, object_info, collision */
+    assert_int_equal(tried, (8 + 3 + 6 + 3 + 6 + 6 + 1 + 5 + 5 + 17 + 6) * 6);
 }
 
 /* Box edges must lie in [PROTO_BOX_MIN, PROTO_BOX_MAX] in join, join_ok and
@@ -1056,13 +1643,13 @@ static void test_box_range(void **state)
     const float bad[] = {0.0f, -0.0f, -1.0f, bits_f32(f32_bits(PROTO_BOX_MIN) - 1),
                          bits_f32(f32_bits(PROTO_BOX_MAX) + 1), 4.5f, 1e30f, -FLT_MAX, FLT_MAX};
     const float good[] = {PROTO_BOX_MIN, PROTO_BOX_MAX, 1.0f, 0.25f};
-    sample s[13];
+    sample s[NSAMPLES];
     size_t n = build_samples(s), tried = 0;
 
     (void)state;
     for (size_t i = 0; i < n; i++) {
         for (size_t k = 0; k < s[i].nboxes; k++) {
-            uint8_t p[64];
+            uint8_t p[SAMPLE_MAX];
 
             memcpy(p, s[i].payload, s[i].len);
             for (size_t b = 0; b < sizeof bad / sizeof bad[0]; b++) {
@@ -1079,36 +1666,100 @@ static void test_box_range(void **state)
     assert_int_equal(tried, 3 * 3 * (sizeof bad / sizeof bad[0]));
 }
 
-/* ---- decoding: strings -------------------------------------------------- */
-
-/* Decodes a string of n bytes placed in a valid message of type t (join,
- * avatar_joined or error) and returns the status. */
-static int string_status(uint16_t t, const char *text, size_t n)
+/* An object's scale (upload_end, place, object_info) and an upload's unit
+ * scale must lie in [PROTO_SCALE_MIN, PROTO_SCALE_MAX], both included. */
+static void test_scale_range(void **state)
 {
-    uint8_t p[400];
-    size_t at = 0;
+    const float bad[] = {0.0f, -0.0f, -1.0f, -PROTO_SCALE_MIN, bits_f32(1) /* denormal */,
+                         bits_f32(f32_bits(PROTO_SCALE_MIN) - 1), bits_f32(f32_bits(PROTO_SCALE_MAX) + 1),
+                         1001.0f, 1e30f, -FLT_MAX, FLT_MAX};
+    const float good[] = {PROTO_SCALE_MIN, PROTO_SCALE_MAX, 1.0f, 0.01f, 999.5f};
+    sample s[NSAMPLES];
+    size_t n = build_samples(s), tried = 0;
 
-    assert_true(n <= 255);
-    if (t == PROTO_AVATAR_JOINED) {
-        wr_u32(p, 9);
-        at = 4;
-    } else if (t == PROTO_ERROR) {
-        wr_u16(p, PROTO_ERR_INTERNAL);
-        at = 2;
+    (void)state;
+    for (size_t i = 0; i < n; i++) {
+        uint8_t p[SAMPLE_MAX];
+
+        if (!s[i].scale)
+            continue;
+        memcpy(p, s[i].payload, s[i].len);
+        for (size_t b = 0; b < sizeof bad / sizeof bad[0]; b++) {
+            wr_f32(p + s[i].scale, bad[b]);
+            if (decode_raw(s[i].type, p, s[i].len) != PROTO_ERR_BAD_VALUE)
+                fail_msg("%s scale %g accepted", proto_type_name(s[i].type), (double)bad[b]);
+            tried++;
+        }
+        for (size_t g = 0; g < sizeof good / sizeof good[0]; g++) {
+            wr_f32(p + s[i].scale, good[g]);
+            assert_int_equal(decode_raw(s[i].type, p, s[i].len), PROTO_OK);
+        }
     }
-    p[at++] = (uint8_t)n;
-    memcpy(p + at, text, n);
-    at += n;
-    if (t == PROTO_AVATAR_JOINED) {
-        for (int i = 0; i < 3; i++, at += 4)
-            wr_f32(p + at, 0.0f);
-    }
-    if (t != PROTO_ERROR) {
-        for (int i = 0; i < 3; i++, at += 4)
-            wr_f32(p + at, 1.0f);
-    }
-    return decode_raw(t, p, at);
+    assert_int_equal(tried, 4 * (sizeof bad / sizeof bad[0]));
 }
+
+/* Object ids, upload ids and ECM versions are never 0 on the wire (0 means
+ * "none"); every other value decodes. */
+static void test_zero_ids(void **state)
+{
+    const uint32_t good[] = {1, 2, 0x80000000u, UINT32_MAX};
+    sample s[NSAMPLES];
+    size_t n = build_samples(s), tried = 0;
+
+    (void)state;
+    for (size_t i = 0; i < n; i++) {
+        for (size_t k = 0; k < s[i].nids; k++) {
+            uint8_t p[SAMPLE_MAX];
+
+            memcpy(p, s[i].payload, s[i].len);
+            wr_u32(p + s[i].ids[k], 0);
+            if (decode_raw(s[i].type, p, s[i].len) != PROTO_ERR_BAD_VALUE)
+                fail_msg("%s id 0 at %zu accepted", proto_type_name(s[i].type), s[i].ids[k]);
+            tried++;
+            for (size_t g = 0; g < sizeof good / sizeof good[0]; g++) {
+                wr_u32(p + s[i].ids[k], good[g]);
+                assert_int_equal(decode_raw(s[i].type, p, s[i].len), PROTO_OK);
+            }
+        }
+    }
+    /* begin, chunk, end, place, remove, info (id, version), removed,
+     * collision (id, version) */
+    assert_int_equal(tried, 10);
+}
+
+/* Where 0 is a value and not "none", it decodes: object_info's upload_id,
+ * object_rejected's request_id, a chunk's offset, a collision's box. */
+static void test_zero_where_allowed(void **state)
+{
+    const struct {
+        uint16_t type;
+        size_t at, size;
+    } cases[] = {
+        {PROTO_OBJECT_INFO, 4, 4},
+        {PROTO_OBJECT_REJECTED, 0, 4},
+        {PROTO_OBJECT_UPLOAD_CHUNK, 4, 4},
+        {PROTO_COLLISION, 8, 2},
+    };
+    sample s[NSAMPLES];
+    size_t n = build_samples(s);
+
+    (void)state;
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        for (size_t i = 0; i < n; i++) {
+            uint8_t p[SAMPLE_MAX];
+
+            if (s[i].type != cases[c].type)
+                continue;
+            memcpy(p, s[i].payload, s[i].len);
+            memset(p + cases[c].at, 0, cases[c].size);
+            assert_int_equal(decode_raw(s[i].type, p, s[i].len), PROTO_OK);
+            memset(p + cases[c].at, 0xff, cases[c].size);
+            assert_int_equal(decode_raw(s[i].type, p, s[i].len), PROTO_OK);
+        }
+    }
+}
+
+/* ---- decoding: strings -------------------------------------------------- */
 
 static const char *const bad_text[] = {
     "\x00", "a\x01", "\x1f", "\x7f", "a\nb", "tab\there", "a\rb", "\x1b[31m",
@@ -1125,40 +1776,94 @@ static const char *const good_text[] = {
     "\xef\xbf\xbd", "\xed\x9f\xbf", "\xee\x80\x80", "\xc2\xa0",
 };
 
+/* Every name field (join, avatar_joined, upload_begin's object name,
+ * object_info's owner and name) takes 1..max bytes of text. */
 static void test_name_rules(void **state)
 {
-    const uint16_t types[] = {PROTO_JOIN, PROTO_AVATAR_JOINED};
-    char longest[PROTO_NAME_MAX + 1];
+    char longest[256];
+    sample s[NSAMPLES];
+    size_t n = build_samples(s), tried = 0;
 
     (void)state;
     memset(longest, 'x', sizeof longest);
-    for (size_t t = 0; t < 2; t++) {
-        for (size_t i = 0; i < sizeof bad_text / sizeof bad_text[0]; i++) {
-            if (string_status(types[t], bad_text[i], bad_text_len(i)) != PROTO_ERR_BAD_STRING)
-                fail_msg("%s accepted bad text #%zu", proto_type_name(types[t]), i);
+    for (size_t i = 0; i < n; i++) {
+        for (size_t k = 0; k < s[i].nstrs; k++) {
+            const uint32_t max = s[i].strs[k].max;
+
+            if (max != PROTO_NAME_MAX && max != PROTO_OBJECT_NAME_MAX)
+                continue;
+            assert_int_equal(s[i].strs[k].min, 1);
+            for (size_t b = 0; b < sizeof bad_text / sizeof bad_text[0]; b++) {
+                if (splice_status(&s[i], k, bad_text[b], bad_text_len(b)) != PROTO_ERR_BAD_STRING)
+                    fail_msg("%s string %zu accepted bad text #%zu", proto_type_name(s[i].type), k, b);
+            }
+            for (size_t g = 0; g < sizeof good_text / sizeof good_text[0]; g++)
+                assert_int_equal(splice_status(&s[i], k, good_text[g], strlen(good_text[g])), PROTO_OK);
+            assert_int_equal(splice_status(&s[i], k, "", 0), PROTO_ERR_BAD_STRING);
+            assert_int_equal(splice_status(&s[i], k, longest, max), PROTO_OK);
+            assert_int_equal(splice_status(&s[i], k, longest, max + 1), PROTO_ERR_BAD_STRING);
+            assert_int_equal(splice_status(&s[i], k, longest, 255), PROTO_ERR_BAD_STRING);
+            tried++;
         }
-        for (size_t i = 0; i < sizeof good_text / sizeof good_text[0]; i++)
-            assert_int_equal(string_status(types[t], good_text[i], strlen(good_text[i])), PROTO_OK);
-        assert_int_equal(string_status(types[t], "", 0), PROTO_ERR_BAD_STRING);
-        assert_int_equal(string_status(types[t], longest, PROTO_NAME_MAX), PROTO_OK);
-        assert_int_equal(string_status(types[t], longest, PROTO_NAME_MAX + 1), PROTO_ERR_BAD_STRING);
     }
+    assert_int_equal(tried, 5);
 }
 
+/* Error texts (error, object_rejected) may be empty, up to
+ * PROTO_MESSAGE_MAX bytes. */
 static void test_message_rules(void **state)
 {
     char longest[256];
+    sample s[NSAMPLES];
+    size_t n = build_samples(s), tried = 0;
 
     (void)state;
     memset(longest, 'x', sizeof longest);
-    for (size_t i = 0; i < sizeof bad_text / sizeof bad_text[0]; i++)
-        assert_int_equal(string_status(PROTO_ERROR, bad_text[i], bad_text_len(i)), PROTO_ERR_BAD_STRING);
-    for (size_t i = 0; i < sizeof good_text / sizeof good_text[0]; i++)
-        assert_int_equal(string_status(PROTO_ERROR, good_text[i], strlen(good_text[i])), PROTO_OK);
-    assert_int_equal(string_status(PROTO_ERROR, "", 0), PROTO_OK);
-    assert_int_equal(string_status(PROTO_ERROR, longest, PROTO_MESSAGE_MAX), PROTO_OK);
-    assert_int_equal(string_status(PROTO_ERROR, longest, PROTO_MESSAGE_MAX + 1), PROTO_ERR_BAD_STRING);
-    assert_int_equal(string_status(PROTO_ERROR, longest, 255), PROTO_ERR_BAD_STRING);
+    for (size_t i = 0; i < n; i++) {
+        for (size_t k = 0; k < s[i].nstrs; k++) {
+            if (s[i].strs[k].max != PROTO_MESSAGE_MAX)
+                continue;
+            for (size_t b = 0; b < sizeof bad_text / sizeof bad_text[0]; b++)
+                assert_int_equal(splice_status(&s[i], k, bad_text[b], bad_text_len(b)), PROTO_ERR_BAD_STRING);
+            for (size_t g = 0; g < sizeof good_text / sizeof good_text[0]; g++)
+                assert_int_equal(splice_status(&s[i], k, good_text[g], strlen(good_text[g])), PROTO_OK);
+            assert_int_equal(splice_status(&s[i], k, "", 0), PROTO_OK);
+            assert_int_equal(splice_status(&s[i], k, longest, PROTO_MESSAGE_MAX), PROTO_OK);
+            assert_int_equal(splice_status(&s[i], k, longest, PROTO_MESSAGE_MAX + 1), PROTO_ERR_BAD_STRING);
+            assert_int_equal(splice_status(&s[i], k, longest, 255), PROTO_ERR_BAD_STRING);
+            tried++;
+        }
+    }
+    assert_int_equal(tried, 2);
+}
+
+/* A format hint is a file extension: 0..PROTO_FORMAT_MAX bytes of a-z and
+ * 0-9, nothing else (no upper case, no dot, no non-ASCII). */
+static void test_format_rules(void **state)
+{
+    static const char *const good[] = {"", "obj", "glb", "gltf", "stl", "ply", "3ds", "x3d",
+                                       "0", "z", "12345678", "abcdefgh"};
+    static const char *const bad[] = {"OBJ", "Obj", "objZ", ".obj", "o.j", "obj.", "-", "_", " ",
+                                      "a b", "/", "@", "[", "`", "{", ":", "\xc3\xa9", "\xef\xbc\xa1",
+                                      "\x7f", "a\n", "\xff", "123456789", "abcdefghi"};
+    sample s[NSAMPLES];
+    const sample *ub = NULL;
+    size_t n = build_samples(s);
+
+    (void)state;
+    for (size_t i = 0; i < n; i++) {
+        if (s[i].type == PROTO_OBJECT_UPLOAD_BEGIN)
+            ub = &s[i];
+    }
+    assert_non_null(ub);
+    assert_int_equal(ub->strs[1].max, PROTO_FORMAT_MAX);
+    for (size_t g = 0; g < sizeof good / sizeof good[0]; g++)
+        assert_int_equal(splice_status(ub, 1, good[g], strlen(good[g])), PROTO_OK);
+    for (size_t b = 0; b < sizeof bad / sizeof bad[0]; b++) {
+        if (splice_status(ub, 1, bad[b], strlen(bad[b])) != PROTO_ERR_BAD_STRING)
+            fail_msg("format \"%s\" accepted", bad[b]);
+    }
+    assert_int_equal(splice_status(ub, 1, "\0", 1), PROTO_ERR_BAD_STRING);
 }
 
 /* A string length that runs past the end of the frame is a bad string, for
@@ -1218,7 +1923,7 @@ static void test_hello_magic(void **state)
 
 static void test_welcome_values(void **state)
 {
-    sample s[13];
+    sample s[NSAMPLES];
     uint8_t p[64];
 
     (void)state;
@@ -1333,6 +2038,180 @@ static void test_error_code(void **state)
     }
 }
 
+/* The sample whose type is t. */
+static const sample *sample_of(const sample *s, size_t n, uint16_t t)
+{
+    for (size_t i = 0; i < n; i++) {
+        if (s[i].type == t)
+            return &s[i];
+    }
+    fail_msg("no sample of type %u", t);
+    return NULL;
+}
+
+/* total_size must be at least 1; up_axis is 0 (y) or 1 (z). */
+static void test_upload_begin_values(void **state)
+{
+    sample s[NSAMPLES];
+    size_t n = build_samples(s);
+    const sample *ub = sample_of(s, n, PROTO_OBJECT_UPLOAD_BEGIN);
+    uint8_t p[SAMPLE_MAX];
+    const size_t up_at = 10 + ub->strs[0].len + ub->strs[1].len;
+
+    (void)state;
+    memcpy(p, ub->payload, ub->len);
+    wr_u32(p + 4, 0);
+    assert_int_equal(decode_raw(ub->type, p, ub->len), PROTO_ERR_BAD_VALUE);
+    wr_u32(p + 4, 1);
+    assert_int_equal(decode_raw(ub->type, p, ub->len), PROTO_OK);
+    wr_u32(p + 4, UINT32_MAX); /* the server's cap, not the codec's */
+    assert_int_equal(decode_raw(ub->type, p, ub->len), PROTO_OK);
+
+    assert_int_equal(up_at, 18);
+    for (unsigned a = 0; a <= 255; a++) {
+        p[up_at] = (uint8_t)a;
+        assert_int_equal(decode_raw(ub->type, p, ub->len), a <= PROTO_UP_Z ? PROTO_OK : PROTO_ERR_BAD_VALUE);
+    }
+}
+
+/* A chunk's data is everything after its 8-byte head: none is short, 1 to
+ * PROTO_CHUNK_MAX bytes decode, more is a bad value (not trailing bytes). */
+static void test_upload_chunk_sizes(void **state)
+{
+    static uint8_t p[PROTO_MAX_LEN - 2];
+    const size_t sizes[] = {9, 10, 100, 8 + PROTO_CHUNK_MAX - 1, 8 + PROTO_CHUNK_MAX};
+    const size_t over[] = {8 + PROTO_CHUNK_MAX + 1, 8 + PROTO_CHUNK_MAX + 17, 2 * PROTO_CHUNK_MAX,
+                           PROTO_MAX_LEN - 2};
+    proto_msg m;
+
+    (void)state;
+    memset(p, 0xab, sizeof p);
+    wr_u32(p, 77);
+    wr_u32(p + 4, 0xffffffffu);
+    for (size_t k = 0; k <= 8; k++)
+        assert_int_equal(decode_raw(PROTO_OBJECT_UPLOAD_CHUNK, p, k), PROTO_ERR_SHORT);
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++) {
+        assert_int_equal(decode_raw_msg(PROTO_OBJECT_UPLOAD_CHUNK, p, sizes[i], &m), PROTO_OK);
+        assert_int_equal(m.u.upload_chunk.upload_id, 77);
+        assert_int_equal(m.u.upload_chunk.offset, 0xffffffffu);
+        assert_int_equal(m.u.upload_chunk.len, sizes[i] - 8);
+    }
+    for (size_t i = 0; i < sizeof over / sizeof over[0]; i++)
+        assert_int_equal(decode_raw(PROTO_OBJECT_UPLOAD_CHUNK, p, over[i]), PROTO_ERR_BAD_VALUE);
+    /* An id 0 comes first, whatever the size. */
+    wr_u32(p, 0);
+    for (size_t k = 4; k <= 9; k++)
+        assert_int_equal(decode_raw(PROTO_OBJECT_UPLOAD_CHUNK, p, k), PROTO_ERR_BAD_VALUE);
+    assert_int_equal(decode_raw(PROTO_OBJECT_UPLOAD_CHUNK, p, 8 + PROTO_CHUNK_MAX + 1), PROTO_ERR_BAD_VALUE);
+}
+
+/* Builds an object_info payload at p with count announced, nboxes boxes
+ * present (min 0,0,0, max 1,1,1) and returns its length. */
+static size_t info_payload(uint8_t *p, uint16_t count, size_t nboxes)
+{
+    size_t at = 0;
+
+    wr_u32(p, 1);
+    wr_u32(p + 4, 0);
+    p[8] = 1;
+    p[9] = 'a';
+    p[10] = 1;
+    p[11] = 'b';
+    at = 12;
+    for (int i = 0; i < 4; i++, at += 4)
+        wr_f32(p + at, 0.0f);
+    wr_f32(p + at, 1.0f); /* scale */
+    at += 4;
+    wr_u32(p + at, 1);
+    wr_u32(p + at + 4, 12);
+    wr_u16(p + at + 8, count);
+    at += 10;
+    assert_int_equal(at, 42);
+    for (size_t i = 0; i < nboxes; i++) {
+        for (int k = 0; k < 3; k++, at += 4)
+            wr_f32(p + at, 0.0f);
+        for (int k = 0; k < 3; k++, at += 4)
+            wr_f32(p + at, 1.0f);
+    }
+    return at;
+}
+
+/* The payload holds exactly box_count boxes; box_count is at most
+ * PROTO_OBJECT_BOXES_MAX; in each box max >= min on every axis. */
+static void test_object_info_boxes(void **state)
+{
+    static uint8_t p[PROTO_MAX_LEN];
+    const size_t e = PROTO_BOX_ENTRY_SIZE;
+    size_t len;
+
+    (void)state;
+    len = info_payload(p, 0, 0);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len + e), PROTO_ERR_TRAILING);
+    len = info_payload(p, 2, 3);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len - 2 * e), PROTO_ERR_SHORT);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len - e - 1), PROTO_ERR_SHORT);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len - e), PROTO_OK);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_TRAILING);
+
+    len = info_payload(p, PROTO_OBJECT_BOXES_MAX, PROTO_OBJECT_BOXES_MAX);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
+    /* Over the cap even with every box there, or with none. */
+    len = info_payload(p, PROTO_OBJECT_BOXES_MAX + 1, PROTO_OBJECT_BOXES_MAX + 1);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, 42), PROTO_ERR_BAD_VALUE);
+    len = info_payload(p, 0xffff, 0);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+
+    /* min > max on each axis of box 1 of 2; equal is a flat box. */
+    for (size_t k = 0; k < 3; k++) {
+        len = info_payload(p, 2, 2);
+        wr_f32(p + 42 + e + 4 * k, 1.5f);
+        assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+        wr_f32(p + 42 + e + 4 * k, 1.0f);
+        assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
+        wr_f32(p + 42 + e + 12 + 4 * k, -1.0f);
+        assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+        wr_f32(p + 42 + e + 12 + 4 * k, -0.0f); /* min 1.0 */
+        assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+    }
+    /* -0.0 and 0.0 are equal: either may be min or max. */
+    len = info_payload(p, 1, 1);
+    wr_f32(p + 42, 0.0f);
+    wr_f32(p + 42 + 12, -0.0f);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
+    wr_f32(p + 42, -0.0f);
+    wr_f32(p + 42 + 12, 0.0f);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
+}
+
+static void test_collision_inside(void **state)
+{
+    sample s[NSAMPLES];
+    size_t n = build_samples(s);
+    const sample *co = sample_of(s, n, PROTO_COLLISION);
+    uint8_t p[SAMPLE_MAX];
+
+    (void)state;
+    memcpy(p, co->payload, co->len);
+    for (unsigned v = 0; v <= 255; v++) {
+        p[10] = (uint8_t)v;
+        assert_int_equal(decode_raw(co->type, p, co->len), v <= 1 ? PROTO_OK : PROTO_ERR_BAD_VALUE);
+    }
+}
+
+/* As in error: codes below 16 never travel, later codes are accepted. */
+static void test_object_rejected_code(void **state)
+{
+    uint8_t p[7] = {5, 0, 0, 0, 0, 0, 0};
+
+    (void)state;
+    for (unsigned c = 0; c <= 0xffff; c++) {
+        wr_u16(p + 4, (uint16_t)c);
+        assert_int_equal(decode_raw(PROTO_OBJECT_REJECTED, p, 7), c < 16 ? PROTO_ERR_BAD_VALUE : PROTO_OK);
+    }
+}
+
 /* With several problems the first in field order wins. */
 static void test_first_failure_wins(void **state)
 {
@@ -1378,13 +2257,105 @@ static void test_first_failure_wins(void **state)
     assert_int_equal(decode_raw(PROTO_SNAPSHOT, p, 26), PROTO_ERR_NOT_FINITE);
 }
 
+/* The same rule for the object messages. */
+static void test_first_failure_wins_objects(void **state)
+{
+    static uint8_t p[PROTO_MAX_LEN];
+    sample s[NSAMPLES];
+    size_t n = build_samples(s), len;
+    const sample *ub = sample_of(s, n, PROTO_OBJECT_UPLOAD_BEGIN);
+    const sample *pl = sample_of(s, n, PROTO_OBJECT_PLACE);
+    const sample *co = sample_of(s, n, PROTO_COLLISION);
+
+    (void)state;
+    /* upload_begin: total_size 0, then an empty name */
+    memcpy(p, ub->payload, ub->len);
+    wr_u32(p + 4, 0);
+    p[8] = 0;
+    assert_int_equal(decode_raw(ub->type, p, ub->len), PROTO_ERR_BAD_VALUE);
+    /* upload_begin: an upper-case format, then up_axis 7 and a NaN scale */
+    memcpy(p, ub->payload, ub->len);
+    p[15] = 'O';
+    p[18] = 7;
+    wr_u32(p + 19, 0x7fc00000u);
+    assert_int_equal(decode_raw(ub->type, p, ub->len), PROTO_ERR_BAD_STRING);
+    /* ...up_axis 7 then the NaN */
+    p[15] = 'o';
+    assert_int_equal(decode_raw(ub->type, p, ub->len), PROTO_ERR_BAD_VALUE);
+    /* ...the NaN, then the payload ends early or runs on */
+    p[18] = 0;
+    assert_int_equal(decode_raw(ub->type, p, ub->len + 5), PROTO_ERR_NOT_FINITE);
+    /* upload_begin: a format past the end is a bad string, not short */
+    p[14] = 8;
+    assert_int_equal(decode_raw(ub->type, p, 17), PROTO_ERR_BAD_STRING);
+
+    /* place: NaN yaw, then scale 0; scale 0, then trailing bytes */
+    memcpy(p, pl->payload, pl->len);
+    wr_u32(p + 16, 0x7f800000u);
+    wr_f32(p + 20, 0.0f);
+    assert_int_equal(decode_raw(pl->type, p, pl->len), PROTO_ERR_NOT_FINITE);
+    wr_f32(p + 16, 1.0f);
+    assert_int_equal(decode_raw(pl->type, p, pl->len + 3), PROTO_ERR_BAD_VALUE);
+    /* place: id 0, then the payload ends */
+    wr_u32(p, 0);
+    assert_int_equal(decode_raw(pl->type, p, 6), PROTO_ERR_BAD_VALUE);
+
+    /* object_info: box 0 min.x > max.x, then a NaN at max.y: the x axis is
+     * wrong first */
+    len = info_payload(p, 2, 2);
+    wr_f32(p + 42, 5.0f);
+    wr_u32(p + 42 + 16, 0x7fc00000u);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+    /* ...but a NaN at max.x itself is found before the comparison */
+    wr_u32(p + 42 + 12, 0x7fc00000u);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_NOT_FINITE);
+    /* object_info: min > max in box 0, and box 1 cut short */
+    len = info_payload(p, 2, 2);
+    wr_f32(p + 42 + 4, 5.0f);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len - 10), PROTO_ERR_BAD_VALUE);
+    /* object_info: a count over the cap, and no boxes at all */
+    len = info_payload(p, 2000, 0);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+    /* object_info: an empty owner, then ecm_version 0 */
+    len = info_payload(p, 0, 0);
+    p[8] = 0;
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_STRING);
+    /* object_info: scale out of range, then ecm_version 0 */
+    len = info_payload(p, 0, 0);
+    wr_f32(p + 28, 2000.0f);
+    wr_u32(p + 32, 0);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+    wr_f32(p + 28, 1.0f);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
+
+    /* chunk: id 0 and no data */
+    wr_u32(p, 0);
+    wr_u32(p + 4, 0);
+    assert_int_equal(decode_raw(PROTO_OBJECT_UPLOAD_CHUNK, p, 8), PROTO_ERR_BAD_VALUE);
+
+    /* collision: inside 2, then a NaN point; a NaN normal, then trailing */
+    memcpy(p, co->payload, co->len);
+    p[10] = 2;
+    wr_u32(p + 11, 0x7fc00000u);
+    assert_int_equal(decode_raw(co->type, p, co->len), PROTO_ERR_BAD_VALUE);
+    memcpy(p, co->payload, co->len);
+    wr_u32(p + 31, 0xff800000u);
+    assert_int_equal(decode_raw(co->type, p, co->len + 1), PROTO_ERR_NOT_FINITE);
+
+    /* object_rejected: a bad code, then a message past the end */
+    wr_u32(p, 5);
+    wr_u16(p + 4, 15);
+    p[6] = 100;
+    assert_int_equal(decode_raw(PROTO_OBJECT_REJECTED, p, 9), PROTO_ERR_BAD_VALUE);
+}
+
 /* ---- names of things ---------------------------------------------------- */
 
 static void test_strerror_total(void **state)
 {
     const char *unknown = proto_strerror(-1);
     const int known[] = {PROTO_OK, PROTO_INCOMPLETE, 16, 17, 18, 19, 20, 21, 22, 23, 24,
-                         25, 26, 27, 28, 29, 30, 32, 34};
+                         25, 26, 27, 28, 29, 30, 32, 34, 35, 36, 37, 38};
 
     (void)state;
     for (int s = -2000; s <= 2000; s++) {
@@ -1397,7 +2368,7 @@ static void test_strerror_total(void **state)
     assert_ptr_equal(proto_strerror(15), unknown);
     assert_ptr_equal(proto_strerror(31), unknown); /* reserved */
     assert_ptr_equal(proto_strerror(33), unknown);
-    assert_ptr_equal(proto_strerror(35), unknown);
+    assert_ptr_equal(proto_strerror(39), unknown);
     for (size_t i = 0; i < sizeof known / sizeof known[0]; i++) {
         assert_true(proto_strerror(known[i]) != unknown);
         for (size_t j = 0; j < i; j++)
@@ -1409,17 +2380,33 @@ static void test_type_names(void **state)
 {
     static const char *want[] = {NULL, "hello", "welcome", "join", "join_ok", "move", "snapshot",
                                  "avatar_joined", "avatar_left", "error", "ping", "pong", "bye"};
+    static const struct {
+        uint16_t type;
+        const char *name;
+    } objects[] = {
+        {PROTO_OBJECT_UPLOAD_BEGIN, "object_upload_begin"},
+        {PROTO_OBJECT_UPLOAD_CHUNK, "object_upload_chunk"},
+        {PROTO_OBJECT_UPLOAD_END, "object_upload_end"},
+        {PROTO_OBJECT_PLACE, "object_place"},
+        {PROTO_OBJECT_MOVE, "object_move"}, /* reserved, but named */
+        {PROTO_OBJECT_REMOVE, "object_remove"},
+        {PROTO_OBJECT_INFO, "object_info"},
+        {PROTO_OBJECT_REMOVED, "object_removed"},
+        {PROTO_OBJECT_REJECTED, "object_rejected"},
+        {PROTO_COLLISION, "collision"},
+        {PROTO_ECM_UPDATE, "ecm_update"},
+        {PROTO_ADMIN_REQUEST, "admin_request"},
+        {PROTO_ADMIN_REPLY, "admin_reply"},
+    };
+    const uint16_t unknown[] = {0, 13, 31, 41, 47, 50, 63, 66, 79, 80, 0xffff};
+
     (void)state;
     for (uint16_t t = PROTO_HELLO; t <= PROTO_BYE; t++)
         assert_string_equal(proto_type_name(t), want[t]);
-    assert_string_equal(proto_type_name(0), "unknown");
-    assert_string_equal(proto_type_name(13), "unknown");
-    assert_string_equal(proto_type_name(40), "unknown");
-    assert_string_equal(proto_type_name(0xffff), "unknown");
-    assert_string_equal(proto_type_name(PROTO_OBJECT_UPLOAD_BEGIN), "object_upload_begin");
-    assert_string_equal(proto_type_name(PROTO_COLLISION), "collision");
-    assert_string_equal(proto_type_name(PROTO_ECM_UPDATE), "ecm_update");
-    assert_string_equal(proto_type_name(PROTO_ADMIN_REPLY), "admin_reply");
+    for (size_t i = 0; i < sizeof objects / sizeof objects[0]; i++)
+        assert_string_equal(proto_type_name(objects[i].type), objects[i].name);
+    for (size_t i = 0; i < sizeof unknown / sizeof unknown[0]; i++)
+        assert_string_equal(proto_type_name(unknown[i]), "unknown");
     for (uint32_t t = 0; t <= 0xffff; t++)
         assert_non_null(proto_type_name((uint16_t)t));
 }
@@ -1441,7 +2428,18 @@ int main(void)
         cmocka_unit_test(test_error_roundtrip),
         cmocka_unit_test(test_ping_pong_roundtrip),
         cmocka_unit_test(test_bye_roundtrip),
+        cmocka_unit_test(test_upload_begin_roundtrip),
+        cmocka_unit_test(test_upload_chunk_roundtrip),
+        cmocka_unit_test(test_upload_end_roundtrip),
+        cmocka_unit_test(test_object_place_roundtrip),
+        cmocka_unit_test(test_object_remove_roundtrip),
+        cmocka_unit_test(test_object_info_no_boxes),
+        cmocka_unit_test(test_object_info_one_box),
+        cmocka_unit_test(test_object_info_max_boxes),
+        cmocka_unit_test(test_object_rejected_roundtrip),
+        cmocka_unit_test(test_collision_roundtrip),
         cmocka_unit_test(test_max_sizes),
+        cmocka_unit_test(test_object_string_truncation),
         cmocka_unit_test(test_name_truncation),
         cmocka_unit_test(test_error_message_cleaning),
         cmocka_unit_test(test_empty_name_encodes),
@@ -1451,6 +2449,9 @@ int main(void)
         cmocka_unit_test(test_writer_overflow_first_frame),
         cmocka_unit_test(test_writer_overflow_sticky),
         cmocka_unit_test(test_writer_null_buffer),
+        cmocka_unit_test(test_writer_chunk_over_max),
+        cmocka_unit_test(test_writer_info_over_max),
+        cmocka_unit_test(test_bad_objects_encode),
         cmocka_unit_test(test_snapshot_begin_no_room),
         cmocka_unit_test(test_snapshot_add_no_room),
         cmocka_unit_test(test_snapshot_after_frames),
@@ -1464,8 +2465,12 @@ int main(void)
         cmocka_unit_test(test_trailing_every_type),
         cmocka_unit_test(test_not_finite_every_float),
         cmocka_unit_test(test_box_range),
+        cmocka_unit_test(test_scale_range),
+        cmocka_unit_test(test_zero_ids),
+        cmocka_unit_test(test_zero_where_allowed),
         cmocka_unit_test(test_name_rules),
         cmocka_unit_test(test_message_rules),
+        cmocka_unit_test(test_format_rules),
         cmocka_unit_test(test_string_past_end),
         cmocka_unit_test(test_hello_magic),
         cmocka_unit_test(test_welcome_values),
@@ -1474,7 +2479,13 @@ int main(void)
         cmocka_unit_test(test_avatar_left_reason),
         cmocka_unit_test(test_bye_reason),
         cmocka_unit_test(test_error_code),
+        cmocka_unit_test(test_upload_begin_values),
+        cmocka_unit_test(test_upload_chunk_sizes),
+        cmocka_unit_test(test_object_info_boxes),
+        cmocka_unit_test(test_collision_inside),
+        cmocka_unit_test(test_object_rejected_code),
         cmocka_unit_test(test_first_failure_wins),
+        cmocka_unit_test(test_first_failure_wins_objects),
         cmocka_unit_test(test_strerror_total),
         cmocka_unit_test(test_type_names),
     };
