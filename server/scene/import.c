@@ -1,0 +1,1616 @@
+/*
+ * import.c: model files to triangles, through Assimp's C API.
+ *
+ * What Assimp 5.2.5 (Debian libassimp5) does with hostile input, found
+ * under ASan, valgrind and fuzzing, and what this file does about it:
+ *
+ * - It is built with assertions on (ASSIMP_BUILD_DEBUG): a zero-length
+ *   buffer aborts the process. We refuse empty input first.
+ * - Importing "from memory" still opens files on the local disk: an OBJ's
+ *   `mtllib /etc/passwd`, a glTF buffer URI. A buffer URI turns the named
+ *   file's bytes into vertices, which the server would keep and show; a
+ *   FIFO would block. We hand Assimp our own aiFileIO that serves the
+ *   upload and nothing else, so missing .mtl files and textures are simply
+ *   absent.
+ * - Any of its 48 importers can be reached: with no usable extension it
+ *   asks each whether it wants the file, and for an extension claimed by
+ *   two (glb) it asks everyone when both decline. Some crash or hang on
+ *   small files (its own test models: an OpenGEX file segfaults, an OFF
+ *   and an SMD file hang), COLLADA expands a 3 KB file of shared
+ *   instance_node references into 14 GB, and an extensionless buffer is as
+ *   likely taken for OBJ as for what it is (binary STL, GLB). So we
+ *   recognise the four formats we accept ourselves, always name one, and
+ *   make sure its reader takes the file.
+ * - Its readers leak their mesh (1.3-2.4 KB) whenever they throw on a
+ *   malformed file: a cut ASCII STL facet, an OBJ face naming a missing
+ *   vertex, a PLY value that is not a number. A client could leak server
+ *   memory at will, so the pre-checks refuse what makes them throw.
+ * - PLY: the reader loops over every element the header declares even
+ *   past the end of the data: a 200-byte ASCII file declaring 5*10^8
+ *   vertices took 56 s and 5.9 GB, one declaring 5*10^8 faces over 16 GB,
+ *   a face list of 10^6 indices hung (>60 s). We walk the body first.
+ * - GLB: the reader builds one node per path through the node graph (a
+ *   1 KB file of nodes listing the next one twice exhausted 24 GB),
+ *   recurses per node level (a 20,000-deep chain overflowed the stack) and
+ *   per JSON level (10^6 overflowed it), and copies an accessor once per
+ *   primitive using it (3.6 MB took 17.6 GB). We parse the JSON first.
+ * - OBJ and ASCII STL: a mesh and a node per named part, names looked up
+ *   linearly: 200,000 `usemtl` lines took 54 s and 7 GB. We count them.
+ * - Triangulation is quadratic in polygon size: we bound the sum of squares
+ *   before triangulating (IMPORT_MAX_POLYGON_WORK).
+ * - Binary STL whose triangle count disagrees with its size, GLB accessors
+ *   beyond their buffer, node cycles: refused by Assimp itself, cleanly.
+ * - Exceptions (std::bad_alloc included) are caught inside the C API and
+ *   become a NULL scene. Its logger is a null logger unless one is
+ *   attached; we attach none, so nothing reaches stderr.
+ * - Each aiImportFile* call makes its own Importer, but the last error is a
+ *   global std::string written inside the call: imports are serialised.
+ *
+ * These guards answer what was found, not everything Assimp might do:
+ * running imports in a separate process with memory and time limits would
+ * contain the rest.
+ */
+#include "import.h"
+
+#include <errno.h>
+#include <float.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <assimp/cfileio.h>
+#include <assimp/cimport.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include "alloc.h"
+
+_Static_assert(IMPORT_MAX_BYTES > 0 && IMPORT_MAX_BYTES <= UINT_MAX,
+               "Assimp takes the length as unsigned int");
+_Static_assert(IMPORT_MAX_TRIANGLES >= 1, "a model has at least one triangle");
+_Static_assert(IMPORT_MAX_POLYGON_WORK >= 16, "quads must always pass");
+_Static_assert(IMPORT_MAX_NODE_DEPTH >= 8 && IMPORT_MAX_NODE_DEPTH <= 4096,
+               "deep enough for real files, shallow enough for a thread's stack");
+_Static_assert(IMPORT_MAX_JSON_DEPTH >= 16 && IMPORT_MAX_JSON_DEPTH <= 1024,
+               "deep enough for glTF, shallow enough for rapidjson's recursion");
+_Static_assert(IMPORT_MAX_JSON_TOKENS >= 1024 && IMPORT_MAX_JSON_TOKENS <= UINT32_MAX / 2,
+               "room for real documents; token indices are 32-bit");
+_Static_assert(IMPORT_MAX_GLB_NODES >= 1, "a scene has a node");
+_Static_assert(IMPORT_GLB_ELEMENTS_PER_BYTE >= 1 && IMPORT_MAX_GLB_ELEMENTS >= 3,
+               "an unshared triangle must pass");
+_Static_assert(IMPORT_MAX_PARTS >= 1, "a file has a part");
+_Static_assert(IMPORT_MAX_PLY_PROPERTIES >= 16 && IMPORT_MAX_PLY_PROPERTIES <= 4096,
+               "a fixed table on the stack");
+
+/* Files Assimp may have open at once through our aiFileIO. The existence
+ * check, the size query and the read each open and close the upload, one
+ * at a time in every format here; the rest is headroom. */
+#define OPEN_MAX 4
+
+static pthread_mutex_t assimp_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* Formats a message into err and returns rc. */
+__attribute__((format(printf, 4, 5))) static int fail(char *err, size_t errlen, int rc,
+                                                      const char *fmt, ...)
+{
+    va_list ap;
+
+    if (errlen) {
+        va_start(ap, fmt);
+        vsnprintf(err, errlen, fmt, ap);
+        va_end(ap);
+    }
+    return rc;
+}
+
+/* ---- the upload as Assimp's only file ----------------------------------- */
+
+typedef struct memfile {
+    struct aiFile f; /* first: Assimp hands this back */
+    const char *data;
+    size_t len, pos;
+    int used;
+} memfile;
+
+typedef struct memfs {
+    struct aiFileIO io; /* first, likewise */
+    const char *name;   /* the one path that opens */
+    const char *data;
+    size_t len;
+    memfile files[OPEN_MAX];
+} memfs;
+
+static size_t mem_read(struct aiFile *f, char *buf, size_t size, size_t count)
+{
+    memfile *m = (memfile *)(void *)f;
+    size_t n;
+
+    if (size == 0 || count == 0)
+        return 0;
+    n = (m->len - m->pos) / size;
+    if (n > count)
+        n = count;
+    memcpy(buf, m->data + m->pos, n * size);
+    m->pos += n * size;
+    return n;
+}
+
+static size_t mem_write(struct aiFile *f, const char *buf, size_t size, size_t count)
+{
+    (void)f, (void)buf, (void)size, (void)count;
+    return 0;
+}
+
+static size_t mem_tell(struct aiFile *f) { return ((memfile *)(void *)f)->pos; }
+
+static size_t mem_size(struct aiFile *f) { return ((memfile *)(void *)f)->len; }
+
+static void mem_flush(struct aiFile *f) { (void)f; }
+
+/* Seeks like Assimp's own memory stream: from the end, offset counts back. */
+static enum aiReturn mem_seek(struct aiFile *f, size_t off, enum aiOrigin origin)
+{
+    memfile *m = (memfile *)(void *)f;
+    size_t base = origin == aiOrigin_SET ? 0 : origin == aiOrigin_CUR ? m->pos : m->len;
+
+    if (origin == aiOrigin_END) {
+        if (off > m->len)
+            return aiReturn_FAILURE;
+        m->pos = m->len - off;
+        return aiReturn_SUCCESS;
+    }
+    if (off > m->len - base)
+        return aiReturn_FAILURE;
+    m->pos = base + off;
+    return aiReturn_SUCCESS;
+}
+
+/* Opens the upload for reading; every other path, and any write, fails as
+ * if the file did not exist (how Assimp treats a missing .mtl or texture). */
+static struct aiFile *mem_open(struct aiFileIO *io, const char *path, const char *mode)
+{
+    memfs *fs = (memfs *)(void *)io;
+
+    if (strcmp(path, fs->name) != 0 || strpbrk(mode, "wa+"))
+        return NULL;
+    for (int i = 0; i < OPEN_MAX; i++) {
+        memfile *m = &fs->files[i];
+        if (m->used)
+            continue;
+        memset(m, 0, sizeof *m);
+        m->f.ReadProc = mem_read;
+        m->f.WriteProc = mem_write;
+        m->f.TellProc = mem_tell;
+        m->f.FileSizeProc = mem_size;
+        m->f.SeekProc = mem_seek;
+        m->f.FlushProc = mem_flush;
+        m->data = fs->data;
+        m->len = fs->len;
+        m->used = 1;
+        return &m->f;
+    }
+    return NULL;
+}
+
+static void mem_close(struct aiFileIO *io, struct aiFile *f)
+{
+    (void)io;
+    ((memfile *)(void *)f)->used = 0;
+}
+
+/* ---- formats and their pre-checks --------------------------------------- */
+
+typedef int (*precheck_fn)(const unsigned char *p, size_t n, char *err, size_t errlen);
+
+typedef struct format {
+    const char *ext;   /* ours and Assimp's name for it */
+    const char *name;  /* for messages */
+    precheck_fn check; /* refuses what Assimp would mishandle */
+} format;
+
+static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen);
+static int check_stl(const unsigned char *p, size_t n, char *err, size_t errlen);
+static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen);
+static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen);
+
+enum { FMT_OBJ, FMT_STL, FMT_PLY, FMT_GLB, FMT_COUNT };
+
+static const format formats[FMT_COUNT] = {
+    [FMT_OBJ] = {"obj", "OBJ", check_obj},
+    [FMT_STL] = {"stl", "STL", check_stl},
+    [FMT_PLY] = {"ply", "PLY", check_ply},
+    [FMT_GLB] = {"glb", "GLB", check_glb},
+};
+
+const char *import_formats(void) { return "obj stl ply glb"; }
+
+static int is_space(unsigned char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\v';
+}
+
+static unsigned char lower(unsigned char c)
+{
+    return c >= 'A' && c <= 'Z' ? (unsigned char)(c + 32) : c;
+}
+
+/* True if p[0..n) starts with the word w, case-insensitively. */
+static int starts_with(const unsigned char *p, size_t n, const char *w)
+{
+    size_t k = strlen(w);
+
+    if (n < k)
+        return 0;
+    for (size_t i = 0; i < k; i++)
+        if (lower(p[i]) != (unsigned char)w[i])
+            return 0;
+    return 1;
+}
+
+/* True if the word w[0..n) is s, case-insensitively. */
+static int word_is(const unsigned char *w, size_t n, const char *s)
+{
+    return strlen(s) == n && starts_with(w, n, s);
+}
+
+static uint32_t get_u32le(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+/* A binary STL is an 80-byte header, a triangle count and 50 bytes per
+ * triangle, nothing more (Assimp's test too, checked before "solid"
+ * because binary headers often start with that word). */
+static int is_binary_stl(const unsigned char *p, size_t n)
+{
+    return n >= 84 && (n - 84) % 50 == 0 && (n - 84) / 50 == get_u32le(p + 80);
+}
+
+/* OBJ has no signature: the first line that is neither blank nor a
+ * comment must be one of its statements. */
+static int looks_like_obj(const unsigned char *p, size_t n)
+{
+    static const char *const words[] = {"v", "vt", "vn", "vp", "f",      "l",     "p",
+                                        "o", "g",  "s",  "mg", "mtllib", "usemtl"};
+    size_t i = 0, w;
+
+    for (;;) {
+        while (i < n && is_space(p[i]))
+            i++;
+        if (i == n)
+            return 0;
+        if (p[i] != '#')
+            break;
+        while (i < n && p[i] != '\n')
+            i++;
+    }
+    for (w = i; w < n && !is_space(p[w]); w++)
+        ;
+    if (w == n || (p[w] != ' ' && p[w] != '\t'))
+        return 0;
+    for (size_t k = 0; k < sizeof words / sizeof words[0]; k++)
+        if (strlen(words[k]) == w - i && memcmp(p + i, words[k], w - i) == 0)
+            return 1;
+    return 0;
+}
+
+/* The format the content shows, or -1. */
+static int sniff(const unsigned char *p, size_t n)
+{
+    size_t i = 0;
+
+    if (n >= 4 && memcmp(p, "glTF", 4) == 0)
+        return FMT_GLB;
+    if (starts_with(p, n, "ply") && n > 3 && (p[3] == '\n' || p[3] == '\r'))
+        return FMT_PLY;
+    if (is_binary_stl(p, n))
+        return FMT_STL;
+    while (i < n && is_space(p[i]))
+        i++;
+    if (starts_with(p + i, n - i, "solid") && (n - i == 5 || is_space(p[i + 5])))
+        return FMT_STL;
+    if (looks_like_obj(p, n))
+        return FMT_OBJ;
+    return -1;
+}
+
+/* ---- OBJ and ASCII STL pre-check --------------------------------------- */
+
+/* Reads the next whitespace-separated word of p[0..n) from *at. */
+static size_t next_word(const unsigned char *p, size_t n, size_t *at, const unsigned char **w)
+{
+    size_t s;
+
+    while (*at < n && is_space(p[*at]))
+        (*at)++;
+    s = *at;
+    while (*at < n && !is_space(p[*at]))
+        (*at)++;
+    *w = p + s;
+    return *at - s;
+}
+
+/* True if the word is exactly kw (Assimp's keywords are lower case). */
+static int kw_is(const unsigned char *w, size_t n, const char *kw)
+{
+    return strlen(kw) == n && memcmp(w, kw, n) == 0;
+}
+
+/* True if the word is all digits, at least one. */
+static int all_digits(const unsigned char *w, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (w[i] < '0' || w[i] > '9')
+            return 0;
+    return n > 0;
+}
+
+/* True if the whole word is a number Assimp's fast_atof reads without
+ * throwing and without leaving characters for the next read: decimal,
+ * with optional sign, fraction and exponent, or nan/inf (refused later
+ * as non-finite). */
+static int is_number(const unsigned char *w, size_t n)
+{
+    size_t i = n && (w[0] == '-' || w[0] == '+'), d = 0, dots = 0, e;
+
+    if (word_is(w + i, n - i, "nan") || word_is(w + i, n - i, "inf") ||
+        word_is(w + i, n - i, "infinity"))
+        return 1;
+    for (e = i; e < n && w[e] != 'e' && w[e] != 'E'; e++)
+        if (w[e] >= '0' && w[e] <= '9')
+            d++;
+        else if (w[e] == '.')
+            dots++;
+        else
+            return 0;
+    if (d == 0 || dots > 1)
+        return 0;
+    if (e == n)
+        return 1;
+    e++;
+    if (e < n && (w[e] == '-' || w[e] == '+'))
+        e++;
+    return all_digits(w + e, n - e);
+}
+
+/* An OBJ face, line or point vertex: v, v/t, v//n or v/t/n, integers of
+ * at most nine digits (Assimp reads them as int). Returns the position
+ * index through *v. */
+static int obj_vertex_ref(const unsigned char *w, size_t n, long long *v)
+{
+    size_t part = 0, s = 0;
+
+    for (size_t i = 0; i <= n; i++) {
+        size_t a;
+        if (i < n && w[i] != '/')
+            continue;
+        a = s + (s < i && w[s] == '-');
+        if ((i > s || part == 0) && (!all_digits(w + a, i - a) || i - a > 9))
+            return 0;
+        if (part == 0) {
+            *v = 0;
+            for (size_t k = a; k < i; k++)
+                *v = *v * 10 + (w[k] - '0');
+            if (a > s)
+                *v = -*v;
+        }
+        if (++part > 3)
+            return 0;
+        s = i + 1;
+    }
+    return 1;
+}
+
+/*
+ * OBJ: Assimp's reader leaks its mesh when a face names a vertex that does
+ * not exist, and throws on a malformed number (in a statement we check),
+ * so we check what it would choke on. Position indices count from 1, or
+ * back from the last position read when negative; 0 is refused. Also
+ * bounds the named parts (IMPORT_MAX_PARTS).
+ */
+static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
+{
+    unsigned long long positions = 0, line = 0, parts = 0;
+    long long highest = 0; /* the largest positive index used */
+
+    for (size_t at = 0; at < n; at++, line++) {
+        size_t eol = at, cur = at, wl, end;
+        const unsigned char *w, *x;
+        size_t xl;
+        while (eol < n && p[eol] != '\n')
+            eol++;
+        end = eol > at && p[eol - 1] == '\r' ? eol - 1 : eol;
+        if (end > at && p[end - 1] == '\\')
+            return fail(err, errlen, -EINVAL, "OBJ line %llu: line continuations are not supported",
+                        line + 1);
+        wl = next_word(p, eol, &cur, &w);
+        if (kw_is(w, wl, "v") || kw_is(w, wl, "vt") || kw_is(w, wl, "vn")) {
+            int k = 0;
+            while ((xl = next_word(p, eol, &cur, &x)) != 0) {
+                if (!is_number(x, xl))
+                    return fail(err, errlen, -EINVAL, "OBJ line %llu: malformed number", line + 1);
+                k++;
+            }
+            if (wl == 1 && k != 3 && k != 4 && k != 6)
+                return fail(err, errlen, -EINVAL, "OBJ line %llu: a position has 3, 4 or 6 numbers",
+                            line + 1);
+            positions += wl == 1;
+        } else if (kw_is(w, wl, "f") || kw_is(w, wl, "l") || kw_is(w, wl, "p")) {
+            while ((xl = next_word(p, eol, &cur, &x)) != 0) {
+                long long v = 0;
+                if (!obj_vertex_ref(x, xl, &v) || v == 0)
+                    return fail(err, errlen, -EINVAL, "OBJ line %llu: malformed vertex index",
+                                line + 1);
+                if (v < 0 && (unsigned long long)-v > positions)
+                    return fail(err, errlen, -EINVAL,
+                                "OBJ line %llu: vertex index %lld before the first vertex",
+                                line + 1, v);
+                if (v > highest)
+                    highest = v;
+            }
+        } else if (kw_is(w, wl, "o") || kw_is(w, wl, "g") || kw_is(w, wl, "usemtl")) {
+            parts++;
+        }
+        at = eol;
+    }
+    if ((unsigned long long)highest > positions)
+        return fail(err, errlen, -EINVAL, "OBJ vertex index %lld, but the file has %llu", highest,
+                    positions);
+    if (parts > IMPORT_MAX_PARTS)
+        return fail(err, errlen, -EINVAL,
+                    "%llu OBJ objects, groups and material switches, over the limit of %u", parts,
+                    (unsigned)IMPORT_MAX_PARTS);
+    return 0;
+}
+
+/*
+ * ASCII STL: Assimp's reader leaks its mesh and node (2.4 KB) whenever it
+ * throws, which any cut or malformed facet makes it do, so a client could
+ * leak server memory at will. We accept only what it reads without
+ * throwing: solids of whole facets, each a normal and three vertices of
+ * three numbers. Also bounds the solids (IMPORT_MAX_PARTS).
+ */
+static int check_stl(const unsigned char *p, size_t n, char *err, size_t errlen)
+{
+    static const char *const facet[] = {
+        "normal", "#", "#", "#", "outer",  "loop", "vertex", "#", "#",       "#",
+        "vertex", "#", "#", "#", "vertex", "#",    "#",      "#", "endloop", "endfacet"};
+    size_t at = 0, wl, solids = 0;
+    const unsigned char *w;
+
+    if (is_binary_stl(p, n))
+        return 0;
+    while ((wl = next_word(p, n, &at, &w)) != 0) {
+        if (!kw_is(w, wl, "solid"))
+            return fail(err, errlen, -EINVAL, "STL: 'solid' expected at byte %zu", at - wl);
+        while (at < n && p[at] != '\n') /* the solid's name */
+            at++;
+        for (;;) {
+            wl = next_word(p, n, &at, &w);
+            if (kw_is(w, wl, "endsolid"))
+                break;
+            if (!kw_is(w, wl, "facet"))
+                return fail(err, errlen, -EINVAL, "STL: facet or endsolid expected at byte %zu",
+                            at - wl);
+            for (size_t k = 0; k < sizeof facet / sizeof facet[0]; k++) {
+                wl = next_word(p, n, &at, &w);
+                if (facet[k][0] == '#' ? !is_number(w, wl) : !kw_is(w, wl, facet[k]))
+                    return fail(err, errlen, -EINVAL, "STL: malformed facet at byte %zu", at - wl);
+            }
+        }
+        while (at < n && p[at] != '\n') /* the name again */
+            at++;
+        if (++solids > IMPORT_MAX_PARTS)
+            return fail(err, errlen, -EINVAL, "more than %u STL solids",
+                        (unsigned)IMPORT_MAX_PARTS);
+    }
+    return 0;
+}
+
+/* ---- PLY pre-check ------------------------------------------------------ */
+
+typedef struct ply_prop {
+    uint8_t size;       /* bytes of the value (binary) */
+    uint8_t count_size; /* bytes of a list's length, 0 for a scalar */
+    uint8_t count_signed;
+} ply_prop;
+
+typedef struct ply_elem {
+    uint32_t count;
+    uint32_t first, nprops; /* its properties in the table */
+} ply_elem;
+
+typedef struct ply_header {
+    int ascii, big_endian;
+    uint32_t nelems, nprops;
+    ply_elem elems[IMPORT_MAX_PLY_PROPERTIES];
+    ply_prop props[IMPORT_MAX_PLY_PROPERTIES];
+} ply_header;
+
+enum { PLY_FLOAT, PLY_UNSIGNED, PLY_SIGNED };
+
+/* Size in bytes of a PLY type name, 0 if unknown; *kind says which. */
+static uint8_t ply_type(const unsigned char *w, size_t n, int *kind)
+{
+    static const struct {
+        const char *name;
+        uint8_t size, kind;
+    } types[] = {
+        {"char", 1, PLY_SIGNED},    {"uchar", 1, PLY_UNSIGNED},  {"int8", 1, PLY_SIGNED},
+        {"uint8", 1, PLY_UNSIGNED}, {"short", 2, PLY_SIGNED},    {"ushort", 2, PLY_UNSIGNED},
+        {"int16", 2, PLY_SIGNED},   {"uint16", 2, PLY_UNSIGNED}, {"int", 4, PLY_SIGNED},
+        {"uint", 4, PLY_UNSIGNED},  {"int32", 4, PLY_SIGNED},    {"uint32", 4, PLY_UNSIGNED},
+        {"float", 4, PLY_FLOAT},    {"float32", 4, PLY_FLOAT},   {"double", 8, PLY_FLOAT},
+        {"float64", 8, PLY_FLOAT}};
+
+    for (size_t i = 0; i < sizeof types / sizeof types[0]; i++)
+        if (strlen(types[i].name) == n && memcmp(w, types[i].name, n) == 0) {
+            *kind = types[i].kind;
+            return types[i].size;
+        }
+    return 0;
+}
+
+/* Splits the line p[0..n) into at most max words; returns how many. */
+static size_t split_words(const unsigned char *p, size_t n, const unsigned char **w, size_t *wl,
+                          size_t max)
+{
+    size_t k = 0, i = 0;
+
+    while (k < max) {
+        while (i < n && is_space(p[i]))
+            i++;
+        if (i == n)
+            break;
+        w[k] = p + i;
+        while (i < n && !is_space(p[i]))
+            i++;
+        wl[k] = (size_t)(p + i - w[k]);
+        k++;
+    }
+    return k;
+}
+
+/* Parses a whole decimal word into *v; 0 if it is anything else or over
+ * UINT32_MAX. */
+static int parse_u32(const unsigned char *w, size_t n, uint32_t *v)
+{
+    uint64_t x = 0;
+
+    if (n == 0 || n > 10)
+        return 0;
+    for (size_t i = 0; i < n; i++) {
+        if (w[i] < '0' || w[i] > '9')
+            return 0;
+        x = x * 10 + (uint64_t)(w[i] - '0');
+    }
+    if (x > UINT32_MAX)
+        return 0;
+    *v = (uint32_t)x;
+    return 1;
+}
+
+/* Reads the header into h; returns the offset of the body, or 0 with err
+ * set. Keywords match case-insensitively and unknown lines are skipped,
+ * like Assimp, so that no line it takes for an element escapes us. */
+static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, char *err,
+                               size_t errlen)
+{
+    size_t at = 0;
+    int have_format = 0;
+
+    memset(h, 0, sizeof *h);
+    while (at < n) {
+        const unsigned char *w[6];
+        size_t wl[6], k, eol = at;
+
+        while (eol < n && p[eol] != '\n')
+            eol++;
+        k = split_words(p + at, eol - at, w, wl, 6);
+        at = eol < n ? eol + 1 : n;
+        if (k == 0)
+            continue;
+        if (word_is(w[0], wl[0], "end_header")) {
+            if (!have_format)
+                return (size_t)fail(err, errlen, 0, "PLY header has no format line");
+            return at;
+        }
+        if (word_is(w[0], wl[0], "format") && k >= 2) {
+            have_format = 1;
+            h->ascii = word_is(w[1], wl[1], "ascii");
+            h->big_endian = word_is(w[1], wl[1], "binary_big_endian");
+            if (!h->ascii && !h->big_endian && !word_is(w[1], wl[1], "binary_little_endian"))
+                return (size_t)fail(err, errlen, 0, "PLY format is not ascii or binary");
+        } else if (word_is(w[0], wl[0], "element")) {
+            ply_elem *e;
+            if (h->nelems == IMPORT_MAX_PLY_PROPERTIES)
+                return (size_t)fail(err, errlen, 0, "PLY header declares too many elements");
+            e = &h->elems[h->nelems++];
+            if (k < 3 || !parse_u32(w[2], wl[2], &e->count))
+                return (size_t)fail(err, errlen, 0, "PLY element line without a count");
+            e->first = h->nprops;
+        } else if (word_is(w[0], wl[0], "property")) {
+            ply_prop *q;
+            int kind, count_kind;
+            if (h->nelems == 0)
+                return (size_t)fail(err, errlen, 0, "PLY property before any element");
+            if (h->nprops == IMPORT_MAX_PLY_PROPERTIES)
+                return (size_t)fail(err, errlen, 0, "PLY header declares over %d properties",
+                                    IMPORT_MAX_PLY_PROPERTIES);
+            q = &h->props[h->nprops++];
+            h->elems[h->nelems - 1].nprops++;
+            if (k >= 2 && word_is(w[1], wl[1], "list")) {
+                if (k < 4 || !(q->count_size = ply_type(w[2], wl[2], &count_kind)) ||
+                    count_kind == PLY_FLOAT || !(q->size = ply_type(w[3], wl[3], &kind)))
+                    return (size_t)fail(err, errlen, 0, "PLY list property of unknown type");
+                q->count_signed = count_kind == PLY_SIGNED;
+            } else if (k < 2 || !(q->size = ply_type(w[1], wl[1], &kind))) {
+                return (size_t)fail(err, errlen, 0, "PLY property of unknown type");
+            }
+        }
+    }
+    return (size_t)fail(err, errlen, 0, "PLY header has no end_header line");
+}
+
+/* Reads a list length of q->count_size bytes at p; -1 if negative. */
+static int64_t ply_get_count(const unsigned char *p, const ply_prop *q, int big_endian)
+{
+    uint64_t v = 0;
+    unsigned bits = 8u * q->count_size;
+
+    for (unsigned i = 0; i < q->count_size; i++)
+        v |= (uint64_t)p[big_endian ? q->count_size - 1 - i : i] << (8 * i);
+    if (q->count_signed && (v >> (bits - 1)))
+        return -1;
+    return (int64_t)v;
+}
+
+/* Checks one ASCII element instance, the line p[at..eol): its values,
+ * numbers, a list's length first, and nothing more (Assimp reads one line
+ * per instance and throws, leaking, on a missing value). */
+static int ply_ascii_line(const unsigned char *p, size_t at, size_t eol, const ply_header *h,
+                          const ply_elem *el)
+{
+    for (uint32_t k = el->first; k < el->first + el->nprops; k++) {
+        uint64_t want = 1;
+        for (uint64_t i = 0; i < want; i++) {
+            const unsigned char *w;
+            size_t wl = next_word(p, eol, &at, &w);
+            if (!is_number(w, wl))
+                return 0;
+            if (i == 0 && h->props[k].count_size) {
+                uint32_t len;
+                if (!parse_u32(w, wl, &len))
+                    return 0;
+                want += len;
+            }
+        }
+    }
+    {
+        const unsigned char *w;
+        return next_word(p, eol, &at, &w) == 0;
+    }
+}
+
+/*
+ * Walks the body: every element the header declares must be there, each
+ * list no longer than its data. Assimp then allocates and loops in
+ * proportion to the file, not to what the header claims. ASCII values
+ * must be numbers, one instance a line. Returns 0 or -EINVAL. Linear in
+ * the file: each step consumes at least one byte.
+ */
+static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
+{
+    ply_header h;
+    size_t at = ply_parse_header(p, n, &h, err, errlen), line = 0;
+
+    if (at == 0)
+        return -EINVAL;
+    for (uint32_t e = 0; e < h.nelems; e++) {
+        const ply_elem *el = &h.elems[e];
+        if (el->count > 0 && el->nprops == 0)
+            return fail(err, errlen, -EINVAL, "PLY element %u has no properties", e);
+        /* Every value takes at least a byte: refuse impossible counts
+         * before walking them. */
+        if ((uint64_t)el->count * el->nprops > n - at)
+            return fail(err, errlen, -EINVAL,
+                        "PLY header declares %u of element %u, more than the file holds", el->count,
+                        e);
+        for (uint32_t i = 0; i < el->count; i++) {
+            if (h.ascii) {
+                size_t eol = at;
+                while (eol < n && p[eol] != '\n')
+                    eol++;
+                line++;
+                if (at >= n)
+                    return fail(err, errlen, -EINVAL,
+                                "PLY data ends before the elements its header declares");
+                if (!ply_ascii_line(p, at, eol, &h, el))
+                    return fail(err, errlen, -EINVAL,
+                                "PLY data line %zu does not match its element %u", line, e);
+                at = eol < n ? eol + 1 : n;
+                continue;
+            }
+            for (uint32_t k = el->first; k < el->first + el->nprops; k++) {
+                const ply_prop *q = &h.props[k];
+                int64_t items = 1;
+                if (q->count_size) {
+                    if (n - at < q->count_size)
+                        return fail(err, errlen, -EINVAL,
+                                    "PLY data ends before the elements its header declares");
+                    items = ply_get_count(p + at, q, h.big_endian);
+                    at += q->count_size;
+                }
+                if (items < 0 || (uint64_t)items > (n - at) / q->size)
+                    return fail(err, errlen, -EINVAL,
+                                "PLY data ends before the elements its header declares");
+                at += (size_t)items * q->size;
+            }
+        }
+    }
+    return 0;
+}
+
+/* ---- GLB pre-check: the JSON chunk as tokens ---------------------------- */
+
+enum { J_OBJ, J_ARR, J_STR, J_PRIM };
+
+/* One JSON value. An object's members follow it as key and value tokens
+ * in turn, an array's elements as values. */
+typedef struct jtok {
+    uint32_t start, end; /* its bytes; a string's without the quotes */
+    uint32_t next;       /* the token after it and everything inside it */
+    uint32_t type;
+} jtok;
+
+typedef struct jdoc {
+    const unsigned char *s;
+    uint32_t len, i; /* text and cursor */
+    jtok *t;
+    uint32_t n, cap;
+    const char *why; /* the first refusal, sticky */
+    int nomem;
+} jdoc;
+
+static void jfail(jdoc *d, const char *why)
+{
+    if (!d->why)
+        d->why = why;
+}
+
+/* Appends a token; returns its index, or UINT32_MAX with d->why set. */
+static uint32_t jpush(jdoc *d, uint32_t type, uint32_t start)
+{
+    if (d->n == IMPORT_MAX_JSON_TOKENS) {
+        jfail(d, "too many JSON values");
+        return UINT32_MAX;
+    }
+    if (d->n == d->cap) {
+        uint32_t cap = d->cap ? d->cap * 2 : 256;
+        jtok *t;
+        if (cap > IMPORT_MAX_JSON_TOKENS)
+            cap = IMPORT_MAX_JSON_TOKENS;
+        t = cvre_realloc(d->t, cap * sizeof *t);
+        if (!t) {
+            d->nomem = 1;
+            jfail(d, "out of memory");
+            return UINT32_MAX;
+        }
+        d->t = t;
+        d->cap = cap;
+    }
+    d->t[d->n] = (jtok){start, start, 0, type};
+    return d->n++;
+}
+
+static void jws(jdoc *d)
+{
+    while (d->i < d->len &&
+           (d->s[d->i] == ' ' || d->s[d->i] == '\t' || d->s[d->i] == '\n' || d->s[d->i] == '\r'))
+        d->i++;
+}
+
+static int jis(jdoc *d, unsigned char c) { return d->i < d->len && d->s[d->i] == c; }
+
+static int hexval(unsigned c)
+{
+    if (c >= '0' && c <= '9')
+        return (int)(c - '0');
+    if ((c | 32u) >= 'a' && (c | 32u) <= 'f') /* only A-F and a-f */
+        return (int)((c | 32u) - 'a' + 10);
+    return -1;
+}
+
+/* Reads \uXXXX at s (after the backslash and u); -1 if malformed. */
+static long jhex4(const unsigned char *s, uint32_t left)
+{
+    long v = 0;
+
+    if (left < 4)
+        return -1;
+    for (int k = 0; k < 4; k++) {
+        int h = hexval(s[k]);
+        if (h < 0)
+            return -1;
+        v = v * 16 + h;
+    }
+    return v;
+}
+
+/* A string, its opening quote next: no control characters, only JSON's
+ * escapes, surrogates in pairs (rapidjson's rules). */
+static void jstring(jdoc *d)
+{
+    uint32_t tok = jpush(d, J_STR, d->i + 1);
+
+    if (tok == UINT32_MAX)
+        return;
+    for (d->i++;; d->i++) {
+        unsigned char c;
+        if (d->i >= d->len) {
+            jfail(d, "unterminated string");
+            return;
+        }
+        c = d->s[d->i];
+        if (c == '"')
+            break;
+        if (c < 0x20) {
+            jfail(d, "control character in string");
+            return;
+        }
+        if (c != '\\')
+            continue;
+        if (++d->i >= d->len) {
+            jfail(d, "unterminated string");
+            return;
+        }
+        c = d->s[d->i];
+        if (c == 'u') {
+            long u = jhex4(d->s + d->i + 1, d->len - d->i - 1);
+            d->i += 4;
+            if (u >= 0xD800 && u <= 0xDBFF) {
+                long lo = d->i + 2 < d->len && d->s[d->i + 1] == '\\' && d->s[d->i + 2] == 'u'
+                              ? jhex4(d->s + d->i + 3, d->len - d->i - 3)
+                              : -1;
+                if (lo < 0xDC00 || lo > 0xDFFF) {
+                    jfail(d, "unpaired surrogate");
+                    return;
+                }
+                d->i += 6;
+            } else if (u < 0 || (u >= 0xDC00 && u <= 0xDFFF)) {
+                {
+                    jfail(d, "bad \\u escape");
+                    return;
+                }
+            }
+        } else if (!strchr("\"\\/bfnrt", c) || c == 0) {
+            {
+                jfail(d, "bad escape");
+                return;
+            }
+        }
+    }
+    d->t[tok].end = d->i++;
+    d->t[tok].next = d->n;
+}
+
+/* Consumes the digits at the cursor; returns how many. */
+static uint32_t jdigits(jdoc *d)
+{
+    uint32_t s = d->i;
+
+    while (d->i < d->len && d->s[d->i] >= '0' && d->s[d->i] <= '9')
+        d->i++;
+    return d->i - s;
+}
+
+/* A number, true, false or null, by JSON's grammar. */
+static void jprimitive(jdoc *d)
+{
+    static const char *const words[] = {"true", "false", "null"};
+    uint32_t tok = jpush(d, J_PRIM, d->i);
+
+    if (tok == UINT32_MAX)
+        return;
+    for (int k = 0; k < 3; k++) {
+        size_t wl = strlen(words[k]);
+        if (d->len - d->i >= wl && memcmp(d->s + d->i, words[k], wl) == 0) {
+            d->i += (uint32_t)wl;
+            goto done;
+        }
+    }
+    if (jis(d, '-'))
+        d->i++;
+    if (jis(d, '0'))
+        d->i++;
+    else if (!jdigits(d)) {
+        jfail(d, "value expected");
+        return;
+    }
+    if (jis(d, '.')) {
+        d->i++;
+        if (!jdigits(d)) {
+            jfail(d, "digits expected after '.'");
+            return;
+        }
+    }
+    if (jis(d, 'e') || jis(d, 'E')) {
+        d->i++;
+        if (jis(d, '+') || jis(d, '-'))
+            d->i++;
+        if (!jdigits(d)) {
+            jfail(d, "digits expected in exponent");
+            return;
+        }
+    }
+done:
+    d->t[tok].end = d->i;
+    d->t[tok].next = d->n;
+}
+
+/* Any value at the cursor, inside depth containers. */
+static void jvalue(jdoc *d, int depth)
+{
+    uint32_t tok;
+    unsigned char close;
+
+    jws(d);
+    if (d->why)
+        return;
+    if (d->i >= d->len) {
+        jfail(d, "value expected");
+        return;
+    }
+    if (jis(d, '"')) {
+        jstring(d);
+        return;
+    }
+    if (!jis(d, '{') && !jis(d, '[')) {
+        jprimitive(d);
+        return;
+    }
+    if (depth == IMPORT_MAX_JSON_DEPTH) {
+        jfail(d, "JSON nested too deep");
+        return;
+    }
+    close = jis(d, '{') ? '}' : ']';
+    tok = jpush(d, close == '}' ? J_OBJ : J_ARR, d->i++);
+    jws(d);
+    if (jis(d, close)) {
+        d->i++;
+    } else {
+        while (!d->why) {
+            if (close == '}') {
+                jws(d);
+                if (!jis(d, '"')) {
+                    jfail(d, "object key expected");
+                    return;
+                }
+                jstring(d);
+                jws(d);
+                if (!jis(d, ':')) {
+                    jfail(d, "':' expected");
+                    return;
+                }
+                d->i++;
+            }
+            jvalue(d, depth + 1);
+            jws(d);
+            if (jis(d, ',')) {
+                d->i++;
+            } else if (jis(d, close)) {
+                d->i++;
+                break;
+            } else {
+                {
+                    jfail(d, "',' or closing bracket expected");
+                    return;
+                }
+            }
+        }
+    }
+    if (!d->why) {
+        d->t[tok].end = d->i;
+        d->t[tok].next = d->n;
+    }
+}
+
+/* True if string token k is key, as written. */
+static int jkey_is(const jdoc *d, uint32_t k, const char *key)
+{
+    size_t kl = strlen(key);
+
+    return d->t[k].end - d->t[k].start == kl && memcmp(d->s + d->t[k].start, key, kl) == 0;
+}
+
+/* The value of obj's first member named key (rapidjson's FindMember also
+ * takes the first), or 0 if none. Members whose key holds an escape are
+ * refused outright, since rapidjson would decode them into a name we
+ * might be looking for. */
+static uint32_t jfind(jdoc *d, uint32_t obj, const char *key)
+{
+    if (d->t[obj].type != J_OBJ)
+        return 0;
+    for (uint32_t k = obj + 1; k < d->t[obj].next; k = d->t[k + 1].next) {
+        if (memchr(d->s + d->t[k].start, '\\', d->t[k].end - d->t[k].start)) {
+            jfail(d, "escaped object key");
+            return 0;
+        }
+        if (jkey_is(d, k, key))
+            return k + 1;
+    }
+    return 0;
+}
+
+/* Reads a non-negative integer token; 0 and d->why set otherwise. */
+static uint32_t jindex(jdoc *d, uint32_t k)
+{
+    uint32_t v;
+
+    if (d->t[k].type != J_PRIM ||
+        !parse_u32(d->s + d->t[k].start, d->t[k].end - d->t[k].start, &v)) {
+        jfail(d, "index is not a non-negative integer");
+        return 0;
+    }
+    return v;
+}
+
+/* Number of values in array token a (0 if it is not an array). */
+static uint32_t jlength(const jdoc *d, uint32_t a)
+{
+    uint32_t n = 0;
+
+    if (a == 0 || d->t[a].type != J_ARR)
+        return 0;
+    for (uint32_t k = a + 1; k < d->t[a].next; k = d->t[k].next)
+        n++;
+    return n;
+}
+
+/*
+ * Counts the nodes Assimp will create: one per path from a scene root.
+ * Requires trees (each node one parent at most, no cycles, as glTF 2.0
+ * does) no deeper than IMPORT_MAX_NODE_DEPTH; a node listed as a root and
+ * also as a child, which exporters do, is counted once per path. Sets
+ * d->why on refusal.
+ */
+static uint64_t glb_node_paths(jdoc *d, uint32_t nodes, uint32_t scenes, uint32_t *parent,
+                               uint32_t *roots, uint64_t *paths, uint32_t *stack, uint32_t *level,
+                               uint32_t n)
+{
+    uint64_t total = 0;
+    uint32_t i = 0;
+
+    for (uint32_t k = 0; k < n; k++)
+        parent[k] = UINT32_MAX, paths[k] = UINT64_MAX, roots[k] = 0;
+    for (uint32_t nd = nodes + 1; nd < d->t[nodes].next; nd = d->t[nd].next, i++) {
+        uint32_t ch = jfind(d, nd, "children");
+        for (uint32_t k = ch ? ch + 1 : 0; ch && k < d->t[ch].next; k = d->t[k].next) {
+            uint32_t c = jindex(d, k);
+            if (d->why)
+                return 0;
+            if (c >= n || parent[c] != UINT32_MAX) {
+                jfail(d, c >= n ? "node child out of range" : "node with two parents");
+                return 0;
+            }
+            parent[c] = i;
+        }
+    }
+    for (uint32_t sc = scenes ? scenes + 1 : 0; scenes && sc < d->t[scenes].next;
+         sc = d->t[sc].next) {
+        uint32_t rl = jfind(d, sc, "nodes");
+        for (uint32_t k = rl ? rl + 1 : 0; rl && k < d->t[rl].next; k = d->t[k].next) {
+            uint32_t r = jindex(d, k);
+            if (d->why)
+                return 0;
+            if (r >= n) {
+                jfail(d, "scene root out of range");
+                return 0;
+            }
+            roots[r]++;
+        }
+    }
+    /* paths[x] = roots on x's ancestor chain, x included, and level[x] its
+     * length, by walking up to a known ancestor; UINT64_MAX - 1 marks a
+     * node on the walk, to find cycles. */
+    for (uint32_t x = 0; x < n; x++) {
+        uint32_t depth = 0, y = x, lv = 0;
+        uint64_t above = 0;
+        while (y != UINT32_MAX && paths[y] == UINT64_MAX) {
+            paths[y] = UINT64_MAX - 1;
+            stack[depth++] = y;
+            y = parent[y];
+        }
+        if (y != UINT32_MAX) {
+            if (paths[y] == UINT64_MAX - 1) {
+                jfail(d, "node cycle");
+                return 0;
+            }
+            above = paths[y];
+            lv = level[y];
+        }
+        while (depth) {
+            y = stack[--depth];
+            above += roots[y];
+            paths[y] = above;
+            level[y] = ++lv;
+        }
+        if (lv > IMPORT_MAX_NODE_DEPTH) { /* Assimp recurses once per level */
+            jfail(d, "node hierarchy too deep");
+            return 0;
+        }
+        total += paths[x];
+        if (total > IMPORT_MAX_GLB_NODES)
+            return total;
+    }
+    return total;
+}
+
+/* Adds the count of the accessor whose index is token k to *total. */
+static void glb_add_ref(jdoc *d, uint32_t k, const uint32_t *counts, uint32_t na, uint64_t *total)
+{
+    uint32_t a = jindex(d, k);
+
+    if (!d->why && a >= na)
+        jfail(d, "accessor index out of range");
+    if (!d->why)
+        *total += counts[a];
+}
+
+/* Adds the accessors named by the member values of object token obj. */
+static void glb_add_members(jdoc *d, uint32_t obj, const uint32_t *counts, uint32_t na,
+                            uint64_t *total)
+{
+    if (obj == 0 || d->t[obj].type != J_OBJ)
+        return;
+    for (uint32_t k = obj + 1; k < d->t[obj].next && !d->why; k = d->t[k + 1].next)
+        glb_add_ref(d, k + 1, counts, na, total);
+}
+
+/* Sums, over every primitive of every mesh, the counts of the accessors it
+ * uses (attributes, indices, morph targets): Assimp copies an accessor once
+ * per primitive that uses it. counts[i] is accessor i's count. */
+static uint64_t glb_primitive_elements(jdoc *d, uint32_t meshes, const uint32_t *counts,
+                                       uint32_t na)
+{
+    uint64_t total = 0;
+
+    for (uint32_t m = meshes + 1; m < d->t[meshes].next && !d->why; m = d->t[m].next) {
+        uint32_t prims = jfind(d, m, "primitives");
+        if (prims == 0 || d->t[prims].type != J_ARR)
+            continue;
+        for (uint32_t p = prims + 1; p < d->t[prims].next && !d->why; p = d->t[p].next) {
+            uint32_t ix = jfind(d, p, "indices"), targets = jfind(d, p, "targets");
+            glb_add_members(d, jfind(d, p, "attributes"), counts, na, &total);
+            if (ix)
+                glb_add_ref(d, ix, counts, na, &total);
+            if (targets == 0 || d->t[targets].type != J_ARR)
+                continue;
+            for (uint32_t t = targets + 1; t < d->t[targets].next && !d->why; t = d->t[t].next)
+                glb_add_members(d, t, counts, na, &total);
+        }
+    }
+    return total;
+}
+
+/*
+ * Checks a GLB's header and JSON chunk before Assimp sees them: version 2,
+ * lengths that agree with the file, strict JSON no deeper than
+ * IMPORT_MAX_JSON_DEPTH (so that Assimp's glTF reader, not a fallback
+ * importer, takes it), asset.version 2.x, node trees no deeper than
+ * IMPORT_MAX_NODE_DEPTH, at most IMPORT_MAX_GLB_NODES nodes once
+ * expanded, and at most IMPORT_MAX_GLB_ELEMENTS accessor elements copied
+ * into meshes (and IMPORT_GLB_ELEMENTS_PER_BYTE per byte of the file).
+ * Returns 0, -EINVAL or -ENOMEM.
+ */
+static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
+{
+    jdoc d;
+    uint32_t json_len, nodes, scenes, meshes, accessors, asset, version, nn, na;
+    uint32_t *u32 = NULL;
+    uint64_t *paths = NULL, total, elements_max = (uint64_t)IMPORT_GLB_ELEMENTS_PER_BYTE * n;
+    int rc;
+
+    if (elements_max > IMPORT_MAX_GLB_ELEMENTS)
+        elements_max = IMPORT_MAX_GLB_ELEMENTS;
+
+    if (n < 20)
+        return fail(err, errlen, -EINVAL, "GLB shorter than its header");
+    if (get_u32le(p + 4) != 2)
+        return fail(err, errlen, -EINVAL, "GLB version %u (only glTF 2.0 is supported)",
+                    get_u32le(p + 4));
+    if (get_u32le(p + 8) != n)
+        return fail(err, errlen, -EINVAL, "GLB length field says %u bytes, the file has %zu",
+                    get_u32le(p + 8), n);
+    json_len = get_u32le(p + 12);
+    if (get_u32le(p + 16) != 0x4E4F534Au || json_len > n - 20)
+        return fail(err, errlen, -EINVAL, "GLB does not start with a whole JSON chunk");
+
+    memset(&d, 0, sizeof d);
+    d.s = p + 20;
+    d.len = json_len;
+    jvalue(&d, 0);
+    jws(&d);
+    /* rapidjson reads the chunk as a C string: it ends at a NUL */
+    if (!d.why && d.i < d.len && d.s[d.i] != 0)
+        jfail(&d, "text after the JSON document");
+    if (!d.why && d.t[0].type != J_OBJ)
+        jfail(&d, "JSON document is not an object");
+    asset = d.why ? 0 : jfind(&d, 0, "asset");
+    version = asset ? jfind(&d, asset, "version") : 0;
+    if (!d.why && (!version || d.t[version].type != J_STR ||
+                   d.t[version].start == d.t[version].end || d.s[d.t[version].start] != '2'))
+        jfail(&d, "asset.version is not 2.x");
+    if (d.why) {
+        rc = d.nomem ? fail(err, errlen, -ENOMEM, "out of memory")
+                     : fail(err, errlen, -EINVAL, "GLB JSON: %s (near byte %u)", d.why, 20 + d.i);
+        goto cleanup;
+    }
+
+    nodes = jfind(&d, 0, "nodes");
+    scenes = jfind(&d, 0, "scenes");
+    meshes = jfind(&d, 0, "meshes");
+    accessors = jfind(&d, 0, "accessors");
+    nodes = nodes && d.t[nodes].type == J_ARR ? nodes : 0;
+    scenes = scenes && d.t[scenes].type == J_ARR ? scenes : 0;
+    nn = jlength(&d, nodes);
+    na = jlength(&d, accessors);
+    /* parent, roots, stack and level for the nodes, then accessor counts */
+    u32 = cvre_malloc(((size_t)4 * nn + na + 1) * sizeof *u32);
+    paths = cvre_malloc(((size_t)nn + 1) * sizeof *paths);
+    if (!u32 || !paths) {
+        rc = fail(err, errlen, -ENOMEM, "out of memory");
+        goto cleanup;
+    }
+    total = nodes ? glb_node_paths(&d, nodes, scenes, u32, u32 + nn, paths, u32 + 2 * nn,
+                                   u32 + 3 * nn, nn)
+                  : 0;
+    if (!d.why && total > IMPORT_MAX_GLB_NODES) {
+        rc = fail(err, errlen, -EINVAL, "GLB node hierarchy expands to over %u nodes",
+                  (unsigned)IMPORT_MAX_GLB_NODES);
+        goto cleanup;
+    }
+    if (!d.why && accessors) {
+        uint32_t i = 0;
+        for (uint32_t a = accessors + 1; a < d.t[accessors].next && !d.why; a = d.t[a].next) {
+            uint32_t c = jfind(&d, a, "count");
+            u32[4 * nn + i++] = c ? jindex(&d, c) : 0;
+        }
+    }
+    total = !d.why && meshes && d.t[meshes].type == J_ARR
+                ? glb_primitive_elements(&d, meshes, u32 + 4 * nn, na)
+                : 0;
+    if (d.why)
+        rc = fail(err, errlen, -EINVAL, "GLB: %s", d.why);
+    else if (total > elements_max)
+        rc = fail(err, errlen, -EINVAL,
+                  "GLB meshes copy %llu accessor elements, over the limit of %llu for its size",
+                  (unsigned long long)total, (unsigned long long)elements_max);
+    else
+        rc = 0;
+cleanup:
+    free(u32);
+    free(paths);
+    free(d.t);
+    return rc;
+}
+
+/* ---- from Assimp's scene to triangles ----------------------------------- */
+
+typedef struct walk {
+    const struct aiScene *scene;
+    const uint32_t *mesh_tris; /* triangles in each mesh */
+    uint32_t max_tris;
+    uint64_t ntris; /* counted, then emitted */
+    float *out;     /* NULL while counting */
+    int z_up;
+    double scale;
+    float min[3], max[3];
+    char *err;
+    size_t errlen;
+} walk;
+
+/* Counts each mesh's triangles into w->mesh_tris, checking the indices
+ * they use. Polygons were triangulated and anything else (points, lines)
+ * is skipped. Returns 0 or -EINVAL. */
+static int count_meshes(const struct aiScene *sc, uint32_t *mesh_tris, char *err, size_t errlen)
+{
+    for (unsigned m = 0; m < sc->mNumMeshes; m++) {
+        const struct aiMesh *me = sc->mMeshes[m];
+        uint32_t t = 0;
+        if (!me)
+            return fail(err, errlen, -EINVAL, "mesh %u missing", m);
+        for (unsigned f = 0; f < me->mNumFaces; f++) {
+            const struct aiFace *fa = &me->mFaces[f];
+            if (fa->mNumIndices != 3)
+                continue;
+            if (!me->mVertices)
+                return fail(err, errlen, -EINVAL, "mesh %u has faces but no positions", m);
+            for (int k = 0; k < 3; k++)
+                if (fa->mIndices[k] >= me->mNumVertices)
+                    return fail(err, errlen, -EINVAL, "mesh %u: vertex index %u out of range", m,
+                                fa->mIndices[k]);
+            t++;
+        }
+        mesh_tris[m] = t;
+    }
+    return 0;
+}
+
+/* Sums, over polygons of more than four vertices (quads are split in
+ * constant time), the square of their size: what triangulating costs. */
+static int check_polygons(const struct aiScene *sc, char *err, size_t errlen)
+{
+    uint64_t work = 0;
+    unsigned largest = 0;
+
+    for (unsigned m = 0; m < sc->mNumMeshes; m++) {
+        const struct aiMesh *me = sc->mMeshes[m];
+        if (!me)
+            continue;
+        for (unsigned f = 0; f < me->mNumFaces; f++) {
+            unsigned k = me->mFaces[f].mNumIndices;
+            if (k <= 4)
+                continue;
+            if (k > largest)
+                largest = k;
+            work += (uint64_t)k * k;
+            if (work > IMPORT_MAX_POLYGON_WORK)
+                return fail(err, errlen, -EINVAL,
+                            "polygons too large to triangulate (largest so far %u vertices; "
+                            "their squared sizes may total %llu)",
+                            largest, (unsigned long long)IMPORT_MAX_POLYGON_WORK);
+        }
+    }
+    return 0;
+}
+
+/* r = a * b, 4x4 row-major. */
+static void mat_mul(double r[16], const double a[16], const double b[16])
+{
+    for (int i = 0; i < 4; i++)
+        for (int k = 0; k < 4; k++)
+            r[4 * i + k] = a[4 * i] * b[k] + a[4 * i + 1] * b[4 + k] + a[4 * i + 2] * b[8 + k] +
+                           a[4 * i + 3] * b[12 + k];
+}
+
+/* Writes one vertex: node transform m, then the up-axis, then the scale. */
+static int emit_vertex(walk *w, const double m[16], const struct aiVector3D *v, float *o)
+{
+    double x = v->x, y = v->y, z = v->z;
+    double p[3] = {m[0] * x + m[1] * y + m[2] * z + m[3], m[4] * x + m[5] * y + m[6] * z + m[7],
+                   m[8] * x + m[9] * y + m[10] * z + m[11]};
+
+    if (w->z_up) {
+        double t = p[1];
+        p[1] = p[2];
+        p[2] = -t;
+    }
+    for (int k = 0; k < 3; k++) {
+        double s = p[k] * w->scale;
+        /* also false for NaN; checked before the conversion, which
+         * would be undefined out of range */
+        if (!(fabs(s) <= FLT_MAX))
+            return fail(w->err, w->errlen, -EINVAL,
+                        "coordinate not a finite float in triangle %llu",
+                        (unsigned long long)w->ntris + 1);
+        o[k] = (float)s;
+        if (o[k] < w->min[k])
+            w->min[k] = o[k];
+        if (o[k] > w->max[k])
+            w->max[k] = o[k];
+    }
+    return 0;
+}
+
+/*
+ * Visits node and its subtree with parent's accumulated transform: counts
+ * the triangles of every mesh instance (w->out NULL) or writes them.
+ * Counting stops as soon as the total passes w->max_tris. Returns 0,
+ * -EINVAL or -EFBIG.
+ */
+static int visit(walk *w, const struct aiNode *node, const double parent[16], unsigned depth)
+{
+    const struct aiMatrix4x4 *t = &node->mTransformation;
+    const double local[16] = {t->a1, t->a2, t->a3, t->a4, t->b1, t->b2, t->b3, t->b4,
+                              t->c1, t->c2, t->c3, t->c4, t->d1, t->d2, t->d3, t->d4};
+    double m[16];
+    int rc;
+
+    if (depth > IMPORT_MAX_NODE_DEPTH)
+        return fail(w->err, w->errlen, -EINVAL, "node hierarchy deeper than %d",
+                    IMPORT_MAX_NODE_DEPTH);
+    mat_mul(m, parent, local);
+    for (unsigned i = 0; i < node->mNumMeshes; i++) {
+        unsigned mi = node->mMeshes[i];
+        const struct aiMesh *me;
+        if (mi >= w->scene->mNumMeshes)
+            return fail(w->err, w->errlen, -EINVAL, "node refers to missing mesh %u", mi);
+        if (!w->out) {
+            w->ntris += w->mesh_tris[mi];
+            if (w->ntris > w->max_tris)
+                return fail(w->err, w->errlen, -EFBIG, "more than %u triangles", w->max_tris);
+            continue;
+        }
+        me = w->scene->mMeshes[mi];
+        for (unsigned f = 0; f < me->mNumFaces; f++) {
+            const struct aiFace *fa = &me->mFaces[f];
+            float *o = w->out + 9 * w->ntris;
+            if (fa->mNumIndices != 3)
+                continue;
+            for (int k = 0; k < 3; k++)
+                if ((rc = emit_vertex(w, m, &me->mVertices[fa->mIndices[k]], o + 3 * k)) != 0)
+                    return rc;
+            w->ntris++;
+        }
+    }
+    for (unsigned i = 0; i < node->mNumChildren; i++) {
+        if (!node->mChildren[i])
+            return fail(w->err, w->errlen, -EINVAL, "node child missing");
+        if ((rc = visit(w, node->mChildren[i], m, depth + 1)) != 0)
+            return rc;
+    }
+    return 0;
+}
+
+/* Triangles of every mesh instance into out. Returns 0, -EINVAL, -EFBIG
+ * or -ENOMEM. */
+static int collect(const struct aiScene *sc, const import_options *opt, import_mesh *out, char *err,
+                   size_t errlen)
+{
+    static const double identity[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    walk w;
+    uint32_t *mesh_tris;
+    int rc;
+
+    if (!sc->mRootNode)
+        return fail(err, errlen, -EINVAL, "no scene graph");
+    mesh_tris = cvre_calloc(sc->mNumMeshes, sizeof *mesh_tris);
+    if (!mesh_tris)
+        return fail(err, errlen, -ENOMEM, "out of memory");
+    memset(&w, 0, sizeof w);
+    w.scene = sc;
+    w.mesh_tris = mesh_tris;
+    w.max_tris = opt->max_triangles;
+    w.z_up = opt->z_up;
+    w.scale = opt->unit_scale;
+    w.err = err;
+    w.errlen = errlen;
+    if ((rc = count_meshes(sc, mesh_tris, err, errlen)) != 0 ||
+        (rc = visit(&w, sc->mRootNode, identity, 0)) != 0)
+        goto cleanup;
+    if (w.ntris == 0) {
+        rc = fail(err, errlen, -EINVAL, "the file has no triangles");
+        goto cleanup;
+    }
+    if (w.ntris > SIZE_MAX / (9 * sizeof(float))) {
+        rc = fail(err, errlen, -ENOMEM, "out of memory");
+        goto cleanup;
+    }
+    out->tris = cvre_malloc((size_t)w.ntris * 9 * sizeof(float));
+    if (!out->tris) {
+        rc = fail(err, errlen, -ENOMEM, "out of memory for %llu triangles",
+                  (unsigned long long)w.ntris);
+        goto cleanup;
+    }
+    w.out = out->tris;
+    w.ntris = 0;
+    for (int k = 0; k < 3; k++) {
+        w.min[k] = FLT_MAX;
+        w.max[k] = -FLT_MAX;
+    }
+    if ((rc = visit(&w, sc->mRootNode, identity, 0)) != 0) {
+        import_mesh_free(out);
+        goto cleanup;
+    }
+    out->ntris = (uint32_t)w.ntris;
+    memcpy(out->min, w.min, sizeof w.min);
+    memcpy(out->max, w.max, sizeof w.max);
+cleanup:
+    free(mesh_tris);
+    return rc;
+}
+
+/* ---- the entry points --------------------------------------------------- */
+
+/* The format the hint names, -1 if none, -2 if unsupported. */
+static int hint_format(const char *hint)
+{
+    if (!hint || !*hint)
+        return -1;
+    if (*hint == '.')
+        hint++;
+    for (int f = 0; f < FMT_COUNT; f++)
+        if (strlen(hint) == strlen(formats[f].ext) &&
+            starts_with((const unsigned char *)hint, strlen(hint), formats[f].ext))
+            return f;
+    return -2;
+}
+
+static int check_options(const import_options *o, char *err, size_t errlen)
+{
+    if (!(o->unit_scale > 0.0f) || !isfinite(o->unit_scale))
+        return fail(err, errlen, -EINVAL, "unit_scale must be positive and finite");
+    if (o->max_triangles == 0)
+        return fail(err, errlen, -EINVAL, "max_triangles must be at least 1");
+    return 0;
+}
+
+void import_mesh_free(import_mesh *m)
+{
+    free(m->tris);
+    memset(m, 0, sizeof *m);
+}
+
+int import_model(const void *data, size_t len, const char *hint, const import_options *opt,
+                 import_mesh *out, char *err, size_t errlen)
+{
+    static const import_options defaults = IMPORT_OPTIONS_DEFAULT;
+    const unsigned char *p = data;
+    const struct aiScene *sc;
+    memfs fs;
+    char name[16];
+    int fmt, hinted, rc;
+
+    if (errlen)
+        err[0] = 0;
+    if (!out)
+        return fail(err, errlen, -EINVAL, "no output mesh");
+    memset(out, 0, sizeof *out);
+    if (!opt)
+        opt = &defaults;
+    if ((rc = check_options(opt, err, errlen)) != 0)
+        return rc;
+    if (!data || len == 0)
+        return fail(err, errlen, -EINVAL, "empty file");
+    if (len > IMPORT_MAX_BYTES)
+        return fail(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
+                    (unsigned)IMPORT_MAX_BYTES);
+    hinted = hint_format(hint);
+    if (hinted == -2)
+        return fail(err, errlen, -EINVAL, "unsupported format \"%.16s\" (supported: %s)", hint,
+                    import_formats());
+    fmt = sniff(p, len);
+    if (fmt < 0 && hinted == FMT_OBJ)
+        fmt = FMT_OBJ;
+    if (fmt < 0)
+        return hinted >= 0 ? fail(err, errlen, -EINVAL, "not a valid %s file", formats[hinted].name)
+                           : fail(err, errlen, -EINVAL, "unrecognised format (supported: %s)",
+                                  import_formats());
+    if ((rc = formats[fmt].check(p, len, err, errlen)) != 0)
+        return rc;
+
+    snprintf(name, sizeof name, "upload.%s", formats[fmt].ext);
+    memset(&fs, 0, sizeof fs);
+    fs.io.OpenProc = mem_open;
+    fs.io.CloseProc = mem_close;
+    fs.name = name;
+    fs.data = data;
+    fs.len = len;
+    pthread_mutex_lock(&assimp_lock);
+    sc = aiImportFileEx(name, 0, &fs.io);
+    if (!sc) {
+        const char *why = aiGetErrorString();
+        rc = strstr(why, "bad_alloc") ? -ENOMEM : -EINVAL;
+        fail(err, errlen, rc, "%s parse error: %s", formats[fmt].name,
+             *why ? why : "(no reason given)");
+    }
+    pthread_mutex_unlock(&assimp_lock);
+    if (!sc)
+        return rc;
+    if ((rc = check_polygons(sc, err, errlen)) != 0) {
+        aiReleaseImport(sc);
+        return rc;
+    }
+    /* On failure this releases the scene. */
+    sc = aiApplyPostProcessing(sc, aiProcess_Triangulate);
+    if (!sc)
+        return fail(err, errlen, -EINVAL, "%s: triangulation failed", formats[fmt].name);
+    rc = collect(sc, opt, out, err, errlen);
+    aiReleaseImport(sc);
+    return rc;
+}
