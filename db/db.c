@@ -13,7 +13,23 @@
  * tool, the clustering job) before giving up. */
 #define DB_BUSY_TIMEOUT_MS 5000
 
-enum { ST_SESSION_OPEN, ST_USER_UPSERT, ST_SESSION_JOIN, ST_SESSION_CLOSE, ST_COUNT };
+/* Meshes are stored as little-endian float32 and copied as they are. */
+_Static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "mesh blobs are little-endian float32");
+
+enum {
+    ST_SESSION_OPEN,
+    ST_USER_UPSERT,
+    ST_SESSION_JOIN,
+    ST_SESSION_CLOSE,
+    ST_OBJECT_INSERT,
+    ST_MESH_INSERT,
+    ST_ECM_VERSION_INSERT,
+    ST_ECM_BOX_INSERT,
+    ST_OBJECT_PLACE,
+    ST_OBJECT_REMOVE,
+    ST_USER_ID,
+    ST_COUNT
+};
 
 static const char *const stmt_sql[ST_COUNT] = {
     [ST_SESSION_OPEN] = "INSERT INTO sessions(id, token, peer, started_at) VALUES (?1, ?2, ?3, ?4)",
@@ -23,6 +39,18 @@ static const char *const stmt_sql[ST_COUNT] = {
                         "avatar_id = ?3, joined_at = ?4 WHERE id = ?1",
     [ST_SESSION_CLOSE] = "UPDATE sessions SET ended_at = ?3, end_reason = ?2 "
                          "WHERE id = ?1 AND ended_at IS NULL",
+    [ST_OBJECT_INSERT] = "INSERT INTO objects(owner_id, name, format, created_at, pos_x, pos_y, pos_z, yaw, scale, "
+                         "ecm_version, tri_count, min_x, min_y, min_z, max_x, max_y, max_z) "
+                         "VALUES ((SELECT id FROM users WHERE name = ?1), ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, 1, ?10, "
+                         "?11, ?12, ?13, ?14, ?15, ?16)",
+    [ST_MESH_INSERT] = "INSERT INTO meshes(object_id, triangles) VALUES (?1, ?2)",
+    [ST_ECM_VERSION_INSERT] = "INSERT INTO ecm_versions(object_id, version, created_at, reason, box_count) "
+                              "VALUES (?1, ?2, ?3, ?4, ?5)",
+    [ST_ECM_BOX_INSERT] = "INSERT INTO ecm_boxes(object_id, version, box_index, min_x, min_y, min_z, max_x, max_y, "
+                          "max_z) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
+    [ST_OBJECT_PLACE] = "UPDATE objects SET pos_x = ?2, pos_y = ?3, pos_z = ?4, yaw = ?5, scale = ?6 WHERE id = ?1",
+    [ST_OBJECT_REMOVE] = "UPDATE objects SET removed_at = ?2 WHERE id = ?1 AND removed_at IS NULL",
+    [ST_USER_ID] = "SELECT id FROM users WHERE name = ?1",
 };
 
 struct db {
@@ -212,7 +240,7 @@ int db_session_open(db *d, int64_t id, const char *token_hex, const char *peer, 
     return run(d, st);
 }
 
-int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at)
+int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id)
 {
     sqlite3_stmt *st = d->st[ST_USER_UPSERT];
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
@@ -224,7 +252,15 @@ int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, dou
     sqlite3_bind_text(st, 2, name, -1, SQLITE_STATIC);
     sqlite3_bind_int64(st, 3, avatar_id);
     sqlite3_bind_double(st, 4, at);
-    return run(d, st);
+    if (run(d, st) < 0)
+        return -1;
+    st = d->st[ST_USER_ID];
+    sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
+    int rc = sqlite3_step(st);
+    *user_id = rc == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
+    sqlite3_reset(st);
+    sqlite3_clear_bindings(st);
+    return rc == SQLITE_ROW ? 0 : fail(d, "user %s vanished", name);
 }
 
 int db_session_close(db *d, int64_t id, const char *reason, double at)
@@ -234,4 +270,168 @@ int db_session_close(db *d, int64_t id, const char *reason, double at)
     sqlite3_bind_text(st, 2, reason, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 3, at);
     return run(d, st);
+}
+
+/* Binds n doubles from v to parameters first..first+n-1. */
+static void bind_floats(sqlite3_stmt *st, int first, const float *v, int n)
+{
+    for (int i = 0; i < n; i++)
+        sqlite3_bind_double(st, first + i, (double)v[i]);
+}
+
+int db_object_create(db *d, db_object *o, double at)
+{
+    if (db_begin(d) < 0)
+        return -1;
+    sqlite3_stmt *st = d->st[ST_USER_UPSERT];
+    sqlite3_bind_text(st, 1, o->owner, -1, SQLITE_STATIC);
+    sqlite3_bind_double(st, 2, at);
+    if (run(d, st) < 0)
+        goto fail;
+    st = d->st[ST_OBJECT_INSERT];
+    sqlite3_bind_text(st, 1, o->owner, -1, SQLITE_STATIC);
+    sqlite3_bind_text(st, 2, o->name, -1, SQLITE_STATIC);
+    sqlite3_bind_text(st, 3, o->format, -1, SQLITE_STATIC);
+    sqlite3_bind_double(st, 4, at);
+    bind_floats(st, 5, o->pos, 3);
+    sqlite3_bind_double(st, 8, (double)o->yaw);
+    sqlite3_bind_double(st, 9, (double)o->scale);
+    sqlite3_bind_int64(st, 10, o->tri_count);
+    bind_floats(st, 11, o->min, 3);
+    bind_floats(st, 14, o->max, 3);
+    if (run(d, st) < 0)
+        goto fail;
+    o->id = sqlite3_last_insert_rowid(d->sql);
+    o->ecm_version = 1;
+    st = d->st[ST_MESH_INSERT];
+    sqlite3_bind_int64(st, 1, o->id);
+    sqlite3_bind_blob64(st, 2, o->tris, (sqlite3_uint64)o->tri_count * 9 * sizeof(float), SQLITE_STATIC);
+    if (run(d, st) < 0)
+        goto fail;
+    st = d->st[ST_ECM_VERSION_INSERT];
+    sqlite3_bind_int64(st, 1, o->id);
+    sqlite3_bind_int64(st, 2, 1);
+    sqlite3_bind_double(st, 3, at);
+    sqlite3_bind_text(st, 4, "import", -1, SQLITE_STATIC);
+    sqlite3_bind_int64(st, 5, o->box_count);
+    if (run(d, st) < 0)
+        goto fail;
+    for (uint32_t i = 0; i < o->box_count; i++) {
+        st = d->st[ST_ECM_BOX_INSERT];
+        sqlite3_bind_int64(st, 1, o->id);
+        sqlite3_bind_int64(st, 2, 1);
+        sqlite3_bind_int64(st, 3, i);
+        bind_floats(st, 4, o->boxes[i], 6);
+        if (run(d, st) < 0)
+            goto fail;
+    }
+    if (db_commit(d) == 0)
+        return 0;
+fail:
+    sqlite3_exec(d->sql, "ROLLBACK", NULL, NULL, NULL);
+    return -1;
+}
+
+int db_object_place(db *d, int64_t id, const float pos[3], float yaw, float scale)
+{
+    sqlite3_stmt *st = d->st[ST_OBJECT_PLACE];
+    sqlite3_bind_int64(st, 1, id);
+    bind_floats(st, 2, pos, 3);
+    sqlite3_bind_double(st, 5, (double)yaw);
+    sqlite3_bind_double(st, 6, (double)scale);
+    return run(d, st);
+}
+
+int db_object_remove(db *d, int64_t id, double at)
+{
+    sqlite3_stmt *st = d->st[ST_OBJECT_REMOVE];
+    sqlite3_bind_int64(st, 1, id);
+    sqlite3_bind_double(st, 2, at);
+    return run(d, st);
+}
+
+/* Reads the current ECM boxes of one object into a growing array. */
+static int load_boxes(db *d, sqlite3_stmt *bx, int64_t id, uint32_t version, float (**boxes)[6], uint32_t *n,
+                      uint32_t *cap)
+{
+    *n = 0;
+    sqlite3_bind_int64(bx, 1, id);
+    sqlite3_bind_int64(bx, 2, version);
+    int rc;
+    while ((rc = sqlite3_step(bx)) == SQLITE_ROW) {
+        if (*n == *cap) {
+            uint32_t ncap = *cap ? *cap * 2 : 64;
+            float(*nb)[6] = cvre_realloc(*boxes, ncap * sizeof **boxes);
+            if (!nb) {
+                sqlite3_reset(bx);
+                return fail(d, "out of memory loading boxes");
+            }
+            *boxes = nb;
+            *cap = ncap;
+        }
+        for (int k = 0; k < 6; k++)
+            (*boxes)[*n][k] = (float)sqlite3_column_double(bx, k);
+        (*n)++;
+    }
+    sqlite3_reset(bx);
+    return rc == SQLITE_DONE ? 0 : fail(d, "%s", sqlite3_errmsg(d->sql));
+}
+
+int db_objects_load(db *d, db_object_fn *fn, void *ctx)
+{
+    sqlite3_stmt *ob = NULL, *bx = NULL;
+    float(*boxes)[6] = NULL;
+    uint32_t cap = 0;
+    int rc = -1, step;
+    if (sqlite3_prepare_v2(d->sql,
+                           "SELECT o.id, u.name, o.name, o.format, o.pos_x, o.pos_y, o.pos_z, o.yaw, o.scale, "
+                           "o.ecm_version, o.tri_count, o.min_x, o.min_y, o.min_z, o.max_x, o.max_y, o.max_z, "
+                           "m.triangles FROM objects o JOIN users u ON u.id = o.owner_id "
+                           "JOIN meshes m ON m.object_id = o.id WHERE o.removed_at IS NULL ORDER BY o.id",
+                           -1, &ob, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(d->sql,
+                           "SELECT min_x, min_y, min_z, max_x, max_y, max_z FROM ecm_boxes "
+                           "WHERE object_id = ?1 AND version = ?2 ORDER BY box_index",
+                           -1, &bx, NULL) != SQLITE_OK) {
+        fail(d, "%s", sqlite3_errmsg(d->sql));
+        goto done;
+    }
+    while ((step = sqlite3_step(ob)) == SQLITE_ROW) {
+        db_object o = {.id = sqlite3_column_int64(ob, 0),
+                       .owner = (const char *)sqlite3_column_text(ob, 1),
+                       .name = (const char *)sqlite3_column_text(ob, 2),
+                       .format = (const char *)sqlite3_column_text(ob, 3),
+                       .yaw = (float)sqlite3_column_double(ob, 7),
+                       .scale = (float)sqlite3_column_double(ob, 8),
+                       .ecm_version = (uint32_t)sqlite3_column_int64(ob, 9),
+                       .tri_count = (uint32_t)sqlite3_column_int64(ob, 10)};
+        for (int k = 0; k < 3; k++) {
+            o.pos[k] = (float)sqlite3_column_double(ob, 4 + k);
+            o.min[k] = (float)sqlite3_column_double(ob, 11 + k);
+            o.max[k] = (float)sqlite3_column_double(ob, 14 + k);
+        }
+        o.tris = sqlite3_column_blob(ob, 17);
+        if ((size_t)sqlite3_column_bytes(ob, 17) != (size_t)o.tri_count * 9 * sizeof(float)) {
+            fail(d, "object %lld: mesh size does not match its triangle count", (long long)o.id);
+            goto done;
+        }
+        if (load_boxes(d, bx, o.id, o.ecm_version, &boxes, &o.box_count, &cap) < 0)
+            goto done;
+        o.boxes = (const float(*)[6])boxes;
+        int r = fn(ctx, &o);
+        if (r != 0) {
+            rc = r;
+            goto done;
+        }
+    }
+    if (step != SQLITE_DONE) {
+        fail(d, "%s", sqlite3_errmsg(d->sql));
+        goto done;
+    }
+    rc = 0;
+done:
+    sqlite3_finalize(ob);
+    sqlite3_finalize(bx);
+    free(boxes);
+    return rc;
 }

@@ -40,8 +40,37 @@ int64_t db_session_last_id(db *d);
 /* Closes sessions a crashed run left open. Returns how many, or -1. */
 int db_sessions_close_stale(db *d, double now);
 int db_session_open(db *d, int64_t id, const char *token_hex, const char *peer, double at);
-/* Creates the user if new, stamps last_seen_at, and ties it to the session. */
-int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at);
+/* Creates the user if new, stamps last_seen_at, ties it to the session and
+ * sets *user_id to the user's id. */
+int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id);
 int db_session_close(db *d, int64_t id, const char *reason, double at);
+
+/* An object as stored: its mesh and the boxes of one ECM version, all in
+ * object-local coordinates; world = R_y(yaw) * (scale * local) + pos. */
+typedef struct db_object {
+    int64_t id;
+    const char *owner;  /* user name */
+    const char *name;
+    const char *format;
+    float pos[3], yaw, scale;
+    uint32_t ecm_version;
+    uint32_t tri_count;
+    const float *tris;  /* 9 floats a triangle */
+    float min[3], max[3]; /* MBR */
+    uint32_t box_count;
+    const float (*boxes)[6]; /* min x y z, max x y z */
+} db_object;
+
+/* Stores a new object with its mesh and ECM version 1 (its boxes, reason
+ * "import"), creating the owner's user row if needed, in one transaction.
+ * Sets o->id. */
+int db_object_create(db *d, db_object *o, double at);
+int db_object_place(db *d, int64_t id, const float pos[3], float yaw, float scale);
+int db_object_remove(db *d, int64_t id, double at);
+/* Calls fn for every object in the world (not removed) with its current
+ * ECM version, in id order; the pointers in o are valid during the call
+ * only. Stops early and returns fn's value if it is not 0. */
+typedef int db_object_fn(void *ctx, const db_object *o);
+int db_objects_load(db *d, db_object_fn *fn, void *ctx);
 
 #endif

@@ -55,8 +55,10 @@ static void test_sessions_round_trip(void **state)
     assert_int_equal(db_begin(d), 0);
     assert_int_equal(db_session_open(d, 1, "00ff", "127.0.0.1:1", 100.0), 0);
     assert_int_equal(db_session_open(d, 2, "11ee", "127.0.0.1:2", 101.0), 0);
-    assert_int_equal(db_session_join(d, 1, "alice", 65536, 100.5), 0);
-    assert_int_equal(db_session_join(d, 2, "alice", 65537, 101.5), 0); /* same user again */
+    int64_t uid1, uid2;
+    assert_int_equal(db_session_join(d, 1, "alice", 65536, 100.5, &uid1), 0);
+    assert_int_equal(db_session_join(d, 2, "alice", 65537, 101.5, &uid2), 0); /* same user again */
+    assert_true(uid1 == 1 && uid2 == 1);
     assert_int_equal(db_session_close(d, 1, "quit", 102.0), 0);
     assert_int_equal(db_commit(d), 0);
     assert_int_equal(scalar(d, "SELECT count(*) FROM users"), 1);
