@@ -227,6 +227,9 @@ static void on_msg(conn *c, const proto_msg *m, void *data)
         if (!b->ending)
             events_bye((int)t->idx, m->u.bye.reason);
         break;
+    case PROTO_COLLISION:
+        b->k.collisions++;
+        break;
     default:
         break;
     }
@@ -251,7 +254,7 @@ static void on_close(conn *c, const conn_end *end, void *data)
         finish(b);
 }
 
-static const conn_handler handler = {on_msg, on_close};
+static const conn_handler handler = {.on_msg = on_msg, .on_close = on_close};
 
 static void start_bot(bots *b, bot *t)
 {

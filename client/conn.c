@@ -60,6 +60,7 @@ struct conn {
     int raw;         /* no handshake */
     int bye_sent;    /* no more frames after the bye */
     int write_dead;  /* a send failed: output is dropped, the read side reports the end */
+    int want_writable; /* the owner asked for an on_writable call */
     int ended;
     conn_end end;
     uint32_t seq;
@@ -264,7 +265,9 @@ static int send_frame(conn *c, const uint8_t *p, size_t n)
     return 0;
 }
 
-/* Writes the backlog when the socket has room again. */
+/* Writes the backlog when the socket has room again; once it is empty,
+ * gives the owner the on_writable call it asked for, and stops watching for
+ * writability unless the owner refilled the backlog or asked again. */
 static void flush(conn *c)
 {
     while (c->out_len > 0) {
@@ -279,7 +282,16 @@ static void flush(conn *c)
         c->out_len -= (size_t)k;
         memmove(c->out, c->out + k, c->out_len);
     }
-    rearm(c, EV_READ);
+    if (c->want_writable) {
+        c->want_writable = 0;
+        if (!c->bye_sent) { /* after the bye nothing more may be sent */
+            c->h->on_writable(c, c->data);
+            if (c->ended || c->write_dead)
+                return;
+        }
+    }
+    if (c->out_len == 0 && !c->want_writable && (c->armed & EV_WRITE))
+        rearm(c, EV_READ);
     maybe_shutdown(c);
 }
 
@@ -299,10 +311,22 @@ static int from_server(uint16_t type)
     case PROTO_PING:
     case PROTO_PONG:
     case PROTO_BYE:
+    case PROTO_OBJECT_INFO:
+    case PROTO_OBJECT_REMOVED:
+    case PROTO_OBJECT_REJECTED:
+    case PROTO_COLLISION:
         return 1;
     default:
         return 0;
     }
+}
+
+/* Object messages follow JOIN_OK (the world's objects come right after it)
+ * and concern a joined avatar only. */
+static int needs_join(uint16_t type)
+{
+    return type == PROTO_OBJECT_INFO || type == PROTO_OBJECT_REMOVED || type == PROTO_OBJECT_REJECTED ||
+           type == PROTO_COLLISION;
 }
 
 static void send_join(conn *c)
@@ -339,7 +363,7 @@ static void dispatch(conn *c, const proto_frame *f)
     proto_msg m;
     c->ctx->frames_in++;
     int st = proto_decode(f, &m);
-    if (st == PROTO_OK && !from_server(m.type))
+    if (st == PROTO_OK && (!from_server(m.type) || (needs_join(m.type) && c->state != CONN_JOINED)))
         st = PROTO_ERR_UNEXPECTED;
     c->view.pos_fresh = 0;
     if (st == PROTO_OK) {
@@ -675,6 +699,77 @@ int conn_send_ping(conn *c, uint64_t stamp)
     proto_writer_init(&w, buf, sizeof buf);
     proto_put_ping(&w, stamp);
     return send_frame(c, buf, w.len);
+}
+
+int conn_send_upload_begin(conn *c, const proto_upload_begin *m)
+{
+    if (c->state != CONN_JOINED)
+        return -ENOTCONN;
+    uint8_t buf[PROTO_HEADER_SIZE + 8u + 2u + PROTO_OBJECT_NAME_MAX + PROTO_FORMAT_MAX + 5u];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_upload_begin(&w, m);
+    return w.err == PROTO_OK ? send_frame(c, buf, w.len) : -EINVAL;
+}
+
+int conn_send_upload_chunk(conn *c, uint32_t upload_id, uint32_t offset, const uint8_t *data, uint32_t len)
+{
+    if (c->state != CONN_JOINED)
+        return -ENOTCONN;
+    /* Checked before encoding, so a full backlog costs no 16 KiB copy. */
+    if (c->out_len + PROTO_HEADER_SIZE + 8u + len > CONN_OUT_MAX)
+        return -ENOBUFS;
+    uint8_t buf[CONN_SIZE_CHUNK_MAX];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_upload_chunk(&w, &(proto_upload_chunk){.upload_id = upload_id, .offset = offset, .data = data,
+                                                     .len = len});
+    return w.err == PROTO_OK ? send_frame(c, buf, w.len) : -EINVAL;
+}
+
+int conn_send_upload_end(conn *c, const proto_upload_end *m)
+{
+    if (c->state != CONN_JOINED)
+        return -ENOTCONN;
+    uint8_t buf[PROTO_HEADER_SIZE + 4u + PROTO_SIZE_TRANSFORM];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_upload_end(&w, m);
+    return send_frame(c, buf, w.len);
+}
+
+int conn_send_object_place(conn *c, const proto_object_place *m)
+{
+    if (c->state != CONN_JOINED)
+        return -ENOTCONN;
+    uint8_t buf[PROTO_HEADER_SIZE + 4u + PROTO_SIZE_TRANSFORM];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_object_place(&w, m);
+    return send_frame(c, buf, w.len);
+}
+
+int conn_send_object_remove(conn *c, uint32_t object_id)
+{
+    if (c->state != CONN_JOINED)
+        return -ENOTCONN;
+    uint8_t buf[PROTO_HEADER_SIZE + 4u];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_object_remove(&w, object_id);
+    return send_frame(c, buf, w.len);
+}
+
+size_t conn_out_pending(const conn *c) { return c->out_len; }
+
+int conn_want_writable(conn *c)
+{
+    if (c->ended || c->write_dead || c->bye_sent || c->state == CONN_CONNECTING || !c->h->on_writable)
+        return -ENOTCONN;
+    c->want_writable = 1;
+    if (!(c->armed & EV_WRITE))
+        rearm(c, EV_READ | EV_WRITE);
+    return c->ended ? -ENOTCONN : 0;
 }
 
 void conn_keepalive(conn *c)

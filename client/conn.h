@@ -28,14 +28,12 @@
  * moves at 20 Hz, so it is only reached when the server stops reading. */
 #ifndef CONN_OUT_MAX
 #define CONN_OUT_MAX (64u * 1024u)
-/* ev_timer_start for the client loop, where failing to get a timer (a small
- * allocation) is not recoverable: it logs and aborts. Returns the id. */
-int conn_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_timer_fn *fn, void *data);
-/* Stops *id if it is running (>= 0) and sets it to -1. */
-void conn_timer_stop(ev_loop *loop, int *id);
-
 #endif
 _Static_assert(CONN_OUT_MAX >= PROTO_SIZE_JOIN_MAX + PROTO_SIZE_HELLO, "the handshake fits the backlog");
+
+/* The largest frame the client sends: an upload chunk with a full payload. */
+#define CONN_SIZE_CHUNK_MAX (PROTO_HEADER_SIZE + 8u + PROTO_CHUNK_MAX)
+_Static_assert(CONN_SIZE_CHUNK_MAX <= CONN_OUT_MAX, "a whole chunk fits the backlog");
 
 /* The server closes a connection that sent no frame for the idle timeout it
  * announces in the welcome; a joined connection with nothing else to send
@@ -99,6 +97,10 @@ typedef struct conn_handler {
     /* The end, once, from the before-sleep hook. The conn is CONN_CLOSED and
      * may be freed here. */
     void (*on_close)(conn *c, const conn_end *end, void *data);
+    /* Optional (NULL if never asked for): the answer to conn_want_writable(),
+     * once the backlog is empty and the socket takes more. Called from the
+     * conn's readiness callback; the same rules as for on_msg apply. */
+    void (*on_writable)(conn *c, void *data);
 } conn_handler;
 
 /*
@@ -142,6 +144,33 @@ uint32_t conn_send_move(conn *c, const float pos[3]);
 /* Sends a ping (legal only once joined); 0, or -ENOBUFS (backlog full) or
  * -ENOTCONN. */
 int conn_send_ping(conn *c, uint64_t stamp);
+
+/*
+ * The object requests, legal only once joined. Each sends one whole frame
+ * and returns 0, -ENOBUFS when the backlog has no room for it (nothing was
+ * sent; try again once it drains) or -ENOTCONN (not joined, or the conn
+ * cannot send any more). Strings longer than their limit are cut by the
+ * codec; values are the caller's to check (PROTOCOL.md gives the ranges).
+ */
+int conn_send_upload_begin(conn *c, const proto_upload_begin *m);
+/* len is 1..PROTO_CHUNK_MAX; data is copied before the call returns. */
+int conn_send_upload_chunk(conn *c, uint32_t upload_id, uint32_t offset, const uint8_t *data, uint32_t len);
+int conn_send_upload_end(conn *c, const proto_upload_end *m);
+int conn_send_object_place(conn *c, const proto_object_place *m);
+int conn_send_object_remove(conn *c, uint32_t object_id);
+
+/* Bytes queued in the conn's backlog, not yet taken by the socket. A bulk
+ * sender (an upload) sends only while this is 0, so that whatever else is
+ * sent meanwhile (moves, pongs) waits behind at most one of its frames. */
+size_t conn_out_pending(const conn *c);
+/*
+ * Asks for one on_writable call at the next loop iteration in which the
+ * backlog is empty and the socket is writable: the way to send bulk data a
+ * slice per wakeup without starving reads and timers. Returns 0, or
+ * -ENOTCONN when the conn cannot send any more (no call will come) or the
+ * handler has no on_writable.
+ */
+int conn_want_writable(conn *c);
 /* Pings with the current monotonic time in microseconds if the conn is
  * joined and nothing was sent for a CONN_KEEPALIVE_FRACTION of the server's
  * idle timeout; the pong is consumed

@@ -42,6 +42,18 @@ static void put_vec3(const char *key, const float v[3])
     putchar(']');
 }
 
+/* Angles and scales: three decimals would lose too much of them (a scale
+ * of 0.0015, a tenth of a degree), so they get the seven significant digits
+ * a float holds. */
+static void put_fine(const char *key, float v)
+{
+    printf(",\"%s\":", key);
+    if (isfinite(v))
+        printf("%.7g", (double)v);
+    else
+        fputs("null", stdout);
+}
+
 /* A JSON string from len bytes: quotes, backslashes and control characters
  * escaped, bytes that are not UTF-8 replaced by U+FFFD. The server's strings
  * are already clean; local messages (strerror, paths) need not be. */
@@ -145,6 +157,41 @@ static void snapshot(const proto_snapshot *s)
     finish();
 }
 
+static void object_info(const proto_object_info *o)
+{
+    begin("object", -1);
+    printf(",\"id\":%" PRIu32 ",\"upload\":%" PRIu32, o->object_id, o->upload_id);
+    put_string("owner", o->owner.ptr, o->owner.len);
+    put_string("name", o->name.ptr, o->name.len);
+    put_vec3("pos", o->at.pos);
+    put_fine("yaw", o->at.yaw);
+    put_fine("scale", o->at.scale);
+    printf(",\"ecm_version\":%" PRIu32 ",\"triangles\":%" PRIu32 ",\"boxes\":[", o->ecm_version, o->tri_count);
+    for (uint16_t i = 0; i < o->box_count; i++) {
+        float lo[3], hi[3];
+        proto_object_box(o, i, lo, hi);
+        fputs(i ? ",[" : "[", stdout);
+        for (int k = 0; k < 6; k++) {
+            if (k)
+                putchar(',');
+            put_float(k < 3 ? lo[k] : hi[k - 3]);
+        }
+        putchar(']');
+    }
+    putchar(']');
+    finish();
+}
+
+static void collision(const proto_collision *c)
+{
+    begin("collision", -1);
+    printf(",\"object\":%" PRIu32 ",\"ecm_version\":%" PRIu32 ",\"box\":%u,\"inside\":%s", c->object_id,
+           c->ecm_version, (unsigned)c->box_index, c->inside ? "true" : "false");
+    put_vec3("point", c->point);
+    put_vec3("normal", c->normal);
+    finish();
+}
+
 void events_message(const proto_msg *m, uint64_t now_us)
 {
     switch (m->type) {
@@ -189,6 +236,24 @@ void events_message(const proto_msg *m, uint64_t now_us)
     case PROTO_BYE:
         events_bye(-1, m->u.bye.reason);
         break;
+    case PROTO_OBJECT_INFO:
+        object_info(&m->u.object_info);
+        break;
+    case PROTO_OBJECT_REMOVED:
+        begin("object_removed", -1);
+        printf(",\"id\":%" PRIu32, m->u.object_id);
+        finish();
+        break;
+    case PROTO_OBJECT_REJECTED:
+        begin("rejected", -1);
+        printf(",\"request\":%" PRIu32 ",\"code\":%u", m->u.object_rejected.request_id,
+               (unsigned)m->u.object_rejected.code);
+        put_string("message", m->u.object_rejected.message.ptr, m->u.object_rejected.message.len);
+        finish();
+        break;
+    case PROTO_COLLISION:
+        collision(&m->u.collision);
+        break;
     default:
         break;
     }
@@ -226,14 +291,29 @@ void events_done(const char *command, const float pos[3])
     finish();
 }
 
+void events_done_object(const char *command, const char *result, uint32_t object_id, uint32_t upload_id,
+                        double seconds)
+{
+    begin("done", -1);
+    printf(",\"command\":\"%s\",\"result\":\"%s\",\"object\":", command, result);
+    if (object_id)
+        printf("%" PRIu32, object_id);
+    else
+        fputs("null", stdout);
+    if (upload_id)
+        printf(",\"upload\":%" PRIu32, upload_id);
+    printf(",\"seconds\":%.3f", seconds);
+    finish();
+}
+
 static void counts(const char *event, const events_counts *k, const char *time_key, double t)
 {
     begin(event, -1);
     printf(",\"%s\":%.3f,\"connected\":%" PRIu64 ",\"joined\":%" PRIu64 ",\"moves_sent\":%" PRIu64
            ",\"moves_dropped\":%" PRIu64 ",\"frames_in\":%" PRIu64 ",\"bytes_in\":%" PRIu64
-           ",\"errors\":%" PRIu64 ",\"disconnects\":%" PRIu64,
+           ",\"errors\":%" PRIu64 ",\"disconnects\":%" PRIu64 ",\"collisions\":%" PRIu64,
            time_key, t, k->connected, k->joined, k->moves_sent, k->moves_dropped, k->frames_in,
-           k->bytes_in, k->errors, k->disconnects);
+           k->bytes_in, k->errors, k->disconnects, k->collisions);
     finish();
 }
 

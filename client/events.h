@@ -16,11 +16,13 @@
 /* Totals a swarm reports in its stats and summary lines. */
 typedef struct events_counts {
     uint64_t connected, joined, moves_sent, moves_dropped, frames_in, bytes_in, errors, disconnects;
+    uint64_t collisions; /* COLLISION messages received */
 } events_counts;
 
 /* A message received from the server: welcome, join_ok, joined, left,
- * snapshot, error, pong or bye. Pings are answered, not printed. now_us is
- * the monotonic clock in microseconds, for the rtt of a pong. */
+ * snapshot, error, pong, bye, object, object_removed, rejected or
+ * collision. Pings are answered, not printed. now_us is the monotonic clock
+ * in microseconds, for the rtt of a pong. */
 void events_message(const proto_msg *m, uint64_t now_us);
 
 void events_error(int bot, unsigned code, const char *text, size_t len);
@@ -40,6 +42,14 @@ int events_conn_end(int bot, const conn_end *end, const char *peer);
 
 /* A script command finished; pos is the last authoritative own position. */
 void events_done(const char *command, const float pos[3]);
+/*
+ * An object command (import, place, remove) finished. result is "ok",
+ * "rejected", "timeout" or "failed"; object_id 0 prints null (an import
+ * that made no object); upload_id 0 leaves the field out (place, remove);
+ * seconds is how long the command took.
+ */
+void events_done_object(const char *command, const char *result, uint32_t object_id, uint32_t upload_id,
+                        double seconds);
 
 void events_stats(const events_counts *k, double t);
 void events_summary(const events_counts *k, double duration);

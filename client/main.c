@@ -61,7 +61,9 @@ static void usage(FILE *f)
           "  --help, --version\n"
           "Without --bots or --script, commands come from standard input\n"
           "(interactively on a terminal): move X Y Z, walk DX DZ SECONDS, wait MS,\n"
-          "ping, quit. Events are printed on stdout as JSON lines.\n",
+          "ping, import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z\n"
+          "[--yaw DEGREES] [--size S], place ID X Y Z [--yaw DEGREES] [--size S],\n"
+          "remove ID, quit. Events are printed on stdout as JSON lines.\n",
           f);
 }
 

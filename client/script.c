@@ -2,10 +2,14 @@
 #include "script.h"
 
 #include <errno.h>
+#include <fcntl.h>
+#include <inttypes.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <sys/types.h>
 #include <unistd.h>
 
@@ -40,20 +44,75 @@
 #define WALK_MAX_S 86400.0
 #define COORD_MAX 1e7
 
+/* Objects. Scales are checked as typed, against the decimal bounds: the f32
+ * they round to are exactly PROTO_SCALE_MIN and PROTO_SCALE_MAX, so what
+ * passes here passes the server's check. A yaw is reduced modulo 360 before
+ * it is turned into radians, so the bound only keeps typos out. */
+#define OBJ_SCALE_MIN 0.001
+#define OBJ_SCALE_MAX 1000.0
+#define YAW_MAX_DEG 1e6
+/* A model file larger than this is refused before a byte is sent. The
+ * server's own cap is far lower (16 MiB by default, --max-upload) and is the
+ * one that normally speaks, in an OBJECT_REJECTED; this one keeps a wrong
+ * path (a disk image) from streaming for minutes first, and keeps the size
+ * well inside the wire's u32. */
+#ifndef IMPORT_FILE_MAX
+#define IMPORT_FILE_MAX (1024ull * 1024u * 1024u)
+#endif
+_Static_assert(IMPORT_FILE_MAX <= UINT32_MAX, "total_size is a u32");
+/* An import is given up when it has made no progress for this long: no
+ * frame of it could be sent, or, once its end is out, no answer came.
+ * Importing a large model (voxelizing, clustering) takes the server a while. */
+#ifndef IMPORT_TIMEOUT_S
+#define IMPORT_TIMEOUT_S 120
+#endif
+#define IMPORT_TIMEOUT_NS ((uint64_t)IMPORT_TIMEOUT_S * NS_PER_S)
+#define IMPORT_CHECK_NS NS_PER_S
+/* Upload frames sent per wakeup, so that reading (and the pongs and events
+ * that brings) and timers run between slices of a large upload: 4 chunks
+ * are 64 KiB. */
+#define IMPORT_FRAMES_PER_WAKEUP 4
+/* The upload's window. The socket buffers on both ends hold megabytes (all
+ * of a model, on loopback), and whatever else we send (moves, pongs) waits
+ * behind them until the server has read them. So every IMPORT_PROBE_BYTES
+ * the upload sends a ping whose pong says the server has read that far, and
+ * it stays at most IMPORT_WINDOW_BYTES ahead of the last one answered: at
+ * 256 KiB a 50 ms round trip still allows 5 MB/s. */
+#ifndef IMPORT_WINDOW_BYTES
+#define IMPORT_WINDOW_BYTES (256u * 1024u)
+#endif
+#define IMPORT_PROBE_BYTES (IMPORT_WINDOW_BYTES / 4u)
+_Static_assert(IMPORT_PROBE_BYTES >= PROTO_CHUNK_MAX, "at least a chunk between probes");
+/* The probes' stamps: this bit, the upload id in bits 32..62 (cut), the
+ * offset reached below. The ping command's and the keepalive's stamps are
+ * clock readings in microseconds, which never reach bit 63. */
+#define IMPORT_PROBE_MARK (1ull << 63)
+/* How long place and remove wait for the server's answer. */
+#define OBJECT_WAIT_NS (5ull * NS_PER_S)
+#define PI 3.14159265358979323846
+
 /* ---- parsing ----------------------------------------------------------- */
+
+/* Words on one line: a full import has 16. */
+#define WORDS_MAX 24
 
 static const struct {
     const char *name;
     int op;
-    int nargs;
+    int nargs; /* -1: parsed by a function of its own */
     const char *usage;
 } commands[] = {
     {"move", SCRIPT_MOVE, 3, "move X Y Z"},
     {"walk", SCRIPT_WALK, 3, "walk DX DZ SECONDS"},
     {"wait", SCRIPT_WAIT, 1, "wait MS"},
     {"ping", SCRIPT_PING, 0, "ping"},
+    {"import", SCRIPT_IMPORT, -1,
+     "import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z [--yaw DEGREES] [--size S]"},
+    {"place", SCRIPT_PLACE, -1, "place ID X Y Z [--yaw DEGREES] [--size S]"},
+    {"remove", SCRIPT_REMOVE, -1, "remove ID"},
     {"quit", SCRIPT_QUIT, 0, "quit"},
 };
+#define NCOMMANDS (sizeof commands / sizeof commands[0])
 
 /* Parses a whole token as a number within [lo, hi]; strtod alone would take
  * "nan", "inf" and trailing junk. Returns 0 or -1. */
@@ -67,6 +126,216 @@ static int parse_number(const char *tok, double lo, double hi, double *out)
     return 0;
 }
 
+/* An object id: decimal digits only, 1..2^32-1 (0 means "none" on the wire). */
+static int parse_id(const char *tok, uint32_t *out)
+{
+    if (*tok < '0' || *tok > '9')
+        return -1;
+    char *end;
+    errno = 0;
+    unsigned long long v = strtoull(tok, &end, 10);
+    if (*end != '\0' || errno || v == 0 || v > UINT32_MAX)
+        return -1;
+    *out = (uint32_t)v;
+    return 0;
+}
+
+static int is_blank(char ch) { return ch == ' ' || ch == '\t' || ch == '\r' || ch == '\v' || ch == '\f'; }
+
+/*
+ * Splits buf in place into words (at most WORDS_MAX) at blanks. A word that
+ * starts with a double quote runs to the next one and may hold blanks and
+ * '#' (there is no escape: a path with a quote in it cannot be written); an
+ * unquoted '#' ends the line. Returns the count, or -1 with a message.
+ */
+static int split_words(char *buf, char **word, char *err, size_t errlen)
+{
+    int n = 0;
+    char *p = buf;
+    for (;;) {
+        while (is_blank(*p))
+            p++;
+        if (*p == '\0' || *p == '#')
+            return n;
+        if (n == WORDS_MAX) {
+            snprintf(err, errlen, "too many words");
+            return -1;
+        }
+        if (*p == '"') {
+            char *close = strchr(p + 1, '"');
+            if (!close) {
+                snprintf(err, errlen, "unterminated quote");
+                return -1;
+            }
+            *close = '\0';
+            word[n++] = p + 1;
+            p = close + 1;
+            if (*p != '\0' && *p != '#' && !is_blank(*p)) {
+                snprintf(err, errlen, "a blank must follow a closing quote");
+                return -1;
+            }
+            continue;
+        }
+        word[n++] = p;
+        while (*p != '\0' && *p != '#' && !is_blank(*p))
+            p++;
+        if (*p == '#') {
+            *p = '\0';
+            return n;
+        }
+        if (*p != '\0')
+            *p++ = '\0';
+    }
+}
+
+/* An object name as the wire takes it: 1..PROTO_OBJECT_NAME_MAX bytes of
+ * well-formed UTF-8 without control characters (PROTOCOL.md's text rule). */
+static int object_name_ok(const char *name)
+{
+    size_t n = strlen(name);
+    if (n == 0 || n > PROTO_OBJECT_NAME_MAX)
+        return 0;
+    for (size_t i = 0; i < n;) {
+        uint32_t cp;
+        size_t k = proto_utf8_next((const uint8_t *)name + i, n - i, &cp);
+        if (k == 0 || cp < 0x20u || cp == 0x7fu)
+            return 0;
+        i += k;
+    }
+    return 1;
+}
+
+enum { OPT_AT, OPT_UP, OPT_SCALE, OPT_NAME, OPT_YAW, OPT_SIZE, OPT_COUNT };
+static const char *const opt_names[OPT_COUNT] = {"at", "--up", "--scale", "--name", "--yaw", "--size"};
+
+/*
+ * Parses the words of an import after FILE, or of a place after ID X Y Z:
+ * the options in any order, each at most once ("at X Y Z" counts as one,
+ * and only import takes it and the file options). Returns 0, or -1 with a
+ * message that ends with the usage.
+ */
+static int parse_object_opts(char **w, int n, const char *usage, script_cmd *cmd, char *err, size_t errlen)
+{
+    const char *what = cmd->op == SCRIPT_IMPORT ? "import" : "place";
+    unsigned seen = 0;
+    for (int i = 0; i < n;) {
+        int o = 0;
+        while (o < OPT_COUNT && strcmp(opt_names[o], w[i]) != 0)
+            o++;
+        if (o == OPT_COUNT || (cmd->op == SCRIPT_PLACE && o < OPT_YAW)) {
+            snprintf(err, errlen, "%s: unexpected '%.40s': %s", what, w[i], usage);
+            return -1;
+        }
+        if (seen & 1u << o) {
+            snprintf(err, errlen, "%s: '%s' given twice: %s", what, opt_names[o], usage);
+            return -1;
+        }
+        seen |= 1u << o;
+        int nv = o == OPT_AT ? 3 : 1;
+        if (n - i - 1 < nv) {
+            snprintf(err, errlen, "%s: '%s' needs %s: %s", what, opt_names[o], o == OPT_AT ? "X Y Z" : "a value",
+                     usage);
+            return -1;
+        }
+        const char *v = w[i + 1];
+        double lo = OBJ_SCALE_MIN, hi = OBJ_SCALE_MAX;
+        int ok = 1;
+        switch (o) {
+        case OPT_AT:
+            lo = -COORD_MAX;
+            hi = COORD_MAX;
+            for (int k = 0; k < 3 && ok; k++) {
+                v = w[i + 1 + k];
+                ok = parse_number(v, lo, hi, &cmd->arg[k]) == 0;
+            }
+            break;
+        case OPT_UP:
+            if (strcmp(v, "y") == 0 || strcmp(v, "Y") == 0)
+                cmd->up_axis = PROTO_UP_Y;
+            else if (strcmp(v, "z") == 0 || strcmp(v, "Z") == 0)
+                cmd->up_axis = PROTO_UP_Z;
+            else {
+                snprintf(err, errlen, "import: --up: bad axis '%.40s' (want y or z): %s", v, usage);
+                return -1;
+            }
+            break;
+        case OPT_NAME:
+            if (!object_name_ok(v)) {
+                snprintf(err, errlen,
+                         "import: --name: bad name '%.40s' (want 1 to %u bytes of UTF-8, no control characters): %s",
+                         v, PROTO_OBJECT_NAME_MAX, usage);
+                return -1;
+            }
+            snprintf(cmd->name, sizeof cmd->name, "%s", v);
+            break;
+        case OPT_YAW:
+            lo = -YAW_MAX_DEG;
+            hi = YAW_MAX_DEG;
+            ok = parse_number(v, lo, hi, &cmd->yaw_deg) == 0;
+            cmd->has_yaw = 1;
+            break;
+        case OPT_SCALE:
+            ok = parse_number(v, lo, hi, &cmd->unit_scale) == 0;
+            break;
+        default: /* OPT_SIZE */
+            ok = parse_number(v, lo, hi, &cmd->size) == 0;
+            cmd->has_size = 1;
+            break;
+        }
+        if (!ok) {
+            snprintf(err, errlen, "%s: %s: bad number '%.40s' (want a finite number in [%g, %g]): %s", what,
+                     opt_names[o], v, lo, hi, usage);
+            return -1;
+        }
+        i += 1 + nv;
+    }
+    if (cmd->op == SCRIPT_IMPORT && !(seen & 1u << OPT_AT)) {
+        snprintf(err, errlen, "import: missing 'at X Y Z': %s", usage);
+        return -1;
+    }
+    return 0;
+}
+
+/* import, place and remove; w[0] is the command. Returns 0 or -1. */
+static int parse_object_cmd(char **w, int n, const char *usage, script_cmd *cmd, char *err, size_t errlen)
+{
+    cmd->yaw_deg = 0.0;
+    cmd->size = 1.0;
+    cmd->unit_scale = 1.0;
+    cmd->up_axis = PROTO_UP_Y;
+    if (cmd->op == SCRIPT_IMPORT) {
+        if (n < 2 || w[1][0] == '\0') {
+            snprintf(err, errlen, "import: expected a file: %s", usage);
+            return -1;
+        }
+        if (parse_object_opts(w + 2, n - 2, usage, cmd, err, errlen) < 0)
+            return -1;
+        cmd->file = xmalloc(strlen(w[1]) + 1);
+        strcpy(cmd->file, w[1]);
+        return 0;
+    }
+    const char *what = cmd->op == SCRIPT_PLACE ? "place" : "remove";
+    int fixed = cmd->op == SCRIPT_PLACE ? 5 : 2;
+    if (n < fixed || (cmd->op == SCRIPT_REMOVE && n > fixed)) {
+        snprintf(err, errlen, "%s: expected %s: %s", what, cmd->op == SCRIPT_PLACE ? "ID X Y Z" : "ID", usage);
+        return -1;
+    }
+    if (parse_id(w[1], &cmd->object_id) < 0) {
+        snprintf(err, errlen, "%s: bad object id '%.40s' (want 1 to %" PRIu32 "): %s", what, w[1], UINT32_MAX,
+                 usage);
+        return -1;
+    }
+    if (cmd->op == SCRIPT_REMOVE)
+        return 0;
+    for (int k = 0; k < 3; k++)
+        if (parse_number(w[2 + k], -COORD_MAX, COORD_MAX, &cmd->arg[k]) < 0) {
+            snprintf(err, errlen, "place: bad number '%.40s' (want a finite number in [%g, %g]): %s", w[2 + k],
+                     -COORD_MAX, COORD_MAX, usage);
+            return -1;
+        }
+    return parse_object_opts(w + 5, n - 5, usage, cmd, err, errlen);
+}
+
 int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errlen)
 {
     char buf[SCRIPT_LINE_MAX + 1];
@@ -76,35 +345,28 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
         return -1;
     }
     memcpy(buf, line, n + 1);
-    char *hash = strchr(buf, '#');
-    if (hash)
-        *hash = '\0';
 
-    char *tok[5], *save = NULL;
-    int nt = 0;
-    for (char *t = strtok_r(buf, " \t\r\v\f", &save); t; t = strtok_r(NULL, " \t\r\v\f", &save)) {
-        if (nt == 5) {
-            snprintf(err, errlen, "too many words");
-            return -1;
-        }
-        tok[nt++] = t;
-    }
-    if (nt == 0)
-        return 0;
+    char *tok[WORDS_MAX];
+    int nt = split_words(buf, tok, err, errlen);
+    if (nt <= 0)
+        return nt;
 
     size_t k = 0;
-    while (k < sizeof commands / sizeof commands[0] && strcmp(commands[k].name, tok[0]) != 0)
+    while (k < NCOMMANDS && strcmp(commands[k].name, tok[0]) != 0)
         k++;
-    if (k == sizeof commands / sizeof commands[0]) {
-        snprintf(err, errlen, "unknown command '%.40s' (move, walk, wait, ping, quit)", tok[0]);
+    if (k == NCOMMANDS) {
+        snprintf(err, errlen, "unknown command '%.40s' (move, walk, wait, ping, import, place, remove, quit)",
+                 tok[0]);
         return -1;
     }
+    *cmd = (script_cmd){.op = commands[k].op};
+    if (commands[k].nargs < 0)
+        return parse_object_cmd(tok, nt, commands[k].usage, cmd, err, errlen) < 0 ? -1 : 1;
     if (nt - 1 != commands[k].nargs) {
         snprintf(err, errlen, "%s: expected %d argument%s: %s", commands[k].name, commands[k].nargs,
                  commands[k].nargs == 1 ? "" : "s", commands[k].usage);
         return -1;
     }
-    cmd->op = commands[k].op;
     for (int i = 0; i < commands[k].nargs; i++) {
         double lo = -COORD_MAX, hi = COORD_MAX;
         if (cmd->op == SCRIPT_WAIT) {
@@ -121,6 +383,12 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
         }
     }
     return 1;
+}
+
+void script_cmd_clear(script_cmd *cmd)
+{
+    free(cmd->file);
+    cmd->file = NULL;
 }
 
 /* ---- the runner -------------------------------------------------------- */
@@ -161,11 +429,39 @@ struct script {
     uint64_t t_sent;          /* walk: when the last move went out */
     uint64_t ping_stamp;
 
+    /* import: the upload of the running command */
+    int imp_phase;      /* enum import_phase */
+    int imp_fd;         /* the model file, -1 when closed */
+    uint32_t imp_id;    /* its upload id */
+    uint32_t imp_size;  /* bytes in all, */
+    uint32_t imp_off;   /* and sent */
+    uint32_t imp_acked; /* the server has read this far (window probes) */
+    int imp_begun;      /* the server has read the BEGIN (its probe came back) */
+    uint32_t imp_probe_at; /* next probe once imp_off reaches this */
+    int imp_aborted;    /* the file failed mid-way; waiting for the server to drop the upload */
+    uint64_t t_progress;
+    uint32_t last_upload_id;
+    uint8_t chunk[PROTO_CHUNK_MAX];
+
+    /* Objects the server told us about, sorted by id, so that a place that
+     * does not name a yaw or a size keeps the current ones. */
+    struct known_object {
+        uint32_t id;
+        float yaw, scale;
+    } *objs;
+    size_t n_objs, cap_objs;
+
     int keepalive_timer;
     int linger_timer;
+    int start_timer;
 };
 
+/* Where an import stands: its frames go out in this order, each only once
+ * the backlog is empty, and then it waits for the server's answer. */
+enum import_phase { IMPORT_NONE, IMPORT_BEGIN, IMPORT_CHUNKS, IMPORT_END, IMPORT_WAIT };
+
 static void advance(script *s);
+static ev_timer_fn on_cmd_timer;
 
 static void fail(script *s, int code)
 {
@@ -181,25 +477,337 @@ static double dist3(const float a[3], const float b[3])
 
 static const char *op_name(int op)
 {
-    for (size_t k = 0; k < sizeof commands / sizeof commands[0]; k++)
+    for (size_t k = 0; k < NCOMMANDS; k++)
         if (commands[k].op == op)
             return commands[k].name;
     return "?";
 }
 
+/* Lets go of what the running command holds (its timer, an import's file,
+ * its strings); it is no longer running. */
+static void cmd_release(script *s)
+{
+    conn_timer_stop(s->loop, &s->cmd_timer);
+    if (s->imp_fd >= 0) {
+        close(s->imp_fd);
+        s->imp_fd = -1;
+    }
+    s->imp_phase = IMPORT_NONE;
+    s->imp_id = 0;
+    s->imp_aborted = 0;
+    script_cmd_clear(&s->cur);
+    s->running = 0;
+}
+
 /* Ends the running command; move, walk and wait report where we are. */
 static void cmd_done(script *s)
 {
-    conn_timer_stop(s->loop, &s->cmd_timer);
-    s->running = 0;
     if (s->cur.op == SCRIPT_MOVE || s->cur.op == SCRIPT_WALK || s->cur.op == SCRIPT_WAIT)
         events_done(op_name(s->cur.op), conn_get_view(s->c)->pos);
+    cmd_release(s);
 }
 
 static void cmd_finish(script *s)
 {
     cmd_done(s);
     advance(s);
+}
+
+/* Ends the running import, place or remove with its done event (result as
+ * events_done_object() takes it) without advancing; for an import,
+ * object_id is the object it made, 0 if none. */
+static void obj_done(script *s, const char *result, uint32_t object_id)
+{
+    double secs = (double)(ev_now(s->loop) - s->t_start) / (double)NS_PER_S;
+    if (s->cur.op == SCRIPT_IMPORT)
+        events_done_object("import", result, object_id, s->imp_id, secs);
+    else
+        events_done_object(op_name(s->cur.op), result, s->cur.object_id, 0, secs);
+    cmd_release(s);
+}
+
+static void obj_finish(script *s, const char *result, uint32_t object_id)
+{
+    obj_done(s, result, object_id);
+    advance(s);
+}
+
+/* A local failure of an object command: an error event with code 0 (as for
+ * the client's other own errors), the same text on stderr for whoever
+ * watches the terminal. The command then ends as "failed". */
+__attribute__((format(printf, 1, 2))) static void obj_error(const char *fmt, ...)
+{
+    char text[PROTO_MESSAGE_MAX + 100];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    log_warn("%s", text);
+    events_error(-1, 0, text, strlen(text));
+}
+
+/* ---- known objects ----------------------------------------------------- */
+
+/* Index of the first entry whose id is >= id. */
+static size_t objects_at(const script *s, uint32_t id)
+{
+    size_t lo = 0, hi = s->n_objs;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (s->objs[mid].id < id)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+static const struct known_object *objects_get(const script *s, uint32_t id)
+{
+    size_t i = objects_at(s, id);
+    return i < s->n_objs && s->objs[i].id == id ? &s->objs[i] : NULL;
+}
+
+static void objects_put(script *s, uint32_t id, float yaw, float scale)
+{
+    size_t i = objects_at(s, id);
+    if (i == s->n_objs || s->objs[i].id != id) {
+        if (s->n_objs == s->cap_objs) {
+            s->cap_objs = s->cap_objs ? s->cap_objs * 2 : 64;
+            s->objs = xrealloc(s->objs, s->cap_objs * sizeof *s->objs);
+        }
+        memmove(s->objs + i + 1, s->objs + i, (s->n_objs - i) * sizeof *s->objs);
+        s->n_objs++;
+    }
+    s->objs[i] = (struct known_object){id, yaw, scale};
+}
+
+static void objects_del(script *s, uint32_t id)
+{
+    size_t i = objects_at(s, id);
+    if (i < s->n_objs && s->objs[i].id == id) {
+        memmove(s->objs + i, s->objs + i + 1, (s->n_objs - i - 1) * sizeof *s->objs);
+        s->n_objs--;
+    }
+}
+
+/* ---- import ------------------------------------------------------------ */
+
+/* The object's name from the file's base name, for an import without
+ * --name: what the text rule forbids (control characters, broken UTF-8)
+ * becomes '?', and it is cut at the last character boundary within
+ * PROTO_OBJECT_NAME_MAX bytes. */
+static void name_from_path(const char *path, char out[PROTO_OBJECT_NAME_MAX + 1])
+{
+    const char *slash = strrchr(path, '/');
+    const uint8_t *base = (const uint8_t *)(slash ? slash + 1 : path);
+    size_t n = strlen((const char *)base), o = 0;
+    for (size_t i = 0; i < n;) {
+        uint32_t cp;
+        size_t k = proto_utf8_next(base + i, n - i, &cp);
+        int bad = k == 0 || cp < 0x20u || cp == 0x7fu;
+        size_t w = bad ? 1 : k;
+        if (o + w > PROTO_OBJECT_NAME_MAX)
+            break;
+        if (bad)
+            out[o] = '?';
+        else
+            memcpy(out + o, base + i, k);
+        o += w;
+        i += k ? k : 1;
+    }
+    if (o == 0)
+        memcpy(out, "model", (o = 5));
+    out[o] = '\0';
+}
+
+/* The format hint: the base name's extension lowercased when it is 1 to
+ * PROTO_FORMAT_MAX letters and digits, else "" for the server to detect. */
+static void format_from_path(const char *path, char out[PROTO_FORMAT_MAX + 1])
+{
+    const char *slash = strrchr(path, '/');
+    const char *base = slash ? slash + 1 : path;
+    const char *dot = strrchr(base, '.');
+    out[0] = '\0';
+    if (!dot || dot == base)
+        return;
+    size_t n = strlen(dot + 1);
+    if (n == 0 || n > PROTO_FORMAT_MAX)
+        return;
+    for (size_t i = 0; i < n; i++) {
+        char ch = dot[1 + i];
+        if (ch >= 'A' && ch <= 'Z')
+            ch = (char)(ch - 'A' + 'a');
+        if (!((ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9'))) {
+            out[0] = '\0';
+            return;
+        }
+        out[i] = ch;
+    }
+    out[n] = '\0';
+}
+
+static uint64_t probe_stamp(const script *s, uint32_t off)
+{
+    return IMPORT_PROBE_MARK | (uint64_t)(s->imp_id & 0x7fffffffu) << 32 | off;
+}
+
+/* Yaw in radians from degrees, reduced to one turn first so that a large
+ * angle loses nothing in the f32. */
+static float yaw_radians(double deg) { return (float)(fmod(deg, 360.0) * (PI / 180.0)); }
+
+/*
+ * Ends an upload the file failed in the middle of. The server holds one
+ * upload per connection until it is complete, so it is ended early: an
+ * OBJECT_UPLOAD_END short of the announced size makes the server drop it
+ * and say so, and the import is over ("failed") when that rejection comes.
+ * Returns 0 while waiting for it, -1 if even that could not be sent.
+ */
+static int import_abort(script *s)
+{
+    proto_upload_end e = {.upload_id = s->imp_id, .at = {.scale = 1.0f}};
+    if (conn_send_upload_end(s->c, &e) < 0)
+        return -1;
+    close(s->imp_fd);
+    s->imp_fd = -1;
+    s->imp_phase = IMPORT_WAIT;
+    s->imp_aborted = 1;
+    s->t_progress = ev_now(s->loop);
+    return 0;
+}
+
+/*
+ * Sends what is next of the running import, up to IMPORT_FRAMES_PER_WAKEUP
+ * frames and only while the backlog is empty, then asks for an on_writable
+ * call to go on. Returns 0, or -1 after reporting a local read failure (the
+ * caller ends the command). A conn that cannot send any more is left to
+ * on_close, which ends the run.
+ */
+static int import_pump(script *s)
+{
+    for (int budget = IMPORT_FRAMES_PER_WAKEUP; s->imp_phase != IMPORT_WAIT; budget--) {
+        if (budget == 0 || conn_out_pending(s->c) > 0) {
+            conn_want_writable(s->c);
+            return 0;
+        }
+        int rc;
+        if (s->imp_phase == IMPORT_BEGIN) {
+            char name[PROTO_OBJECT_NAME_MAX + 1], format[PROTO_FORMAT_MAX + 1];
+            if (s->cur.name[0])
+                snprintf(name, sizeof name, "%s", s->cur.name);
+            else
+                name_from_path(s->cur.file, name);
+            format_from_path(s->cur.file, format);
+            proto_upload_begin b = {.upload_id = s->imp_id, .total_size = s->imp_size,
+                                    .name = {name, (uint32_t)strlen(name)},
+                                    .format = {format, (uint32_t)strlen(format)},
+                                    .up_axis = (uint8_t)s->cur.up_axis, .unit_scale = (float)s->cur.unit_scale};
+            rc = conn_send_upload_begin(s->c, &b);
+            if (rc == 0) {
+                /* Chunks wait for this probe's pong: a refused BEGIN (too
+                 * big, one upload at a time) is answered before it, and
+                 * chunks sent meanwhile would each be refused too. */
+                conn_send_ping(s->c, probe_stamp(s, 0));
+                s->imp_phase = IMPORT_CHUNKS;
+            }
+        } else if (s->imp_phase == IMPORT_CHUNKS) {
+            if (!s->imp_begun || s->imp_off - s->imp_acked >= IMPORT_WINDOW_BYTES)
+                return 0; /* the pong of a probe goes on */
+            uint32_t want = s->imp_size - s->imp_off;
+            if (want > PROTO_CHUNK_MAX)
+                want = PROTO_CHUNK_MAX;
+            ssize_t k = pread(s->imp_fd, s->chunk, want, (off_t)s->imp_off);
+            if (k < 0 && errno == EINTR)
+                continue;
+            if (k <= 0) {
+                obj_error("import: cannot read %s: %s", s->cur.file,
+                          k < 0 ? strerror(errno) : "the file shrank while it was being sent");
+                return import_abort(s);
+            }
+            rc = conn_send_upload_chunk(s->c, s->imp_id, s->imp_off, s->chunk, (uint32_t)k);
+            if (rc == 0) {
+                s->imp_off += (uint32_t)k;
+                if (s->imp_off == s->imp_size)
+                    s->imp_phase = IMPORT_END;
+                else if (s->imp_off >= s->imp_probe_at) {
+                    /* Fits: the backlog holds at most this chunk's rest. */
+                    conn_send_ping(s->c, probe_stamp(s, s->imp_off));
+                    s->imp_probe_at = s->imp_off + IMPORT_PROBE_BYTES;
+                }
+            }
+        } else {
+            proto_upload_end e = {.upload_id = s->imp_id,
+                                  .at = {.pos = {(float)s->cur.arg[0], (float)s->cur.arg[1], (float)s->cur.arg[2]},
+                                         .yaw = yaw_radians(s->cur.yaw_deg), .scale = (float)s->cur.size}};
+            rc = conn_send_upload_end(s->c, &e);
+            if (rc == 0) {
+                s->imp_phase = IMPORT_WAIT;
+                close(s->imp_fd);
+                s->imp_fd = -1;
+            }
+        }
+        if (rc == -ENOBUFS) {
+            conn_want_writable(s->c);
+            return 0;
+        }
+        if (rc < 0)
+            return 0; /* the conn is ending; on_close follows */
+        s->t_progress = ev_now(s->loop);
+    }
+    return 0;
+}
+
+/* The pong of a window probe (not printed: nobody asked for it). Opens
+ * the window up to the offset it carries and goes on sending. */
+static void import_probed(script *s, uint64_t stamp)
+{
+    uint32_t off = (uint32_t)stamp;
+    if (!s->running || s->cur.op != SCRIPT_IMPORT || s->imp_phase != IMPORT_CHUNKS ||
+        stamp != probe_stamp(s, off) || off > s->imp_off || (s->imp_begun && off <= s->imp_acked))
+        return;
+    s->imp_begun = 1;
+    s->imp_acked = off;
+    s->t_progress = ev_now(s->loop);
+    if (conn_out_pending(s->c) == 0 && import_pump(s) < 0)
+        obj_finish(s, "failed", 0);
+}
+
+/*
+ * Starts an import: opens and checks the file, then sends what it can. A
+ * file that cannot be read is an error event and the command ends at once
+ * ("failed"), the script goes on. Returns 1 if the command is still
+ * running, 0 if it ended here.
+ */
+static int import_start(script *s)
+{
+    const char *file = s->cur.file;
+    struct stat st;
+    s->imp_fd = open(file, O_RDONLY | O_CLOEXEC | O_NONBLOCK); /* a FIFO must not block us */
+    if (s->imp_fd < 0 || fstat(s->imp_fd, &st) < 0) {
+        obj_error("import: cannot read %s: %s", file, strerror(errno));
+    } else if (!S_ISREG(st.st_mode)) {
+        obj_error("import: cannot read %s: not a regular file", file);
+    } else if (st.st_size == 0) {
+        obj_error("import: cannot read %s: the file is empty", file);
+    } else if ((unsigned long long)st.st_size > IMPORT_FILE_MAX) {
+        obj_error("import: cannot read %s: %lld bytes, over the limit of %llu bytes", file,
+                  (long long)st.st_size, (unsigned long long)IMPORT_FILE_MAX);
+    } else {
+        if (++s->last_upload_id == 0)
+            s->last_upload_id = 1;
+        s->imp_id = s->last_upload_id;
+        s->imp_size = (uint32_t)st.st_size;
+        s->imp_off = s->imp_acked = 0;
+        s->imp_begun = 0;
+        s->imp_probe_at = IMPORT_PROBE_BYTES;
+        s->imp_phase = IMPORT_BEGIN;
+        s->t_progress = ev_now(s->loop);
+        s->cmd_timer = conn_timer_start(s->loop, IMPORT_CHECK_NS, IMPORT_CHECK_NS, on_cmd_timer, s);
+        if (import_pump(s) == 0)
+            return 1;
+    }
+    obj_done(s, "failed", 0);
+    return 0;
 }
 
 static void on_linger(ev_loop *loop, void *data)
@@ -217,8 +825,7 @@ static void quit(script *s)
     if (s->quitting)
         return;
     s->quitting = 1;
-    conn_timer_stop(s->loop, &s->cmd_timer);
-    s->running = 0;
+    cmd_release(s);
     if (conn_bye(s->c, PROTO_BYE_QUIT))
         events_bye_sent(PROTO_BYE_QUIT);
     s->linger_timer = conn_timer_start(s->loop, QUIT_LINGER_NS, 0, on_linger, s);
@@ -299,6 +906,21 @@ static void on_cmd_timer(ev_loop *loop, void *data)
         s->cmd_timer = -1; /* one-shot: fired, its id may be reused */
         cmd_finish(s);
         break;
+    case SCRIPT_IMPORT:
+        if (now - s->t_progress >= IMPORT_TIMEOUT_NS) {
+            log_warn("import of %s: %s for %llu s; giving up", s->cur.file,
+                     s->imp_phase == IMPORT_WAIT ? "no answer from the server" : "could not send",
+                     (unsigned long long)(IMPORT_TIMEOUT_NS / NS_PER_S));
+            obj_finish(s, s->imp_aborted ? "failed" : "timeout", 0);
+        }
+        break;
+    case SCRIPT_PLACE:
+    case SCRIPT_REMOVE:
+        log_warn("%s %" PRIu32 ": no answer within %llu s", op_name(s->cur.op), s->cur.object_id,
+                 OBJECT_WAIT_NS / NS_PER_S);
+        s->cmd_timer = -1;
+        obj_finish(s, "timeout", 0);
+        break;
     default: /* wait */
         s->cmd_timer = -1;
         cmd_finish(s);
@@ -345,11 +967,39 @@ static void cmd_start(script *s, const script_cmd *cmd)
         s->ping_stamp = ev_clock(s->loop) / 1000u;
         if (conn_send_ping(s->c, s->ping_stamp) < 0) {
             log_warn("ping not sent: output backlog full");
-            cmd_done(s);
+            cmd_release(s);
             return;
         }
         s->cmd_timer = conn_timer_start(s->loop, PING_WAIT_NS, 0, on_cmd_timer, s);
         break;
+    case SCRIPT_IMPORT:
+        import_start(s);
+        break;
+    case SCRIPT_PLACE: {
+        const struct known_object *k = objects_get(s, cmd->object_id);
+        proto_object_place p = {.object_id = cmd->object_id,
+                                .at = {.pos = {(float)cmd->arg[0], (float)cmd->arg[1], (float)cmd->arg[2]},
+                                       .yaw = cmd->has_yaw ? yaw_radians(cmd->yaw_deg) : k ? k->yaw : 0.0f,
+                                       .scale = cmd->has_size ? (float)cmd->size : k ? k->scale : 1.0f}};
+        int rc = conn_send_object_place(s->c, &p);
+        if (rc < 0) {
+            obj_error("place %" PRIu32 ": not sent: %s", cmd->object_id, strerror(-rc));
+            obj_done(s, "failed", 0);
+            return;
+        }
+        s->cmd_timer = conn_timer_start(s->loop, OBJECT_WAIT_NS, 0, on_cmd_timer, s);
+        break;
+    }
+    case SCRIPT_REMOVE: {
+        int rc = conn_send_object_remove(s->c, cmd->object_id);
+        if (rc < 0) {
+            obj_error("remove %" PRIu32 ": not sent: %s", cmd->object_id, strerror(-rc));
+            obj_done(s, "failed", 0);
+            return;
+        }
+        s->cmd_timer = conn_timer_start(s->loop, OBJECT_WAIT_NS, 0, on_cmd_timer, s);
+        break;
+    }
     default:
         s->running = 0;
         quit(s);
@@ -374,15 +1024,30 @@ static void advance(script *s)
     }
 }
 
+static void on_start(ev_loop *loop, void *data)
+{
+    script *s = data;
+    (void)loop;
+    s->start_timer = -1;
+    advance(s);
+}
+
 static void on_msg(conn *c, const proto_msg *m, void *data)
 {
     script *s = data;
     const conn_view *v = conn_get_view(c);
     uint64_t now = ev_clock(s->loop);
+    if (m->type == PROTO_PONG && (m->u.ping.stamp & IMPORT_PROBE_MARK)) {
+        import_probed(s, m->u.ping.stamp);
+        return;
+    }
     events_message(m, now / 1000u);
     switch (m->type) {
     case PROTO_JOIN_OK:
-        advance(s);
+        /* The world's objects follow the join; letting them in first (the
+         * rest of this read, at least) gives a first place command the
+         * current yaw and size to keep. */
+        s->start_timer = conn_timer_start(s->loop, 0, 0, on_start, s);
         break;
     case PROTO_SNAPSHOT:
         if (!s->running)
@@ -398,9 +1063,42 @@ static void on_msg(conn *c, const proto_msg *m, void *data)
     case PROTO_ERROR:
         fail(s, 1);
         break;
+    case PROTO_OBJECT_INFO: {
+        const proto_object_info *o = &m->u.object_info;
+        objects_put(s, o->object_id, o->at.yaw, o->at.scale);
+        if (!s->running)
+            break;
+        if (s->cur.op == SCRIPT_IMPORT && s->imp_phase != IMPORT_NONE && o->upload_id == s->imp_id)
+            obj_finish(s, "ok", o->object_id);
+        else if (s->cur.op == SCRIPT_PLACE && o->object_id == s->cur.object_id)
+            obj_finish(s, "ok", o->object_id);
+        break;
+    }
+    case PROTO_OBJECT_REMOVED:
+        objects_del(s, m->u.object_id);
+        if (s->running && s->cur.op == SCRIPT_REMOVE && m->u.object_id == s->cur.object_id)
+            obj_finish(s, "ok", 0);
+        break;
+    case PROTO_OBJECT_REJECTED: {
+        uint32_t id = m->u.object_rejected.request_id;
+        if (s->running && ((s->cur.op == SCRIPT_IMPORT && s->imp_phase != IMPORT_NONE && id == s->imp_id) ||
+                           ((s->cur.op == SCRIPT_PLACE || s->cur.op == SCRIPT_REMOVE) && id == s->cur.object_id)))
+            obj_finish(s, s->imp_aborted ? "failed" : "rejected", 0);
+        break;
+    }
     default:
         break;
     }
+}
+
+/* Asked for by import_pump(): the backlog has drained. */
+static void on_writable(conn *c, void *data)
+{
+    script *s = data;
+    (void)c;
+    if (s->running && s->cur.op == SCRIPT_IMPORT && s->imp_phase != IMPORT_NONE && s->imp_phase != IMPORT_WAIT &&
+        import_pump(s) < 0)
+        obj_finish(s, "failed", 0);
 }
 
 static void on_close(conn *c, const conn_end *end, void *data)
@@ -412,12 +1110,13 @@ static void on_close(conn *c, const conn_end *end, void *data)
     events_closed(-1);
     if (!s->quitting)
         fail(s, 1);
-    conn_timer_stop(s->loop, &s->cmd_timer);
+    cmd_release(s);
     conn_timer_stop(s->loop, &s->linger_timer);
+    conn_timer_stop(s->loop, &s->start_timer);
     ev_stop(s->loop);
 }
 
-static const conn_handler handler = {on_msg, on_close};
+static const conn_handler handler = {.on_msg = on_msg, .on_close = on_close, .on_writable = on_writable};
 
 static void on_keepalive(ev_loop *loop, void *data)
 {
@@ -442,7 +1141,7 @@ static void push(script *s, const script_cmd *cmd)
 static int take_line(script *s, const char *line)
 {
     script_cmd cmd;
-    char err[256];
+    char err[512];
     int rc = script_parse_line(line, &cmd, err, sizeof err);
     s->lineno++;
     if (rc < 0) {
@@ -556,7 +1255,8 @@ script *script_create(ev_loop *loop, const script_opts *o, int *exit_code)
     s->loop = loop;
     s->rate = o->rate;
     s->period_ns = (uint64_t)((double)NS_PER_S / o->rate);
-    s->cmd_timer = s->keepalive_timer = s->linger_timer = -1;
+    s->cmd_timer = s->keepalive_timer = s->linger_timer = s->start_timer = -1;
+    s->imp_fd = -1;
     s->source = o->file ? o->file : "stdin";
 
     int rc = 0;
@@ -617,11 +1317,15 @@ void script_free(script *s)
     if (!s)
         return;
     input_over(s);
-    conn_timer_stop(s->loop, &s->cmd_timer);
+    cmd_release(s);
     conn_timer_stop(s->loop, &s->keepalive_timer);
     conn_timer_stop(s->loop, &s->linger_timer);
+    conn_timer_stop(s->loop, &s->start_timer);
     conn_free(s->c);
     conn_ctx_free(s->ctx);
+    for (size_t i = s->q_head; i < s->q_len; i++)
+        script_cmd_clear(&s->q[i]);
     free(s->q);
+    free(s->objs);
     free(s);
 }

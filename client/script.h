@@ -1,7 +1,7 @@
 /*
  * script.h: the scripted and interactive client: one connection that runs
- * commands (move, walk, wait, ping, quit) in order once joined, while every
- * received event is printed (events.h).
+ * commands (move, walk, wait, ping, import, place, remove, quit) in order
+ * once joined, while every received event is printed (events.h).
  *
  * Commands come from a file, read and checked whole before connecting; from
  * standard input when it is a pipe or a terminal, line by line as they are
@@ -16,20 +16,44 @@
 /* Longest command line; longer ones are an error, not silently cut. */
 #define SCRIPT_LINE_MAX 1024
 
-enum script_op { SCRIPT_MOVE, SCRIPT_WALK, SCRIPT_WAIT, SCRIPT_PING, SCRIPT_QUIT };
+enum script_op {
+    SCRIPT_MOVE,
+    SCRIPT_WALK,
+    SCRIPT_WAIT,
+    SCRIPT_PING,
+    SCRIPT_IMPORT,
+    SCRIPT_PLACE,
+    SCRIPT_REMOVE,
+    SCRIPT_QUIT
+};
 
 typedef struct script_cmd {
     int op;        /* enum script_op */
-    double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms */
+    double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms; import, place: x y z */
+    uint32_t object_id; /* place, remove */
+    double yaw_deg;     /* import, place: degrees about +y */
+    double size;        /* import, place: uniform object scale */
+    int has_yaw, has_size; /* place: given (else the object's current ones) */
+    /* import only */
+    char *file;         /* as written, owned: script_cmd_clear() frees it */
+    char name[PROTO_OBJECT_NAME_MAX + 1]; /* --name, or "": the file's base name */
+    int up_axis;        /* enum proto_up_axis */
+    double unit_scale;  /* file units to metres */
 } script_cmd;
 
 /*
  * Parses one line (without its newline). Returns 1 and fills *cmd for a
  * command, 0 for a blank or comment line, -1 with a message in err (which
  * does not name the line; the caller knows it) for anything else, including
- * numbers that are not finite or do not fit their range.
+ * numbers that are not finite or do not fit their range. Words are split at
+ * blanks; a word in double quotes ("my model.obj") may hold blanks and '#'.
+ * A command that returned 1 may own memory: release it with
+ * script_cmd_clear(). Only the syntax is checked: whether an import's file
+ * can be read is found out when it runs.
  */
 int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errlen);
+/* Frees what *cmd owns; it may be cleared again. */
+void script_cmd_clear(script_cmd *cmd);
 
 typedef struct script_opts {
     conn_params net;

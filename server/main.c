@@ -29,6 +29,9 @@ static const char usage[] =
     "  --handshake-timeout MS    hello and join must arrive within MS (default 5000)\n"
     "  --idle-timeout MS         close clients silent for MS (default 30000)\n"
     "  --seed N                  seed for spawn points (default 1)\n"
+    "  --world FILE              preload the objects a world file lists (see server/worlds/)\n"
+    "  --max-upload BYTES        largest model file a client may upload (default 16777216)\n"
+    "  --max-triangles N         most triangles in one model (default 4000000)\n"
     "  --stats-file FILE         append per-interval figures as JSON lines\n"
     "  --stats-interval S        seconds between stats lines (default 10)\n"
     "  --log-level LEVEL         debug, info, warn or error (default info)\n"
@@ -77,7 +80,7 @@ static void raise_fd_limit(uint32_t max_clients)
 int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
-           O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION };
+           O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -87,7 +90,9 @@ int main(int argc, char **argv)
         {"idle-timeout", required_argument, 0, O_IDLE}, {"seed", required_argument, 0, O_SEED},
         {"stats-file", required_argument, 0, O_STATS}, {"stats-interval", required_argument, 0, O_STATS_INT},
         {"log-level", required_argument, 0, O_LOG}, {"help", no_argument, 0, O_HELP},
-        {"version", no_argument, 0, O_VERSION}, {0, 0, 0, 0}};
+        {"version", no_argument, 0, O_VERSION}, {"world", required_argument, 0, O_WORLD_FILE},
+        {"max-upload", required_argument, 0, O_MAX_UPLOAD}, {"max-triangles", required_argument, 0, O_MAX_TRIS},
+        {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
     int o;
@@ -106,6 +111,9 @@ int main(int argc, char **argv)
         case O_IDLE: cfg.idle_timeout_ms = (uint32_t)integer("idle-timeout", optarg, 10, 86400000); break;
         case O_SEED: cfg.seed = (uint64_t)integer("seed", optarg, 0, 9007199254740992.0); break;
         case O_STATS: cfg.stats_file = optarg; break;
+        case O_WORLD_FILE: cfg.world_file = optarg; break;
+        case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, 1024.0 * 1024 * 1024); break;
+        case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, 100000000); break;
         case O_STATS_INT: cfg.stats_interval_ms = (uint32_t)(number("stats-interval", optarg, 0.1, 86400) * 1000); break;
         case O_LOG: {
             int level = log_parse_level(optarg);

@@ -22,9 +22,9 @@
 #include "srv_limits.h"
 #include "log.h"
 #include "proto.h"
+#include "serverInt.h"
 #include "world.h"
 
-#define NS_PER_MS ((uint64_t)1000000)
 /* Connections accepted per wakeup of the listening socket. */
 #define ACCEPT_BUDGET 256
 /* How often timeouts and slow readers are checked. */
@@ -32,78 +32,6 @@
 /* How long a shutdown waits for clients to take their bye. */
 #define SHUTDOWN_GRACE_MS 2000u
 
-typedef enum { ST_HELLO, ST_JOIN, ST_JOINED } client_state;
-
-typedef struct server server;
-
-typedef struct client {
-    conn c;
-    server *srv;
-    client_state state;
-    int closing;  /* no more input is handled; output is flushed, then closed */
-    int shut_wr;  /* output flushed and write side shut down */
-    int dead;     /* reaped at the next safe point */
-    int writing;  /* EV_WRITE armed */
-    int in_write_list;
-    uint32_t index; /* in server.clients */
-    int64_t session_id; /* 0 before hello */
-    uint8_t token[PROTO_TOKEN_SIZE];
-    char peer[80];
-    uint32_t avatar_id; /* 0 before join */
-    int has_seq;
-    uint32_t last_seq;
-    uint32_t sent_ack;
-    uint32_t last_sent_tick;
-    uint32_t *known; /* ids of the avatars this client has been told of, in no order */
-    uint32_t nknown, known_cap;
-    uint64_t connected_ns, last_frame_ns, close_deadline_ns, soft_since_ns;
-    char end_reason[PROTO_MESSAGE_MAX + 16];
-} client;
-
-enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE };
-
-/* A session change waiting to be written; the tick batches them into one
- * transaction so that a burst of joins costs one commit. */
-typedef struct session_event {
-    int kind;
-    int64_t session;
-    double at;
-    uint32_t avatar;
-    char text[PROTO_MESSAGE_MAX + 16]; /* peer (open), name (join), reason (close) */
-    char token[2 * PROTO_TOKEN_SIZE + 1];
-} session_event;
-
-typedef struct stats {
-    uint64_t frames_in, moves_in, bytes_in, bytes_out;
-    uint64_t accepted, closed, protocol_errors, timeouts, slow_readers;
-    uint32_t *tick_us; /* durations of this interval's ticks */
-    uint32_t nticks, tick_cap;
-    uint64_t interval_start_ns;
-} stats;
-
-struct server {
-    server_config cfg;
-    ev_loop *loop;
-    int listen_fd, signal_fd, max_fd;
-    db *db;
-    world *world;
-    client **clients;
-    uint32_t nclients;
-    client **write_list;
-    uint32_t nwrite;
-    /* Per-tick scratch, sized for the largest area of interest. */
-    const world_avatar **vis, **joined, **snap;
-    uint32_t *left;
-    /* Per avatar slot: which id was stamped, and when (update_view). */
-    uint32_t *mark_id, *mark_stamp, stamp;
-    session_event *events;
-    uint32_t nevents, events_cap;
-    int64_t last_session_id;
-    int stopping;
-    uint64_t stop_deadline_ns;
-    stats st;
-    char address[80];
-};
 
 void server_config_defaults(server_config *cfg)
 {
@@ -122,12 +50,23 @@ void server_config_defaults(server_config *cfg)
         .seed = 1,
         .stats_file = NULL,
         .stats_interval_ms = 10000,
+        .max_upload = SRV_MAX_UPLOAD_DEFAULT,
+        .max_triangles = SRV_MAX_TRIANGLES_DEFAULT,
+        .world_file = NULL,
     };
 }
 
 const char *server_address(const server *s) { return s->address; }
 
-static uint64_t now_ns(const server *s) { return ev_now(s->loop); }
+uint64_t server__now(const server *s) { return ev_now(s->loop); }
+
+client *server__client_by_session(server *s, int64_t session)
+{
+    for (uint32_t i = 0; i < s->nclients; i++)
+        if (s->clients[i]->session_id == session && !s->clients[i]->dead)
+            return s->clients[i];
+    return NULL;
+}
 
 /* ---- session log ------------------------------------------------------ */
 
@@ -157,7 +96,14 @@ static void events_flush(server *s)
         const session_event *e = &s->events[i];
         switch (e->kind) {
         case EVT_OPEN: rc = db_session_open(s->db, e->session, e->token, e->text, e->at); break;
-        case EVT_JOIN: rc = db_session_join(s->db, e->session, e->text, e->avatar, e->at); break;
+        case EVT_JOIN: {
+            int64_t uid = 0;
+            rc = db_session_join(s->db, e->session, e->text, e->avatar, e->at, &uid);
+            client *c = rc == 0 ? server__client_by_session(s, e->session) : NULL;
+            if (c)
+                c->user_id = uid;
+            break;
+        }
         default: rc = db_session_close(s->db, e->session, e->text, e->at); break;
         }
     }
@@ -184,7 +130,7 @@ static void want_write(server *s, client *c)
 
 /* Reserves need bytes of output; a client whose backlog would pass the hard
  * limit is disconnected and -1 returned. */
-static int out_begin(server *s, client *c, size_t need, proto_writer *w)
+int server__out_begin(server *s, client *c, size_t need, proto_writer *w)
 {
     if (c->dead)
         return -1;
@@ -196,7 +142,7 @@ static int out_begin(server *s, client *c, size_t need, proto_writer *w)
     return 0;
 }
 
-static void out_end(server *s, client *c, const proto_writer *w)
+void server__out_end(server *s, client *c, const proto_writer *w)
 {
     conn_out_end(&c->c, w);
     want_write(s, c);
@@ -210,7 +156,7 @@ static void begin_close(server *s, client *c, const char *reason)
         return;
     c->closing = 1;
     snprintf(c->end_reason, sizeof c->end_reason, "%s", reason);
-    c->close_deadline_ns = now_ns(s) + SRV_CLOSE_LINGER_MS * NS_PER_MS;
+    c->close_deadline_ns = server__now(s) + SRV_CLOSE_LINGER_MS * NS_PER_MS;
     want_write(s, c);
 }
 
@@ -232,8 +178,7 @@ static void kill_client(server *s, client *c, const char *fmt, ...)
 }
 
 /* Sends an error frame naming the problem and closes the connection. */
-static void protocol_error(server *s, client *c, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
-static void protocol_error(server *s, client *c, int code, const char *fmt, ...)
+void server__protocol_error(server *s, client *c, int code, const char *fmt, ...)
 {
     char msg[PROTO_MESSAGE_MAX + 1];
     va_list ap;
@@ -246,9 +191,9 @@ static void protocol_error(server *s, client *c, int code, const char *fmt, ...)
     else
         s->st.protocol_errors++;
     proto_writer w;
-    if (out_begin(s, c, PROTO_SIZE_ERROR_MAX, &w) == 0) {
+    if (server__out_begin(s, c, PROTO_SIZE_ERROR_MAX, &w) == 0) {
         proto_put_error(&w, (uint16_t)code, msg);
-        out_end(s, c, &w);
+        server__out_end(s, c, &w);
     }
     char reason[sizeof c->end_reason];
     snprintf(reason, sizeof reason, "error: %s", msg);
@@ -270,12 +215,12 @@ static void hex(const uint8_t *p, size_t n, char *out)
 static void on_hello(server *s, client *c, const proto_hello *m)
 {
     if (m->version != PROTO_VERSION) {
-        protocol_error(s, c, PROTO_ERR_VERSION, "protocol version %u not supported; this server speaks %u",
+        server__protocol_error(s, c, PROTO_ERR_VERSION, "protocol version %u not supported; this server speaks %u",
                        m->version, PROTO_VERSION);
         return;
     }
     if (getrandom(c->token, sizeof c->token, 0) != (ssize_t)sizeof c->token) {
-        protocol_error(s, c, PROTO_ERR_INTERNAL, "cannot make a session token");
+        server__protocol_error(s, c, PROTO_ERR_INTERNAL, "cannot make a session token");
         return;
     }
     c->session_id = ++s->last_session_id;
@@ -292,10 +237,10 @@ static void on_hello(server *s, client *c, const proto_hello *m)
     wm.world_max[0] = wm.world_max[2] = half;
     wm.world_max[1] = SRV_WORLD_HEIGHT;
     proto_writer w;
-    if (out_begin(s, c, PROTO_SIZE_WELCOME, &w) < 0)
+    if (server__out_begin(s, c, PROTO_SIZE_WELCOME, &w) < 0)
         return;
     proto_put_welcome(&w, &wm);
-    out_end(s, c, &w);
+    server__out_end(s, c, &w);
     c->state = ST_JOIN;
 }
 
@@ -303,11 +248,12 @@ static void on_join(server *s, client *c, const proto_join *m)
 {
     const world_avatar *a = world_add(s->world, m->name.ptr, m->name.len, m->box);
     if (!a) {
-        protocol_error(s, c, PROTO_ERR_SERVER_FULL, "the world is full (%u avatars)", world_count(s->world));
+        server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "the world is full (%u avatars)", world_count(s->world));
         return;
     }
     c->avatar_id = a->id;
     c->state = ST_JOINED;
+    s->by_slot[world_slot(a->id)] = c;
     session_event *e = event_push(s, EVT_JOIN, c->session_id);
     e->avatar = a->id;
     memcpy(e->text, a->name, sizeof a->name);
@@ -317,16 +263,17 @@ static void on_join(server *s, client *c, const proto_join *m)
     memcpy(ok.pos, a->pos, sizeof ok.pos);
     memcpy(ok.box, a->box, sizeof ok.box);
     proto_writer w;
-    if (out_begin(s, c, PROTO_SIZE_JOIN_OK, &w) < 0)
+    if (server__out_begin(s, c, PROTO_SIZE_JOIN_OK, &w) < 0)
         return;
     proto_put_join_ok(&w, &ok);
-    out_end(s, c, &w);
+    server__out_end(s, c, &w);
+    objects__send_all(s, c);
 }
 
 static void on_move(server *s, client *c, const proto_move *m)
 {
     if (c->has_seq && m->seq <= c->last_seq) {
-        protocol_error(s, c, PROTO_ERR_BAD_SEQ, "move seq %u does not follow %u", m->seq, c->last_seq);
+        server__protocol_error(s, c, PROTO_ERR_BAD_SEQ, "move seq %u does not follow %u", m->seq, c->last_seq);
         return;
     }
     c->has_seq = 1;
@@ -338,8 +285,20 @@ static void on_move(server *s, client *c, const proto_move *m)
 /* Whether clients may send this type at all. */
 static int from_client(uint16_t type)
 {
-    return type == PROTO_HELLO || type == PROTO_JOIN || type == PROTO_MOVE || type == PROTO_PING ||
-           type == PROTO_PONG || type == PROTO_BYE;
+    switch (type) {
+    case PROTO_HELLO:
+    case PROTO_JOIN:
+    case PROTO_MOVE:
+    case PROTO_PING:
+    case PROTO_PONG:
+    case PROTO_BYE:
+    case PROTO_OBJECT_UPLOAD_BEGIN:
+    case PROTO_OBJECT_UPLOAD_CHUNK:
+    case PROTO_OBJECT_UPLOAD_END:
+    case PROTO_OBJECT_PLACE:
+    case PROTO_OBJECT_REMOVE: return 1;
+    default: return 0;
+    }
 }
 
 /* Which messages each state takes: before hello only hello; before join
@@ -354,14 +313,19 @@ static void on_message(server *s, client *c, const proto_msg *m)
     case PROTO_BYE: legal = c->state != ST_HELLO; break;
     case PROTO_MOVE:
     case PROTO_PING:
-    case PROTO_PONG: legal = c->state == ST_JOINED; break;
+    case PROTO_PONG:
+    case PROTO_OBJECT_UPLOAD_BEGIN:
+    case PROTO_OBJECT_UPLOAD_CHUNK:
+    case PROTO_OBJECT_UPLOAD_END:
+    case PROTO_OBJECT_PLACE:
+    case PROTO_OBJECT_REMOVE: legal = c->state == ST_JOINED; break;
     default: return; /* server-to-client types never get here (handle_input) */
     }
     if (!legal) {
         if (m->type == PROTO_JOIN && c->state == ST_JOINED)
-            protocol_error(s, c, PROTO_ERR_ALREADY_JOINED, "already joined as avatar %u", c->avatar_id);
+            server__protocol_error(s, c, PROTO_ERR_ALREADY_JOINED, "already joined as avatar %u", c->avatar_id);
         else
-            protocol_error(s, c, PROTO_ERR_UNEXPECTED, "%s not allowed %s", proto_type_name(m->type),
+            server__protocol_error(s, c, PROTO_ERR_UNEXPECTED, "%s not allowed %s", proto_type_name(m->type),
                            state_names[c->state]);
         return;
     }
@@ -371,13 +335,14 @@ static void on_message(server *s, client *c, const proto_msg *m)
     case PROTO_JOIN: on_join(s, c, &m->u.join); break;
     case PROTO_MOVE: on_move(s, c, &m->u.move); break;
     case PROTO_PING:
-        if (out_begin(s, c, PROTO_SIZE_PING, &w) == 0) {
+        if (server__out_begin(s, c, PROTO_SIZE_PING, &w) == 0) {
             proto_put_pong(&w, m->u.ping.stamp);
-            out_end(s, c, &w);
+            server__out_end(s, c, &w);
         }
         break;
     case PROTO_BYE: begin_close(s, c, "quit"); break;
-    default: break; /* pong: nothing to do */
+    case PROTO_PONG: break;
+    default: objects__on_message(s, c, m); break;
     }
 }
 
@@ -399,23 +364,23 @@ static void handle_input(server *s, client *c)
         if (rc != PROTO_OK) {
             uint32_t len = get_u32le(c->c.in + off);
             if (rc == PROTO_ERR_FRAME_TOO_LONG)
-                protocol_error(s, c, rc, "frame length %u over the limit of %u%s", len, max_len,
+                server__protocol_error(s, c, rc, "frame length %u over the limit of %u%s", len, max_len,
                                c->state == ST_JOINED ? "" : " before join");
             else
-                protocol_error(s, c, rc, "frame length %u is below the minimum of %u", len, PROTO_LEN_MIN);
+                server__protocol_error(s, c, rc, "frame length %u is below the minimum of %u", len, PROTO_LEN_MIN);
             break;
         }
         off += f.size;
-        c->last_frame_ns = now_ns(s);
+        c->last_frame_ns = server__now(s);
         s->st.frames_in++;
         proto_msg m;
         rc = proto_decode(&f, &m);
         if (rc != PROTO_ERR_UNKNOWN_TYPE && !from_client(f.type))
-            protocol_error(s, c, PROTO_ERR_UNEXPECTED, "%s is a server-to-client message", proto_type_name(f.type));
+            server__protocol_error(s, c, PROTO_ERR_UNEXPECTED, "%s is a server-to-client message", proto_type_name(f.type));
         else if (rc == PROTO_ERR_UNKNOWN_TYPE)
-            protocol_error(s, c, rc, "unknown message type %u", f.type);
+            server__protocol_error(s, c, rc, "unknown message type %u", f.type);
         else if (rc != PROTO_OK)
-            protocol_error(s, c, rc, "bad %s frame: %s", proto_type_name(f.type), proto_strerror(rc));
+            server__protocol_error(s, c, rc, "bad %s frame: %s", proto_type_name(f.type), proto_strerror(rc));
         else
             on_message(s, c, &m);
         /* The state may have changed the frame cap (join). */
@@ -431,7 +396,7 @@ static void on_peer_eof(server *s, client *c)
         return;
     }
     if (c->c.in_len > 0) {
-        protocol_error(s, c, PROTO_ERR_TRUNCATED, "connection closed inside a frame (%zu bytes buffered)",
+        server__protocol_error(s, c, PROTO_ERR_TRUNCATED, "connection closed inside a frame (%zu bytes buffered)",
                        c->c.in_len);
         return;
     }
@@ -465,7 +430,7 @@ static void flush_client(server *s, client *c)
     set_writing(s, c, left > 0);
     if ((size_t)left > SRV_OUTBUF_SOFT) {
         if (!c->soft_since_ns)
-            c->soft_since_ns = now_ns(s);
+            c->soft_since_ns = server__now(s);
     } else {
         c->soft_since_ns = 0;
     }
@@ -567,7 +532,7 @@ static void update_view(server *s, client *c, uint32_t tick)
     size_t need = nleft * PROTO_SIZE_AVATAR_LEFT + njoined * PROTO_SIZE_AVATAR_JOINED_MAX +
                   PROTO_SIZE_SNAPSHOT(nsnap);
     proto_writer w;
-    if (out_begin(s, c, need, &w) < 0)
+    if (server__out_begin(s, c, need, &w) < 0)
         return;
     for (uint32_t k = 0; k < nleft; k++) {
         proto_avatar_left m = {.id = s->left[k],
@@ -591,7 +556,7 @@ static void update_view(server *s, client *c, uint32_t tick)
         }
         proto_put_snapshot_end(&w, at);
     }
-    out_end(s, c, &w);
+    server__out_end(s, c, &w);
     known_reserve(c, n);
     for (uint32_t k = 0; k < n; k++)
         c->known[k] = s->vis[k]->id;
@@ -600,11 +565,42 @@ static void update_view(server *s, client *c, uint32_t tick)
     c->sent_ack = me->ack_seq;
 }
 
+/* A contact from world_step: the colliding client is told, and the
+ * collision is logged with its point in world and object-local coordinates
+ * (so its history survives the object being moved). */
+static void on_contact(void *ctx, const world_avatar *a, const move_contact *mc, const float vel[3])
+{
+    server *s = ctx;
+    client *c = s->by_slot[world_slot(a->id)];
+    const scene_object *o = scene_get(s->scene, mc->object_id);
+    if (!c || !o)
+        return;
+    s->st.collisions++;
+    proto_collision m = {.object_id = o->id, .ecm_version = o->ecm_version, .box_index = (uint16_t)mc->box_index,
+                         .inside = mc->inside};
+    memcpy(m.point, mc->point, sizeof m.point);
+    memcpy(m.normal, mc->normal, sizeof m.normal);
+    proto_writer w;
+    if (!c->closing && server__out_begin(s, c, PROTO_SIZE_COLLISION, &w) == 0) {
+        proto_put_collision(&w, &m);
+        server__out_end(s, c, &w);
+    }
+    dblog_row row = {.at = db_now(), .session_id = c->session_id, .user_id = c->user_id, .object_id = o->id,
+                     .avatar_id = a->id, .ecm_version = o->ecm_version, .box_index = mc->box_index,
+                     .inside = mc->inside};
+    memcpy(row.avatar, a->pos, sizeof row.avatar);
+    memcpy(row.world, mc->point, sizeof row.world);
+    scene_to_local(&o->at, mc->point, row.local);
+    memcpy(row.normal, mc->normal, sizeof row.normal);
+    memcpy(row.vel, vel, sizeof row.vel);
+    dblog_push(s->log, &row); /* a full queue is counted in its stats */
+}
+
 static void on_tick(ev_loop *loop, void *data)
 {
     server *s = data;
     uint64_t t0 = ev_clock(loop);
-    world_step(s->world);
+    world_step(s->world, s->scene, on_contact, s);
     uint32_t tick = world_tick(s->world);
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
@@ -621,8 +617,11 @@ static void on_tick(ev_loop *loop, void *data)
 
 static void reap(server *s, client *c)
 {
-    if (c->avatar_id)
+    objects__client_gone(s, c);
+    if (c->avatar_id) {
         world_remove(s->world, c->avatar_id);
+        s->by_slot[world_slot(c->avatar_id)] = NULL;
+    }
     if (c->session_id) {
         session_event *e = event_push(s, EVT_CLOSE, c->session_id);
         snprintf(e->text, sizeof e->text, "%s", c->end_reason[0] ? c->end_reason : "closed");
@@ -695,7 +694,7 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
         }
         c->srv = s;
         memcpy(c->peer, peer, sizeof c->peer);
-        c->connected_ns = c->last_frame_ns = now_ns(s);
+        c->connected_ns = c->last_frame_ns = server__now(s);
         c->index = s->nclients;
         s->clients[s->nclients++] = c;
         s->st.accepted++;
@@ -709,7 +708,7 @@ static void on_housekeeping(ev_loop *loop, void *data)
 {
     (void)loop;
     server *s = data;
-    uint64_t now = now_ns(s);
+    uint64_t now = server__now(s);
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
         if (c->dead)
@@ -718,10 +717,10 @@ static void on_housekeeping(ev_loop *loop, void *data)
             if (now > c->close_deadline_ns)
                 c->dead = 1;
         } else if (c->state != ST_JOINED && now - c->connected_ns > s->cfg.handshake_timeout_ms * NS_PER_MS) {
-            protocol_error(s, c, PROTO_ERR_TIMEOUT, "handshake not completed within %u ms",
+            server__protocol_error(s, c, PROTO_ERR_TIMEOUT, "handshake not completed within %u ms",
                            s->cfg.handshake_timeout_ms);
         } else if (now - c->last_frame_ns > s->cfg.idle_timeout_ms * NS_PER_MS) {
-            protocol_error(s, c, PROTO_ERR_TIMEOUT, "no complete frame for %u ms", s->cfg.idle_timeout_ms);
+            server__protocol_error(s, c, PROTO_ERR_TIMEOUT, "no complete frame for %u ms", s->cfg.idle_timeout_ms);
         } else if (c->soft_since_ns && now - c->soft_since_ns > SRV_OUTBUF_SOFT_MS * NS_PER_MS) {
             s->st.slow_readers++;
             kill_client(s, c, "output backlog over %u bytes for %u ms", SRV_OUTBUF_SOFT, SRV_OUTBUF_SOFT_MS);
@@ -786,17 +785,17 @@ static void begin_shutdown(server *s, const char *why)
 {
     log_info("%s: shutting down, saying bye to %u clients", why, s->nclients);
     s->stopping = 1;
-    s->stop_deadline_ns = now_ns(s) + SHUTDOWN_GRACE_MS * NS_PER_MS;
+    s->stop_deadline_ns = server__now(s) + SHUTDOWN_GRACE_MS * NS_PER_MS;
     ev_io_del(s->loop, s->listen_fd);
     close(s->listen_fd);
     s->listen_fd = -1;
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
         proto_writer w;
-        if (c->closing || out_begin(s, c, PROTO_SIZE_BYE, &w) < 0)
+        if (c->closing || server__out_begin(s, c, PROTO_SIZE_BYE, &w) < 0)
             continue;
         proto_put_bye(&w, PROTO_BYE_SHUTDOWN);
-        out_end(s, c, &w);
+        server__out_end(s, c, &w);
         begin_close(s, c, "shutdown");
     }
 }
@@ -830,7 +829,7 @@ static void before_sleep(ev_loop *loop, void *data)
         else
             i++;
     }
-    if (s->stopping && (s->nclients == 0 || now_ns(s) > s->stop_deadline_ns))
+    if (s->stopping && (s->nclients == 0 || server__now(s) > s->stop_deadline_ns))
         ev_stop(loop);
 }
 
@@ -913,6 +912,7 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     s->joined = xcalloc(SRV_AOI_MAX, sizeof *s->joined);
     s->snap = xcalloc(SRV_AOI_MAX, sizeof *s->snap);
     s->left = xcalloc(cfg->max_clients, sizeof *s->left);
+    s->by_slot = xcalloc(cfg->max_clients, sizeof *s->by_slot);
     s->mark_id = xcalloc(cfg->max_clients, sizeof *s->mark_id);
     s->mark_stamp = xcalloc(cfg->max_clients, sizeof *s->mark_stamp);
     s->st.tick_cap = (uint32_t)cfg->tick_hz * (cfg->stats_interval_ms / 1000u + 1u) * 2u;
@@ -930,13 +930,19 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     if (stale)
         log_warn("closed %d sessions left open by a previous run that did not shut down cleanly", stale);
 
-    if (listen_on(s, err, errlen) < 0 || setup_signals(s, err, errlen) < 0)
-        goto fail;
     s->loop = ev_create(s->max_fd);
     if (!s->loop) {
         snprintf(err, errlen, "event loop: %s", strerror(errno));
         goto fail;
     }
+    /* Signals are blocked before any thread starts, so that every thread
+     * inherits the mask and SIGINT/SIGTERM reach only the signalfd. */
+    if (setup_signals(s, err, errlen) < 0)
+        goto fail;
+    dblog_config lc = {DBLOG_QUEUE_ROWS_DEFAULT, DBLOG_BATCH_ROWS_DEFAULT, DBLOG_BATCH_MS_DEFAULT};
+    s->log = dblog_open(cfg->db_path, &lc, err, errlen);
+    if (!s->log || objects__start(s, err, errlen) < 0 || listen_on(s, err, errlen) < 0)
+        goto fail;
     uint64_t tick_ns = (uint64_t)1000000000 / (uint64_t)cfg->tick_hz;
     if (ev_io_add(s->loop, s->listen_fd, EV_READ, on_accept, s) < 0 ||
         ev_io_add(s->loop, s->signal_fd, EV_READ, on_signal, s) < 0 ||
@@ -968,7 +974,12 @@ int server_run(server *s)
     while (s->nclients)
         reap(s, s->clients[0]);
     events_flush(s);
-    log_info("stopped: %llu connections served", (unsigned long long)s->st.accepted);
+    dblog_stats ls;
+    dblog_stop(s->log, &ls);
+    s->log = NULL;
+    log_info("stopped: %llu connections served; collision log: %llu rows written, %llu dropped, %llu lost",
+             (unsigned long long)s->st.accepted, (unsigned long long)ls.written, (unsigned long long)ls.dropped,
+             (unsigned long long)ls.lost);
     return rc < 0 ? -1 : 0;
 }
 
@@ -978,6 +989,9 @@ void server_destroy(server *s)
         return;
     while (s->nclients)
         reap(s, s->clients[0]);
+    objects__stop(s);
+    if (s->log)
+        dblog_stop(s->log, NULL);
     if (s->loop)
         ev_destroy(s->loop);
     if (s->listen_fd >= 0)
@@ -992,6 +1006,7 @@ void server_destroy(server *s)
     free(s->joined);
     free(s->snap);
     free(s->left);
+    free(s->by_slot);
     free(s->mark_id);
     free(s->mark_stamp);
     free(s->events);

@@ -24,6 +24,9 @@ typedef struct server_config {
     uint64_t seed;
     const char *stats_file; /* NULL: none */
     uint32_t stats_interval_ms;
+    uint32_t max_upload;    /* bytes of one model file */
+    uint32_t max_triangles; /* of one model */
+    const char *world_file; /* objects to preload; NULL: none */
 } server_config;
 
 typedef struct server server;

@@ -66,6 +66,15 @@
  * frame can carry is cut (nearest first is not guaranteed). */
 #define SRV_AOI_MAX PROTO_SNAPSHOT_MAX_ENTRIES
 
+/* Objects. A model file may be 16 MiB (Sponza's OBJ is 5.6 MB, a city block
+ * 13.6 MB); all unfinished uploads together may hold SRV_UPLOAD_BUDGET, so
+ * that many clients uploading at once cannot exhaust memory. */
+#define SRV_MAX_UPLOAD_DEFAULT (16u * 1024u * 1024u)
+#define SRV_UPLOAD_BUDGET (64u * 1024u * 1024u)
+/* Triangles in one model: 4 million (144 MB of floats) is far beyond any
+ * model here (the city block has 400,020) and still fits in memory. */
+#define SRV_MAX_TRIANGLES_DEFAULT 4000000u
+
 /* listen(2) backlog: the bot swarm connects 1,000 per second. */
 #define SRV_LISTEN_BACKLOG 4096
 

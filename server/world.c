@@ -9,6 +9,10 @@
 #include "srv_limits.h"
 
 #define SLOT_MASK ((1u << WORLD_SLOT_BITS) - 1u)
+/* Boxes one move is checked against. A tick's swept volume is a few metres
+ * across; 4,096 boxes there would be a collision map of absurd density, and
+ * past it the farthest found are ignored. */
+#define WORLD_MAX_CANDIDATES 4096
 
 typedef struct avatar {
     world_avatar pub;
@@ -30,6 +34,8 @@ struct world {
     uint64_t rng;
     grid *grid;
     uint32_t *scratch; /* grid query results */
+    uint32_t handles[WORLD_MAX_CANDIDATES]; /* broadphase results, per move */
+    move_box boxes[WORLD_MAX_CANDIDATES];
 };
 
 /* xorshift64*: deterministic spawn points for a given seed. */
@@ -124,6 +130,7 @@ const world_avatar *world_add(world *w, const char *name, uint32_t name_len, con
     a->pub.pos[2] = (w->cfg.min[2] + w->cfg.max[2]) * 0.5f + (float)(r * sin(ang));
     clamp_into_world(w, box, a->pub.pos);
     a->pub.changed_tick = w->step;
+    a->pub.grounded = 1;
     a->moved_at_step = w->step;
     if (grid_insert(w->grid, slot, a->pub.pos[0], a->pub.pos[2]) < 0)
         return NULL;
@@ -155,24 +162,56 @@ void world_request_move(world *w, uint32_t id, uint32_t seq, const float pos[3])
     memcpy(a->request, pos, sizeof a->request);
 }
 
-/* Moves a toward its request by at most max_speed x the time since its last
- * applied move (capped), then clamps into the world. */
-static void apply(world *w, avatar *a)
+/* Moves a for one step: toward its request (if any) by at most max_speed x
+ * the time since its last applied move, under gravity, through move_step
+ * against the boxes the scene finds along the way; then keeps it inside the
+ * world. */
+static void apply(world *w, avatar *a, const scene *sc, world_contact_fn *fn, void *ctx)
 {
-    float elapsed = (float)(w->step - a->moved_at_step) * w->cfg.tick_dt;
-    if (elapsed > SRV_MOVE_MAX_DT)
-        elapsed = SRV_MOVE_MAX_DT;
-    float reach = w->cfg.max_speed * elapsed;
-    float *p = a->pub.pos, d[3];
-    for (int i = 0; i < 3; i++)
-        d[i] = a->request[i] - p[i];
-    float len = sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    float k = len > reach ? reach / len : 1.0f;
-    float q[3] = {p[0] + d[0] * k, p[1] + d[1] * k, p[2] + d[2] * k};
+    float disp[3] = {0, 0, 0}, vel[3] = {0, 0, 0};
+    float *p = a->pub.pos;
+    if (a->has_request) {
+        float elapsed = (float)(w->step - a->moved_at_step) * w->cfg.tick_dt;
+        if (elapsed > SRV_MOVE_MAX_DT)
+            elapsed = SRV_MOVE_MAX_DT;
+        float dx = a->request[0] - p[0], dz = a->request[2] - p[2];
+        float len = sqrtf(dx * dx + dz * dz), reach = w->cfg.max_speed * elapsed;
+        float k = len > reach ? reach / len : 1.0f;
+        disp[0] = dx * k;
+        disp[2] = dz * k;
+        if (elapsed > 0) {
+            vel[0] = disp[0] / elapsed;
+            vel[2] = disp[2] / elapsed;
+        }
+        a->has_request = 0;
+        a->moved_at_step = w->step;
+        a->pub.ack_seq = a->request_seq;
+    }
+    move_params mp;
+    move_params_default(&mp);
+    memcpy(mp.size, a->pub.box, sizeof mp.size);
+    mp.floor_y = w->cfg.min[1];
+    move_state st = {.pos = {p[0], p[1], p[2]}, .vy = a->pub.vy, .grounded = a->pub.grounded != 0};
+    float lo[3], hi[3];
+    move_bounds(&mp, &st, disp, w->cfg.tick_dt, lo, hi);
+    uint32_t n = scene_query(sc, lo, hi, w->handles, WORLD_MAX_CANDIDATES);
+    if (n > WORLD_MAX_CANDIDATES)
+        n = WORLD_MAX_CANDIDATES;
+    for (uint32_t i = 0; i < n; i++) {
+        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
+        w->boxes[i] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
+        memcpy(w->boxes[i].min, b->world.min, sizeof b->world.min);
+        memcpy(w->boxes[i].max, b->world.max, sizeof b->world.max);
+    }
+    move_result res;
+    if (move_step(&mp, &st, disp, w->cfg.tick_dt, w->boxes, n, &res) < 0)
+        return; /* out of the controller's range: stay put */
+    float q[3] = {res.state.pos[0], res.state.pos[1], res.state.pos[2]};
     clamp_into_world(w, a->pub.box, q);
-    a->has_request = 0;
-    a->moved_at_step = w->step;
-    a->pub.ack_seq = a->request_seq;
+    a->pub.vy = res.state.vy;
+    a->pub.grounded = res.state.grounded;
+    for (uint32_t i = 0; i < res.ncontacts; i++)
+        fn(ctx, &a->pub, &res.contacts[i], vel);
     if (q[0] == p[0] && q[1] == p[1] && q[2] == p[2])
         return;
     memcpy(p, q, sizeof q);
@@ -182,12 +221,14 @@ static void apply(world *w, avatar *a)
     (void)grid_move(w->grid, world_slot(a->pub.id), p[0], p[2]);
 }
 
-void world_step(world *w)
+void world_step(world *w, const scene *sc, world_contact_fn *fn, void *ctx)
 {
     w->step++;
-    for (uint32_t s = 0; s < w->cfg.capacity; s++)
-        if (w->avatars[s].used && w->avatars[s].has_request)
-            apply(w, &w->avatars[s]);
+    for (uint32_t s = 0; s < w->cfg.capacity; s++) {
+        avatar *a = &w->avatars[s];
+        if (a->used && (a->has_request || !a->pub.grounded))
+            apply(w, a, sc, fn, ctx);
+    }
 }
 
 uint32_t world_tick(const world *w) { return w->step; }

@@ -13,6 +13,8 @@
 #include <stdint.h>
 
 #include "proto.h"
+#include "scene/move.h"
+#include "scene/scene.h"
 
 typedef struct world world;
 
@@ -39,6 +41,8 @@ typedef struct world_avatar {
     char name[PROTO_NAME_MAX + 1];
     uint32_t changed_tick; /* last step that moved it */
     uint32_t ack_seq;      /* seq of the last move request applied */
+    float vy;              /* vertical velocity, m/s */
+    int grounded;          /* standing on the floor or a box */
 } world_avatar;
 
 /* NULL if out of memory or the config is unusable. */
@@ -57,8 +61,16 @@ const world_avatar *world_get(const world *w, uint32_t id);
  * pos must be finite (the codec guarantees it). */
 void world_request_move(world *w, uint32_t id, uint32_t seq, const float pos[3]);
 
-/* Applies the pending requests and advances the step counter. */
-void world_step(world *w);
+/* Called for each contact that blocked an avatar (or that it made from
+ * inside a box) during world_step; vel is the avatar's requested velocity. */
+typedef void world_contact_fn(void *ctx, const world_avatar *a, const move_contact *c, const float vel[3]);
+
+/* Advances the step counter and moves every avatar that asked to move or is
+ * falling: toward its request (horizontally; the height is the world's to
+ * decide) at most max_speed x elapsed time, under gravity, against the
+ * scene's boxes (move.h: sliding, stepping, support, the inside policy),
+ * reporting each contact to fn. */
+void world_step(world *w, const scene *sc, world_contact_fn *fn, void *ctx);
 uint32_t world_tick(const world *w);
 
 /* The other avatars within the area-of-interest radius of avatar id,

@@ -9,7 +9,7 @@ bash tools/deps.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j "$(nproc)" >/dev/null
 port=${CVRE_PORT:-7878}
-./build/cvre-server --port "$port" --db cvre-demo.db "$@" &
+./build/cvre-server --port "$port" --db cvre-demo.db --world server/worlds/demo.world "$@" &
 server=$!
 sleep 0.5
 ./build/cvre-client --port "$port" --bots 8 --rate 5 --pattern random-walk --duration 86400 --name wanderer >/dev/null &

@@ -3,7 +3,7 @@
 # is missing. Needs root (apt-get). The same list is in docker/Dockerfile.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
-          libflann-dev python3-sklearn time)
+          libflann-dev python3-sklearn time libassimp-dev)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -18,10 +18,14 @@ import time
 MAGIC = 0x45525643
 TEMP_DIRS = []  # removed when every test passed; kept (with server logs) otherwise
 T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINED=7,
-         AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12)
+         AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12, UPLOAD_BEGIN=32, UPLOAD_CHUNK=33,
+         UPLOAD_END=34, OBJECT_PLACE=35, OBJECT_REMOVE=37, OBJECT_INFO=38, OBJECT_REMOVED=39,
+         OBJECT_REJECTED=40, COLLISION=48)
 E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
          BAD_STRING=21, NOT_FINITE=22, BAD_VALUE=23, BAD_MAGIC=24, VERSION=25, UNEXPECTED=26,
-         ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, BAD_SEQ=32)
+         ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, BAD_SEQ=32, INTERNAL=34,
+         UPLOAD=35, IMPORT=36, NO_OBJECT=37, NOT_OWNER=38)
+MODELS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "shared", "models")
 
 
 def args():
@@ -55,6 +59,21 @@ def ping(stamp):
     return frame(T["PING"], struct.pack("<Q", stamp))
 
 
+def transform(pos, yaw=0.0, scale=1.0):
+    return struct.pack("<3fff", *pos, yaw, scale)
+
+
+def upload_frames(upload_id, data, name, fmt="", up=0, units=1.0, pos=(0, 0, 0), yaw=0.0, scale=1.0,
+                  total=None, chunk=16384):
+    """The frames of a whole upload: begin, chunks, end."""
+    out = [frame(T["UPLOAD_BEGIN"], struct.pack("<II", upload_id, len(data) if total is None else total)
+                 + s8(name) + s8(fmt) + struct.pack("<Bf", up, units))]
+    for off in range(0, len(data), chunk):
+        out.append(frame(T["UPLOAD_CHUNK"], struct.pack("<II", upload_id, off) + data[off:off + chunk]))
+    out.append(frame(T["UPLOAD_END"], struct.pack("<I", upload_id) + transform(pos, yaw, scale)))
+    return b"".join(out)
+
+
 def decode(t, p):
     """One server-to-client message as a dict (enough for the tests)."""
     if t == T["WELCOME"]:
@@ -83,6 +102,29 @@ def decode(t, p):
         return dict(type="pong", stamp=struct.unpack_from("<Q", p)[0])
     if t == T["BYE"]:
         return dict(type="bye", reason=p[0])
+    if t == T["OBJECT_INFO"]:
+        oid, up = struct.unpack_from("<II", p)
+        at = 8
+        owner = p[at + 1:at + 1 + p[at]].decode()
+        at += 1 + p[at]
+        name = p[at + 1:at + 1 + p[at]].decode()
+        at += 1 + p[at]
+        x, y, z, yaw, scale, ver, tris, nb = struct.unpack_from("<5fIIH", p, at)
+        at += 30
+        boxes = [struct.unpack_from("<6f", p, at + 24 * i) for i in range(nb)]
+        return dict(type="object", id=oid, upload=up, owner=owner, name=name, pos=(x, y, z), yaw=yaw,
+                    scale=scale, ecm_version=ver, triangles=tris, boxes=boxes)
+    if t == T["OBJECT_REMOVED"]:
+        return dict(type="object_removed", id=struct.unpack_from("<I", p)[0])
+    if t == T["OBJECT_REJECTED"]:
+        rid, code, ln = struct.unpack_from("<IHB", p)
+        return dict(type="rejected", request=rid, code=code, message=p[7:7 + ln].decode())
+    if t == T["COLLISION"]:
+        oid, ver, box, inside = struct.unpack_from("<IIHB", p)
+        point = struct.unpack_from("<3f", p, 11)
+        normal = struct.unpack_from("<3f", p, 23)
+        return dict(type="collision", object=oid, ecm_version=ver, box=box, inside=inside, point=point,
+                    normal=normal)
     return dict(type="other", t=t)
 
 

@@ -67,7 +67,7 @@ def test_truncated_then_close():
 
 def test_unknown_and_reserved_types():
     rejected(frame(999, b"abc"), E["UNKNOWN_TYPE"], joined=True, words="999")
-    rejected(frame(32, b""), E["UNKNOWN_TYPE"], joined=True)  # reserved: object upload
+    rejected(frame(36, b""), E["UNKNOWN_TYPE"], joined=True)  # reserved: object_move
 
 
 def test_payload_shorter_than_layout():

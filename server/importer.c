@@ -1,0 +1,204 @@
+#include "importer.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include "alloc.h"
+#include "db.h"
+#include "log.h"
+#include "scene/import.h"
+
+/* Jobs waiting at once. Each holds a whole file (up to --max-upload), so the
+ * queue bounds the memory that uploads can pin while they wait. */
+#define IMPORTER_QUEUE_MAX 8
+
+typedef struct result_node {
+    import_result r;
+    struct result_node *next;
+} result_node;
+
+struct importer {
+    pthread_t thread;
+    pthread_mutex_t lock;
+    pthread_cond_t wake;
+    int stop;
+    import_job jobs[IMPORTER_QUEUE_MAX];
+    unsigned head, count;
+    result_node *results, *results_tail;
+    int efd;
+    db *db;
+    uint32_t max_triangles;
+};
+
+/* Parses, measures and stores one model; fills r (status and either the
+ * object or a message). Runs on the worker thread. */
+static void run_job(importer *im, import_job *job, import_result *r)
+{
+    memset(r, 0, sizeof *r);
+    r->session = job->session;
+    r->upload_id = job->upload_id;
+    import_options opt = {.z_up = job->z_up, .unit_scale = job->unit_scale, .max_triangles = im->max_triangles};
+    import_mesh mesh = {0};
+    char err[PROTO_MESSAGE_MAX + 1];
+    int rc = import_model(job->data, job->len, job->format[0] ? job->format : NULL, &opt, &mesh, err, sizeof err);
+    free(job->data);
+    job->data = NULL;
+    if (rc < 0) {
+        r->status = rc == -ENOMEM ? PROTO_ERR_INTERNAL : PROTO_ERR_IMPORT;
+        snprintf(r->message, sizeof r->message, "%s", rc == -ENOMEM ? "out of memory importing the model" : err);
+        return;
+    }
+    float box[1][6] = {{mesh.min[0], mesh.min[1], mesh.min[2], mesh.max[0], mesh.max[1], mesh.max[2]}};
+    db_object o = {.owner = job->owner, .name = job->name, .format = job->format[0] ? job->format : "detected",
+                   .yaw = job->at.yaw, .scale = job->at.scale, .tri_count = mesh.ntris, .tris = mesh.tris,
+                   .box_count = 1, .boxes = (const float(*)[6])box};
+    memcpy(o.pos, job->at.pos, sizeof o.pos);
+    memcpy(o.min, mesh.min, sizeof o.min);
+    memcpy(o.max, mesh.max, sizeof o.max);
+    if (db_object_create(im->db, &o, db_now()) < 0) {
+        log_error("importer: storing \"%s\": %s", job->name, db_error(im->db));
+        r->status = PROTO_ERR_INTERNAL;
+        snprintf(r->message, sizeof r->message, "the server could not store the object");
+        import_mesh_free(&mesh);
+        return;
+    }
+    r->object_id = (uint32_t)o.id;
+    memcpy(r->owner, job->owner, sizeof r->owner);
+    memcpy(r->name, job->name, sizeof r->name);
+    r->at = job->at;
+    r->tris = mesh.tris; /* the result takes the triangles over */
+    r->tri_count = mesh.ntris;
+    memcpy(r->min, mesh.min, sizeof r->min);
+    memcpy(r->max, mesh.max, sizeof r->max);
+}
+
+static void *worker(void *arg)
+{
+    importer *im = arg;
+    pthread_mutex_lock(&im->lock);
+    for (;;) {
+        while (!im->stop && im->count == 0)
+            pthread_cond_wait(&im->wake, &im->lock);
+        if (im->stop)
+            break;
+        import_job job = im->jobs[im->head];
+        pthread_mutex_unlock(&im->lock);
+
+        result_node *n = xcalloc(1, sizeof *n);
+        run_job(im, &job, &n->r);
+
+        pthread_mutex_lock(&im->lock);
+        im->head = (im->head + 1) % IMPORTER_QUEUE_MAX;
+        im->count--;
+        if (im->results_tail)
+            im->results_tail->next = n;
+        else
+            im->results = n;
+        im->results_tail = n;
+        uint64_t one = 1;
+        if (write(im->efd, &one, sizeof one) != (ssize_t)sizeof one)
+            log_error("importer: cannot signal the loop: %s", strerror(errno));
+    }
+    pthread_mutex_unlock(&im->lock);
+    return NULL;
+}
+
+importer *importer_start(const char *db_path, uint32_t max_triangles, char *err, size_t errlen)
+{
+    importer *im = xcalloc(1, sizeof *im);
+    im->max_triangles = max_triangles;
+    im->efd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (im->efd < 0) {
+        snprintf(err, errlen, "eventfd: %s", strerror(errno));
+        free(im);
+        return NULL;
+    }
+    im->db = db_open(db_path, DB_READWRITE, err, errlen);
+    if (!im->db) {
+        close(im->efd);
+        free(im);
+        return NULL;
+    }
+    pthread_mutex_init(&im->lock, NULL);
+    pthread_cond_init(&im->wake, NULL);
+    int rc = pthread_create(&im->thread, NULL, worker, im);
+    if (rc != 0) {
+        snprintf(err, errlen, "cannot start the import thread: %s", strerror(rc));
+        db_close(im->db);
+        close(im->efd);
+        free(im);
+        return NULL;
+    }
+    return im;
+}
+
+void importer_stop(importer *im)
+{
+    if (!im)
+        return;
+    pthread_mutex_lock(&im->lock);
+    im->stop = 1;
+    pthread_cond_signal(&im->wake);
+    pthread_mutex_unlock(&im->lock);
+    pthread_join(im->thread, NULL);
+    for (; im->count; im->count--, im->head = (im->head + 1) % IMPORTER_QUEUE_MAX)
+        free(im->jobs[im->head].data);
+    import_result r;
+    while (importer_take(im, &r) == 0)
+        importer_result_free(&r);
+    pthread_mutex_destroy(&im->lock);
+    pthread_cond_destroy(&im->wake);
+    db_close(im->db);
+    close(im->efd);
+    free(im);
+}
+
+int importer_fd(const importer *im) { return im->efd; }
+
+int importer_submit(importer *im, import_job *job)
+{
+    pthread_mutex_lock(&im->lock);
+    if (im->count == IMPORTER_QUEUE_MAX) {
+        pthread_mutex_unlock(&im->lock);
+        free(job->data);
+        job->data = NULL;
+        return -EBUSY;
+    }
+    im->jobs[(im->head + im->count) % IMPORTER_QUEUE_MAX] = *job;
+    im->count++;
+    job->data = NULL;
+    pthread_cond_signal(&im->wake);
+    pthread_mutex_unlock(&im->lock);
+    return 0;
+}
+
+int importer_take(importer *im, import_result *out)
+{
+    uint64_t drained;
+    pthread_mutex_lock(&im->lock);
+    result_node *n = im->results;
+    if (n) {
+        im->results = n->next;
+        if (!im->results)
+            im->results_tail = NULL;
+    } else if (read(im->efd, &drained, sizeof drained) < 0 && errno != EAGAIN) {
+        log_warn("importer: eventfd: %s", strerror(errno));
+    }
+    pthread_mutex_unlock(&im->lock);
+    if (!n)
+        return -EAGAIN;
+    *out = n->r;
+    free(n);
+    return 0;
+}
+
+void importer_result_free(import_result *r)
+{
+    free(r->tris);
+    r->tris = NULL;
+}

@@ -1,0 +1,63 @@
+/*
+ * importer.h: imports uploaded models on a worker thread, so that parsing a
+ * large model (Sponza: about a second) never stalls the tick.
+ *
+ * The loop thread submits a job (it gives up the file's bytes); the worker
+ * parses the model, stores the object, its mesh and ECM version 1 (its MBR)
+ * in the database through its own connection, and queues the result. The
+ * worker signals an eventfd (importer_fd) that the loop watches; the loop
+ * then takes results with importer_take.
+ */
+#ifndef CVRE_IMPORTER_H
+#define CVRE_IMPORTER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "proto.h"
+
+typedef struct importer importer;
+
+typedef struct import_job {
+    int64_t session;      /* who asked, echoed back */
+    uint32_t upload_id;   /* echoed back */
+    char owner[PROTO_NAME_MAX + 1];
+    char name[PROTO_OBJECT_NAME_MAX + 1];
+    char format[PROTO_FORMAT_MAX + 1]; /* "" to detect */
+    int z_up;
+    float unit_scale;
+    proto_transform at;
+    uint8_t *data; /* the file; the importer frees it */
+    size_t len;
+} import_job;
+
+typedef struct import_result {
+    int64_t session;
+    uint32_t upload_id;
+    int status;                   /* 0, or a PROTO_ERR_* code for the rejection */
+    char message[PROTO_MESSAGE_MAX + 1];
+    uint32_t object_id;           /* when status is 0 */
+    char owner[PROTO_NAME_MAX + 1];
+    char name[PROTO_OBJECT_NAME_MAX + 1];
+    proto_transform at;
+    float *tris;                  /* owned by the result: importer_result_free */
+    uint32_t tri_count;
+    float min[3], max[3];         /* the MBR: ECM version 1's only box */
+} import_result;
+
+/* Starts the worker with its own connection to db_path. NULL with a message
+ * in err on failure. max_triangles bounds one model. */
+importer *importer_start(const char *db_path, uint32_t max_triangles, char *err, size_t errlen);
+/* Finishes the job in progress, drops the queued ones (their uploads are
+ * lost with the connections that sent them), joins the thread. */
+void importer_stop(importer *im);
+/* The fd to watch for readability: results are waiting. */
+int importer_fd(const importer *im);
+/* Queues a job; the importer owns job->data from now on, whatever the
+ * result. Returns 0, or -EBUSY when IMPORTER_QUEUE_MAX jobs wait. */
+int importer_submit(importer *im, import_job *job);
+/* Moves the next finished result into *out; 0, or -EAGAIN when none. */
+int importer_take(importer *im, import_result *out);
+void importer_result_free(import_result *r);
+
+#endif

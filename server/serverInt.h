@@ -1,0 +1,131 @@
+/*
+ * serverInt.h: what server.c (connections, protocol, tick) and objects.c
+ * (uploads, object requests, import results) share. Nothing else includes it.
+ */
+#ifndef CVRE_SERVER_INT_H
+#define CVRE_SERVER_INT_H
+
+#include <stdint.h>
+
+#include "conn.h"
+#include "db.h"
+#include "dblog.h"
+#include "ev.h"
+#include "importer.h"
+#include "proto.h"
+#include "scene/scene.h"
+#include "server.h"
+#include "world.h"
+
+#define NS_PER_MS ((uint64_t)1000000)
+
+/* An upload in progress: the file grows chunk by chunk up to its size. */
+typedef struct client_upload {
+    uint32_t id; /* 0: none */
+    uint32_t total, received;
+    uint8_t *data;
+    char name[PROTO_OBJECT_NAME_MAX + 1];
+    char format[PROTO_FORMAT_MAX + 1];
+    int z_up;
+    float unit_scale;
+} client_upload;
+
+typedef enum { ST_HELLO, ST_JOIN, ST_JOINED } client_state;
+
+typedef struct client {
+    conn c;
+    server *srv;
+    client_state state;
+    int closing;  /* no more input is handled; output is flushed, then closed */
+    int shut_wr;  /* output flushed and write side shut down */
+    int dead;     /* reaped at the next safe point */
+    int writing;  /* EV_WRITE armed */
+    int in_write_list;
+    uint32_t index; /* in server.clients */
+    int64_t session_id; /* 0 before hello */
+    uint8_t token[PROTO_TOKEN_SIZE];
+    char peer[80];
+    uint32_t avatar_id; /* 0 before join */
+    int64_t user_id;    /* users.id once the join is stored; 0 before */
+    int has_seq;
+    uint32_t last_seq;
+    uint32_t sent_ack;
+    uint32_t last_sent_tick;
+    uint32_t *known; /* ids of the avatars this client has been told of, in no order */
+    uint32_t nknown, known_cap;
+    uint64_t connected_ns, last_frame_ns, close_deadline_ns, soft_since_ns;
+    char end_reason[PROTO_MESSAGE_MAX + 16];
+    client_upload upload;
+} client;
+
+enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE };
+
+/* A session change waiting to be written; the tick batches them into one
+ * transaction so that a burst of joins costs one commit. */
+typedef struct session_event {
+    int kind;
+    int64_t session;
+    double at;
+    uint32_t avatar;
+    char text[PROTO_MESSAGE_MAX + 16]; /* peer (open), name (join), reason (close) */
+    char token[2 * PROTO_TOKEN_SIZE + 1];
+} session_event;
+
+typedef struct stats {
+    uint64_t frames_in, moves_in, bytes_in, bytes_out;
+    uint64_t accepted, closed, protocol_errors, timeouts, slow_readers, collisions;
+    uint32_t *tick_us; /* durations of this interval's ticks */
+    uint32_t nticks, tick_cap;
+    uint64_t interval_start_ns;
+} stats;
+
+struct server {
+    server_config cfg;
+    ev_loop *loop;
+    int listen_fd, signal_fd, max_fd;
+    db *db;
+    world *world;
+    client **clients;
+    uint32_t nclients;
+    client **write_list;
+    uint32_t nwrite;
+    /* Per-tick scratch, sized for the largest area of interest. */
+    const world_avatar **vis, **joined, **snap;
+    uint32_t *left;
+    /* Per avatar slot: which id was stamped, and when (update_view). */
+    uint32_t *mark_id, *mark_stamp, stamp;
+    session_event *events;
+    uint32_t nevents, events_cap;
+    int64_t last_session_id;
+    int stopping;
+    uint64_t stop_deadline_ns;
+    stats st;
+    char address[80];
+    client **by_slot; /* the joined client of each avatar slot */
+    dblog *log;       /* the collision log's writer thread */
+    /* Objects (objects.c). */
+    scene *scene;
+    importer *importer;
+    size_t upload_bytes; /* held by unfinished uploads, all clients */
+};
+
+uint64_t server__now(const server *s);
+/* Reserves need bytes of c's output (disconnecting it at the hard limit:
+ * -1) and appends what w holds; see server.c. */
+int server__out_begin(server *s, client *c, size_t need, proto_writer *w);
+void server__out_end(server *s, client *c, const proto_writer *w);
+void server__protocol_error(server *s, client *c, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
+/* The connected client of this session, or NULL (it may have left). */
+client *server__client_by_session(server *s, int64_t session);
+
+/* objects.c */
+int objects__start(server *s, char *err, size_t errlen);
+void objects__stop(server *s);
+/* Handles an object request from a joined client. */
+void objects__on_message(server *s, client *c, const proto_msg *m);
+/* Sends c every object in the world (after its join). */
+void objects__send_all(server *s, client *c);
+/* Frees what c's unfinished upload holds. */
+void objects__client_gone(server *s, client *c);
+
+#endif
