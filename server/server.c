@@ -683,8 +683,9 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
             refuse(cfd, "server full");
             continue;
         }
-        int one = 1;
+        int one = 1, sndbuf = SRV_SOCKET_SNDBUF;
         setsockopt(cfd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+        setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
         client *c = xcalloc(1, sizeof *c);
         if (conn_init(&c->c, cfd) < 0 || ev_io_add(loop, cfd, EV_READ, on_client_io, c) < 0) {
             log_error("%s refused: cannot register the connection", peer);

@@ -36,6 +36,11 @@
 #define SRV_OUTBUF_HARD (2u * 1024u * 1024u)
 #endif
 #define SRV_OUTBUF_SOFT_MS 5000u
+/* Kernel send buffer per client socket. Left to autotuning, Linux lets each
+ * grow to 4 MiB (tcp_wmem), 40 GiB for 10,000 stalled clients, and a stalled
+ * reader would hide behind it for a long time before the soft limit sees it.
+ * 256 KiB holds many ticks of snapshots. */
+#define SRV_SOCKET_SNDBUF (256 * 1024)
 
 /* Per-wakeup budget so that one busy client cannot starve the others: at most
  * this many bytes are read per readable event, and only the frames they

@@ -28,7 +28,7 @@ def test_non_reader_is_cut_off():
     bots = subprocess.Popen([os.path.join(A.bin, "cvre-client"), "--port", str(srv.port), "--bots", "200",
                              "--rate", "100", "--pattern", "circle", "--duration", "20"],
                             stdout=subprocess.PIPE, text=True)
-    deadline, cut = time.time() + 25, False
+    deadline, cut = time.time() + 40, False
     while time.time() < deadline and not cut:
         time.sleep(0.5)
         cut = "output backlog" in srv.logtext()
