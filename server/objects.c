@@ -365,7 +365,7 @@ static int preload(server *s, const char *path, const char *name, const import_o
 
 /* Parses one world-file line:
  *   object PATH [name NAME] [up y|z] [units S] at X Y Z [yaw DEGREES] [scale S]
- * PATH is relative to the world file's folder. */
+ * A relative PATH is relative to the world file's folder. */
 static int world_line(server *s, const char *dir, char *line, int lineno, char *err, size_t errlen)
 {
     char *save = NULL, *tok = strtok_r(line, " \t\r\n", &save);
@@ -380,7 +380,10 @@ static int world_line(server *s, const char *dir, char *line, int lineno, char *
     for (tok = strtok_r(NULL, " \t\r\n", &save); tok; tok = strtok_r(NULL, " \t\r\n", &save)) {
         char *arg = NULL;
         if (!have_path) {
-            snprintf(path, sizeof path, "%s/%s", dir, tok);
+            if (tok[0] == '/')
+                snprintf(path, sizeof path, "%s", tok);
+            else
+                snprintf(path, sizeof path, "%s/%s", dir, tok);
             have_path = 1;
             continue;
         }

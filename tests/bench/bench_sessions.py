@@ -8,6 +8,7 @@ per inbound move as a ratio to the bare server's CPU per frame."""
 import argparse
 import json
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -82,12 +83,36 @@ def run_bare(bindir, n, ramp, seconds):
     return cpu / (n * 20 * wall)
 
 
-def run_cvre(bindir, n, ramp, seconds):
+MODELS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "shared", "models", "openings")
+# Each opening model, with what it needs to stand on the floor in metres.
+PIECES = [("kenney_archway_cliff_cave_stone.glb", "", 4, 0.2), ("kenney_building-garage.glb", "", 6, 0),
+          ("openfoam_room_with_doorway.stl", "up z", 1, 0), ("openfoam_desk.stl", "up z", 1, 0),
+          ("homedecor_desk.obj", "", 1, 0.5), ("homedecor_doghouse.obj", "", 1, 0.5),
+          ("homedecor_kitchen_chair.obj", "", 1, 0.312), ("homedecor_spiral_staircase.obj", "", 1, 0.594)]
+
+
+def world_file(path, count, seed=7):
+    """A world of count copies of the opening models, scattered over the
+    1 km x 1 km world (same seed, same world)."""
+    rng = random.Random(seed)
+    with open(path, "w") as f:
+        for i in range(count):
+            name, up, scale, lift = PIECES[i % len(PIECES)]
+            x, z = rng.uniform(-490, 490), rng.uniform(-490, 490)
+            f.write(f"object {os.path.join(MODELS, name)} name o{i} {up} at {x:.2f} {lift * scale:.3f} {z:.2f} "
+                    f"yaw {rng.choice((0, 90, 180, 270))} scale {scale}\n")
+
+
+def run_cvre(bindir, n, ramp, seconds, objects):
     tmp = tempfile.mkdtemp(prefix="cvre-bench-")
     stats = os.path.join(tmp, "stats.jsonl")
+    extra = []
+    if objects:
+        world_file(os.path.join(tmp, "bench.world"), objects)
+        extra = ["--world", os.path.join(tmp, "bench.world")]
     srv, port = start([os.path.join(bindir, "cvre-server"), "--port", "0", "--db", os.path.join(tmp, "b.db"),
                        "--max-clients", str(n + 100), "--world-size", "1000", "--spawn-radius", "500",
-                       "--stats-file", stats, "--stats-interval", "1", "--log-level", "warn"])
+                       "--stats-file", stats, "--stats-interval", "1", "--log-level", "warn", *extra])
     sw = swarm(bindir, port, n, ramp + seconds + 1)
     t_start = time.time()
     cpu, wall, peak = measure_window(srv.pid, ramp, seconds)
@@ -106,7 +131,7 @@ def run_cvre(bindir, n, ramp, seconds):
                 moves_s=moves / secs, out_s=sum(l["bytes_out"] for l in steady) / secs,
                 cpu_pct=100 * cpu / wall, rss=peak, cpu_per_move=cpu / moves if moves else float("nan"),
                 disconnects=sm.get("disconnects", "?"), errors=sm.get("errors", "?"),
-                joined=sm.get("joined", "?"))
+                joined=sm.get("joined", "?"), collisions_s=sm.get("collisions", 0) / (ramp + seconds))
 
 
 def main():
@@ -114,20 +139,24 @@ def main():
     ap.add_argument("--bin", required=True, help="build directory")
     ap.add_argument("--avatars", default="1000,5000,10000", help="comma-separated avatar counts")
     ap.add_argument("--seconds", type=float, default=10, help="steady-state window per run")
+    ap.add_argument("--objects", type=int, default=0,
+                    help="scatter this many real models (collisions on); 0: an empty world")
     a = ap.parse_args()
     rows = []
     for n in [int(x) for x in a.avatars.split(",")]:
         ramp = n / 2000 + 3
         bare = run_bare(a.bin, n, ramp, a.seconds)
-        r = run_cvre(a.bin, n, ramp, a.seconds)
+        r = run_cvre(a.bin, n, ramp, a.seconds, a.objects)
         r["ratio"] = r["cpu_per_move"] / bare
         r["bare_us"] = bare * 1e6
         rows.append(r)
         print(f"# {n} avatars done", file=sys.stderr, flush=True)
-    print("avatars | joined | tick p50 ms | p99 ms | max ms | moves/s | out MB/s | CPU % | RSS MiB | "
-          "disconnects | CPU/move us | bare CPU/frame us | ratio")
+    print(f"world: {a.objects} objects")
+    print("avatars | joined | tick p50 ms | p99 ms | max ms | moves/s | collisions/s | out MB/s | CPU % | "
+          "RSS MiB | disconnects | CPU/move us | bare CPU/frame us | ratio")
     for r in rows:
         print(f"{r['n']} | {r['joined']} | {r['p50']:.2f} | {r['p99']:.2f} | {r['max']:.2f} | {r['moves_s']:.0f} | "
+              f"{r['collisions_s']:.0f} | "
               f"{r['out_s'] / 1e6:.2f} | {r['cpu_pct']:.0f} | {r['rss']:.0f} | {r['disconnects']} | "
               f"{r['cpu_per_move'] * 1e6:.2f} | {r['bare_us']:.2f} | {r['ratio']:.2f}")
 
