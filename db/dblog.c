@@ -21,16 +21,20 @@
  * and per user (where their index entries are appended), the rtree's inner
  * nodes and the tail of every b-tree; 64 MiB keeps them all for a world of
  * 10,000 users and objects, so a batch reads nothing back from disk. */
+#ifndef DBLOG_CACHE_KIB
 #define DBLOG_CACHE_KIB 65536
+#endif
 /* WAL pages before a commit checkpoints (PASSIVE: readers are never
  * blocked). Kept at SQLite's default on purpose: the trigger is per
  * connection but the WAL is shared, so if this writer let the WAL grow past
  * the 1000 pages at which the server's own connection checkpoints, that
  * connection's next commit would run the checkpoint on the tick thread.
  * Larger values made no measurable difference to the writer (db/README). */
+#ifndef DBLOG_WAL_AUTOCHECKPOINT
 #define DBLOG_WAL_AUTOCHECKPOINT 1000
-/* The lock-hold cap looks at the clock once per this many rows, a few
- * milliseconds of inserts at most. */
+#endif
+/* The cap on a transaction's inserting time (batch_ms) is checked once per
+ * this many rows, a few milliseconds of inserts at most. */
 #define DBLOG_CLOCK_ROWS 256u
 /* A cache line's worth of padding keeps the producer's counters, the
  * writer's and the shared wake-up flag on separate lines, so that each side's
@@ -240,8 +244,8 @@ static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
     return rc;
 }
 
-/* Commits up to n of the oldest queued rows (fewer if the lock-hold cap
- * cuts the transaction short; none is cut at stop), retrying a failed batch,
+/* Commits up to n of the oldest queued rows (fewer if batch_ms cuts the
+ * transaction short; the last one, at stop, is not cut), retrying a failed batch,
  * and retires them from the ring, written or lost. Failures are logged one
  * by one until a batch is lost; from then on, until a batch succeeds again,
  * report() sums them up, so a full disk does not flood the log. */
@@ -250,7 +254,7 @@ static void commit_rows(dblog *l, uint64_t n, int stopping)
     uint64_t tail = atomic_load_explicit(&l->tail, memory_order_relaxed);
     uint32_t delay = DBLOG_RETRY_MS;
     for (uint32_t attempt = 1;; attempt++) {
-        int rc = write_batch(l, tail, &n, stopping ? 0 : DBLOG_HOLD_MS);
+        int rc = write_batch(l, tail, &n, stopping ? 0 : l->batch_ms);
         if (rc == SQLITE_OK) {
             atomic_fetch_add_explicit(&l->written, n, memory_order_relaxed);
             atomic_fetch_add_explicit(&l->batches, 1, memory_order_relaxed);

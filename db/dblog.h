@@ -17,11 +17,14 @@
  * stalling the tick, that is every avatar in the world, to save a log row;
  * a lost collision only thins a density cluster that thousands of others
  * make. Drops are visible in dblog_stats and logged by the writer at most once
- * per DBLOG_REPORT_MS. The queue is sized so that the design load
- * (tests/bench/bench_logger.c) never drops; see DBLOG_QUEUE_ROWS_DEFAULT.
+ * per DBLOG_REPORT_MS. At a rate the writer sustains the queue never fills
+ * (tests/bench/bench_logger.c); see DBLOG_QUEUE_ROWS_DEFAULT and db/README.md
+ * for what it sustains.
  *
  * Commit policy: a batch is committed when it reaches batch_rows, or
- * batch_ms after its first row was seen, whichever comes first. Rows stay in
+ * batch_ms after its first row was seen, whichever comes first; and a
+ * transaction that has been inserting for batch_ms commits early with what
+ * it has, so the write lock is never held much longer than that. Rows stay in
  * the ring until their transaction commits, so a failed batch is retried
  * as is: a database error (disk full, locked beyond the busy timeout) is
  * logged and the same batch retried up to DBLOG_ATTEMPTS times, then its rows
@@ -37,10 +40,14 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Default ring capacity in rows (a power of two). At the design load of
- * 200,000 rows/s (10,000 avatars colliding every tick at 20 Hz) 2^18 rows
- * hold 1.3 s, longer than the slowest batch plus WAL checkpoint the
- * benchmark sees, at 128 B a row = 32 MiB. */
+/* Default ring capacity in rows (a power of two), 112 bytes each: 2^18 rows
+ * = 28 MiB, allocated and touched at open. A queue cannot make up for a
+ * writer slower than the tick on average; it carries the tick over the
+ * writer's pauses (a commit, a WAL checkpoint, another process holding the
+ * lock) and over bursts. 2^18 rows are 1.3 s of the 200,000 rows/s that
+ * 10,000 avatars colliding on every tick at 20 Hz would log, and 5 s at the
+ * 50,000 rows/s this writer sustains on the benchmark; the benchmark's
+ * high-water mark at a sustainable rate is a small fraction of it. */
 #ifndef DBLOG_QUEUE_ROWS_DEFAULT
 #define DBLOG_QUEUE_ROWS_DEFAULT (1u << 18)
 #endif
@@ -50,25 +57,27 @@
 /* Default rows per transaction. A commit writes every page it dirtied to the
  * WAL, and the by-object and by-user indexes dirty one leaf per distinct
  * object and user in the batch, so small batches multiply page writes: on
- * the benchmark, 4096 rows a batch run at 3/4 of the rate of 16384, and
- * 65536 gain only a few percent more. */
+ * the benchmark, 4096 rows a batch run at 3/4 of the rate of 16384. 65536
+ * gain another sixth but would hold the write lock for about a second, past
+ * the time cap (DBLOG_BATCH_MS_DEFAULT) anyway. */
 #ifndef DBLOG_BATCH_ROWS_DEFAULT
 #define DBLOG_BATCH_ROWS_DEFAULT 16384u
 #endif
-/* A transaction holds the database's write lock, and the server's tick
- * thread writes session records through another connection: it waits for
- * the lock. So a batch that has been inserting for this long is committed
- * with the rows it has, whatever batch_rows says, and the rest go into the
- * next one. 100 ms is two ticks at 20 Hz; it costs about 10% of the
- * writer's throughput against uncapped 16384-row batches (see db/README). */
-#ifndef DBLOG_HOLD_MS
-#define DBLOG_HOLD_MS 100u
-#endif
-/* Default time limit on a batch, from its first row: under light load the
- * log is at most this far behind the world, and a crash (not a stop) loses at
- * most this much. Clustering runs offline on minutes of data. */
+/* Default time limit on a batch, twice over: a batch is committed at most
+ * this long after its first row was seen, and a transaction that has been
+ * inserting this long commits early with the rows it has (the rest go into
+ * the next one).
+ * - Under light load the log is at most this far behind the world, and a
+ *   crash (not a stop) loses at most this much. Clustering runs offline on
+ *   minutes of data.
+ * - A transaction holds the database's write lock, and the server's tick
+ *   thread writes session records through another connection: it waits for
+ *   that lock. On the benchmark a quiet machine commits full 16384-row
+ *   batches within 250 ms; on a loaded one (the writer descheduled half the
+ *   time) a 100 ms cap cut batches to ~5000 rows and the writer's rate by a
+ *   third, 250 ms by a tenth. */
 #ifndef DBLOG_BATCH_MS_DEFAULT
-#define DBLOG_BATCH_MS_DEFAULT 200u
+#define DBLOG_BATCH_MS_DEFAULT 250u
 #endif
 #define DBLOG_BATCH_MS_MAX 60000u
 
@@ -95,7 +104,6 @@ _Static_assert(DBLOG_QUEUE_ROWS_DEFAULT <= DBLOG_QUEUE_ROWS_MAX, "queue too larg
 _Static_assert(DBLOG_BATCH_ROWS_DEFAULT >= 1 && DBLOG_BATCH_ROWS_DEFAULT <= DBLOG_QUEUE_ROWS_DEFAULT / 2,
                "a batch may fill at most half the queue, so the producer keeps room while it commits");
 _Static_assert(DBLOG_BATCH_MS_DEFAULT >= 1 && DBLOG_BATCH_MS_DEFAULT <= DBLOG_BATCH_MS_MAX, "batch time out of range");
-_Static_assert(DBLOG_HOLD_MS >= 1 && DBLOG_HOLD_MS <= DBLOG_BATCH_MS_MAX, "lock-hold cap out of range");
 _Static_assert(DBLOG_ATTEMPTS >= 1 && DBLOG_ATTEMPTS <= 10, "attempts out of range");
 _Static_assert(DBLOG_RETRY_MS <= 10000, "retry delay out of range");
 
@@ -124,7 +132,8 @@ typedef struct dblog_row {
 typedef struct dblog_config {
     uint32_t queue_rows; /* ring capacity: a power of two, 2..DBLOG_QUEUE_ROWS_MAX */
     uint32_t batch_rows; /* rows per transaction: 1..queue_rows/2 */
-    uint32_t batch_ms;   /* 1..DBLOG_BATCH_MS_MAX */
+    uint32_t batch_ms;   /* 1..DBLOG_BATCH_MS_MAX: gathering a batch, and inserting it
+                            (the last transaction, at stop, is not cut short) */
 } dblog_config;
 
 /* Counters since dblog_open. After dblog_stop,

@@ -1,0 +1,450 @@
+/* cvre-admin: read-only questions to a cvre database, safe while the server
+ * runs. Flags, help texts and exit codes live here; the SQL is in query.c,
+ * the output forms in out.c. */
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "db.h"
+#include "out.h"
+#include "query.h"
+
+enum { EXIT_NOT_FOUND = 1, EXIT_USAGE = 2, EXIT_DB = 3 };
+
+/* --limit can ask for at most this many rows: a table holds them all in
+ * memory to size its columns (0 means no limit and is meant for --csv and
+ * --json, which stream). */
+#define ADMIN_LIMIT_MAX 100000000
+#define ADMIN_LIMIT_DEFAULT 100
+
+static const char usage[] =
+    "usage: cvre-admin [--db FILE] [--csv | --json] COMMAND [options]\n"
+    "\n"
+    "Answers questions about a cvre database: the collision log, objects and\n"
+    "their collision maps (ECM), users and sessions. It opens the file read-only\n"
+    "and can run while the server writes to it.\n"
+    "\n"
+    "Commands:\n"
+    "  collisions [filters]      collisions, newest first (--object, --user, --since,\n"
+    "                            --until, --region, --limit)\n"
+    "  top-objects               objects by number of collisions (--since, --until, --limit)\n"
+    "  object ID                 one object: owner, placement, geometry, ECM, collisions\n"
+    "  versions ID               the ECM versions of an object, with box counts and reasons\n"
+    "  sessions                  who was connected when (--user, --since, --until, --limit)\n"
+    "  totals                    users, sessions, objects, collisions and the time span\n"
+    "  help [COMMAND]            this text, or a command's (same as COMMAND --help)\n"
+    "\n"
+    "Options (before or after the command):\n"
+    "  --db FILE                 the database (default cvre.db)\n"
+    "  --csv                     CSV (RFC 4180) with a header line and every column\n"
+    "  --json                    one JSON array of objects, one object per line, every column\n"
+    "  --help                    show help\n"
+    "  --version                 show the version\n"
+    "\n"
+    "The default output is an aligned table for people; it leaves out a few\n"
+    "detail columns (see each command's help), which --csv and --json include.\n"
+    "Times print as ISO-8601 in UTC. NULL is \"-\" in a table, an empty CSV\n"
+    "field, null in JSON.\n"
+    "\n"
+    "Times given to --since and --until: Unix seconds (1795000000 or\n"
+    "1795000000.25), or ISO-8601: 2026-11-22, 2026-11-22T10:00, 2026-11-22T10:00:00.5,\n"
+    "a space instead of T, and an optional zone: Z, +01:00, -0500 (none means UTC).\n"
+    "--since is inclusive, --until exclusive.\n"
+    "\n"
+    "Exit status:\n"
+    "  0  success (also when no rows match)\n"
+    "  1  the object or user asked about does not exist\n"
+    "  2  bad arguments\n"
+    "  3  the database cannot be used: missing or unreadable file, not a cvre\n"
+    "     database, a schema version this build does not know, or a failed query\n";
+
+struct command {
+    const char *name;
+    unsigned opts; /* OPT_* accepted besides the common ones */
+    int wants_id;  /* takes one positional object id */
+    const char *help;
+};
+
+enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32 };
+
+static const struct command commands[] = {
+    {"collisions", OPT_OBJECT | OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_REGION | OPT_LIMIT, 0,
+     "usage: cvre-admin collisions [--object ID] [--user NAME] [--since T] [--until T]\n"
+     "                             [--region X0,Y0,Z0,X1,Y1,Z1] [--limit N]\n"
+     "\n"
+     "Collisions matching every filter given, newest first.\n"
+     "\n"
+     "  --object ID       on this object (exit 1 if there is no such object)\n"
+     "  --user NAME       by this user (exit 1 if there is no such user)\n"
+     "  --since T         at or after T\n"
+     "  --until T         before T\n"
+     "  --region BOX      world contact point inside the box with corners X0,Y0,Z0 and\n"
+     "                    X1,Y1,Z1 (metres, X0 <= X1 and so on; edges included),\n"
+     "                    looked up through the spatial index\n"
+     "  --limit N         at most N rows (default 100; 0: all)\n"
+     "\n"
+     "Columns: id, time, user, session*, avatar*, object, version (ECM), box, inside\n"
+     "(the avatar was already inside the box), world_x/y/z (contact point),\n"
+     "local_x/y/z* (contact point in object coordinates), normal_x/y/z*,\n"
+     "velocity_x/y/z* (m/s). * only with --csv and --json.\n"},
+    {"top-objects", OPT_SINCE | OPT_UNTIL | OPT_LIMIT, 0,
+     "usage: cvre-admin top-objects [--since T] [--until T] [--limit N]\n"
+     "\n"
+     "Objects by number of collisions in the time range, most first.\n"
+     "\n"
+     "  --since T, --until T   count collisions at or after T, before T\n"
+     "  --limit N              at most N objects (default 100; 0: all)\n"
+     "\n"
+     "Columns: object, name, owner, collisions, users (distinct, known ones),\n"
+     "first, last (collision times), in_world* (not removed).\n"
+     "* only with --csv and --json.\n"},
+    {"object", 0, 1,
+     "usage: cvre-admin object ID\n"
+     "\n"
+     "One object: name, format, owner, when it was created (and removed), its\n"
+     "placement (pos_x/y/z in metres, yaw in radians about +y, scale), triangle\n"
+     "count and bounding box (mbr_*, object coordinates), its ECM version in\n"
+     "force, how many versions it has had and how many boxes the current one\n"
+     "has, and its collisions: in all, in the current version, distinct users,\n"
+     "first and last. Exit 1 if there is no such object.\n"},
+    {"versions", 0, 1,
+     "usage: cvre-admin versions ID\n"
+     "\n"
+     "The ECM versions of an object, oldest first: version, created, reason\n"
+     "(import, refine, rollback), boxes, collisions logged against it, and\n"
+     "whether it is the one in force. Exit 1 if there is no such object.\n"},
+    {"sessions", OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_LIMIT, 0,
+     "usage: cvre-admin sessions [--user NAME] [--since T] [--until T] [--limit N]\n"
+     "\n"
+     "Sessions connected at some moment between --since and --until, newest\n"
+     "first (a session still open counts as connected until now).\n"
+     "\n"
+     "  --user NAME            this user's only (exit 1 if there is no such user)\n"
+     "  --since T, --until T   the time range\n"
+     "  --limit N              at most N sessions (default 100; 0: all)\n"
+     "\n"
+     "Columns: session, user, peer (address:port), avatar*, started, joined*,\n"
+     "ended, reason, duration (h:mm:ss in a table, seconds otherwise).\n"
+     "* only with --csv and --json.\n"},
+    {"totals", 0, 0,
+     "usage: cvre-admin totals\n"
+     "\n"
+     "Counts of users, sessions (and open ones), objects (and those still in the\n"
+     "world) and collisions, and the first and last moment the database knows\n"
+     "of (session starts and ends, collisions).\n"},
+};
+
+static const char *prog = "cvre-admin";
+
+/* Prints "cvre-admin [COMMAND]: message (see ... --help)"; returns the
+ * usage exit status. */
+static int usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static int usage_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    fprintf(stderr, "%s%s%s: ", prog, cmd ? " " : "", cmd ? cmd : "");
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, " (see %s%s%s --help)\n", prog, cmd ? " " : "", cmd ? cmd : "");
+    return EXIT_USAGE;
+}
+
+/* Parses a whole decimal number in [lo, hi]. */
+static int parse_int(const char *text, long long lo, long long hi, long long *value)
+{
+    char *end;
+    errno = 0;
+    long long v = strtoll(text, &end, 10);
+    if (errno || end == text || *end || v < lo || v > hi)
+        return -1;
+    *value = v;
+    return 0;
+}
+
+static int parse_real(const char *text, double *value)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(text, &end);
+    if (errno || end == text || *end || !isfinite(v))
+        return -1;
+    *value = v;
+    return 0;
+}
+
+/* Reads exactly `digits` decimal digits at *p into *value, advancing *p. */
+static int digits_at(const char **p, int digits, int *value)
+{
+    int v = 0;
+    for (int i = 0; i < digits; i++, (*p)++) {
+        if (**p < '0' || **p > '9')
+            return -1;
+        v = v * 10 + (**p - '0');
+    }
+    *value = v;
+    return 0;
+}
+
+/* Unix seconds, or ISO-8601 (see usage) in UTC unless a zone is given. */
+static int parse_time(const char *text, double *value)
+{
+    if (parse_real(text, value) == 0)
+        return 0;
+    struct tm tm = {0};
+    int y, mo, d, h = 0, mi = 0, s = 0, zh = 0, zm = 0, sign = 0;
+    double frac = 0;
+    const char *p = text;
+    if (digits_at(&p, 4, &y) || *p++ != '-' || digits_at(&p, 2, &mo) || *p++ != '-' || digits_at(&p, 2, &d))
+        return -1;
+    if (*p == 'T' || *p == ' ') {
+        p++;
+        if (digits_at(&p, 2, &h) || *p++ != ':' || digits_at(&p, 2, &mi))
+            return -1;
+        if (*p == ':') {
+            p++;
+            if (digits_at(&p, 2, &s))
+                return -1;
+            if (*p == '.') {
+                const char *f = p;
+                p++;
+                if (*p < '0' || *p > '9')
+                    return -1;
+                while (*p >= '0' && *p <= '9')
+                    p++;
+                char buf[32];
+                size_t n = (size_t)(p - f) < sizeof buf - 2 ? (size_t)(p - f) : sizeof buf - 2;
+                buf[0] = '0';
+                memcpy(buf + 1, f, n);
+                buf[n + 1] = 0;
+                frac = strtod(buf, NULL);
+            }
+        }
+        if (*p == 'Z') {
+            p++;
+        } else if (*p == '+' || *p == '-') {
+            sign = *p++ == '+' ? 1 : -1;
+            if (digits_at(&p, 2, &zh))
+                return -1;
+            if (*p == ':')
+                p++;
+            if (digits_at(&p, 2, &zm) || zh > 23 || zm > 59)
+                return -1;
+        }
+    }
+    if (*p || mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || s > 60)
+        return -1;
+    tm.tm_year = y - 1900;
+    tm.tm_mon = mo - 1;
+    tm.tm_mday = d;
+    tm.tm_hour = h;
+    tm.tm_min = mi;
+    tm.tm_sec = s;
+    time_t t = timegm(&tm);
+    if (tm.tm_mday != d) /* 2026-02-30 came back as March */
+        return -1;
+    *value = (double)t + frac - sign * (zh * 3600.0 + zm * 60.0);
+    return 0;
+}
+
+/* X0,Y0,Z0,X1,Y1,Z1 with X0 <= X1, Y0 <= Y1, Z0 <= Z1. */
+static int parse_region(const char *text, double box[6])
+{
+    const char *p = text;
+    for (int i = 0; i < 6; i++) {
+        char buf[64];
+        size_t n = strcspn(p, ",");
+        if (n == 0 || n >= sizeof buf || (i < 5 && p[n] != ',') || (i == 5 && p[n]))
+            return -1;
+        memcpy(buf, p, n);
+        buf[n] = 0;
+        if (parse_real(buf, &box[i]) < 0)
+            return -1;
+        p += n + (i < 5);
+    }
+    return box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5] ? 0 : -1;
+}
+
+static const struct command *find_command(const char *name)
+{
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        if (strcmp(commands[i].name, name) == 0)
+            return &commands[i];
+    return NULL;
+}
+
+enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT };
+
+static const struct option options[] = {
+    {"db", required_argument, 0, O_DB},         {"csv", no_argument, 0, O_CSV},
+    {"json", no_argument, 0, O_JSON},           {"help", no_argument, 0, O_HELP},
+    {"version", no_argument, 0, O_VERSION},     {"object", required_argument, 0, O_OBJECT},
+    {"user", required_argument, 0, O_USER},     {"since", required_argument, 0, O_SINCE},
+    {"until", required_argument, 0, O_UNTIL},   {"region", required_argument, 0, O_REGION},
+    {"limit", required_argument, 0, O_LIMIT},   {0, 0, 0, 0},
+};
+
+struct args {
+    const char *db;
+    int format, help, version;
+    query_filter f;
+};
+
+/* Parses options from argv[1..] (argv[0] names the program or the command).
+ * cmd is NULL before the command: only the common options are taken, and
+ * parsing stops at the first word that is not an option. Returns 0 or an
+ * exit status. */
+static int parse_options(int argc, char **argv, const struct command *cmd, struct args *a)
+{
+    static const unsigned bit[] = {[O_OBJECT - O_OBJECT] = OPT_OBJECT, [O_USER - O_OBJECT] = OPT_USER,
+                                   [O_SINCE - O_OBJECT] = OPT_SINCE,   [O_UNTIL - O_OBJECT] = OPT_UNTIL,
+                                   [O_REGION - O_OBJECT] = OPT_REGION, [O_LIMIT - O_OBJECT] = OPT_LIMIT};
+    const char *where = cmd ? cmd->name : NULL;
+    int o, li = 0;
+    long long n;
+    optind = 0; /* glibc: start afresh, argv[0] is skipped */
+    opterr = 0;
+    while ((o = getopt_long(argc, argv, cmd ? ":" : "+:", options, &li)) != -1) {
+        if (o == '?')
+            return usage_error(where, "unknown option %s", argv[optind - 1]);
+        if (o == ':')
+            return usage_error(where, "%s needs a value", argv[optind - 1]);
+        if (o >= O_OBJECT && (!cmd || !(cmd->opts & bit[o - O_OBJECT])))
+            return usage_error(where, cmd ? "--%s is not an option of this command" : "--%s must come after the command",
+                               options[li].name);
+        switch (o) {
+        case O_DB: a->db = optarg; break;
+        case O_CSV: a->format = OUT_CSV; break;
+        case O_JSON: a->format = OUT_JSON; break;
+        case O_HELP: a->help = 1; break;
+        case O_VERSION: a->version = 1; break;
+        case O_OBJECT:
+            if (parse_int(optarg, 1, INT64_MAX, &n) < 0)
+                return usage_error(where, "--object wants a positive whole number, not \"%s\"", optarg);
+            a->f.has_object = 1;
+            a->f.object = n;
+            break;
+        case O_USER: a->f.user = optarg; break;
+        case O_SINCE:
+        case O_UNTIL: {
+            double t;
+            if (parse_time(optarg, &t) < 0)
+                return usage_error(where, "not a time: \"%s\"", optarg);
+            if (o == O_SINCE)
+                a->f.has_since = 1, a->f.since = t;
+            else
+                a->f.has_until = 1, a->f.until = t;
+            break;
+        }
+        case O_REGION:
+            if (parse_region(optarg, a->f.region) < 0)
+                return usage_error(where, "--region wants X0,Y0,Z0,X1,Y1,Z1 with X0 <= X1, Y0 <= Y1, Z0 <= Z1, not \"%s\"",
+                                   optarg);
+            a->f.has_region = 1;
+            break;
+        case O_LIMIT:
+            if (parse_int(optarg, 0, ADMIN_LIMIT_MAX, &n) < 0)
+                return usage_error(where, "--limit wants a whole number from 0 to 100000000, not \"%s\"", optarg);
+            a->f.limit = n;
+            break;
+        }
+    }
+    return 0;
+}
+
+static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, int64_t id)
+{
+    char err[512] = "";
+    int rc;
+    if (strcmp(cmd->name, "collisions") == 0)
+        rc = query_collisions(s, &a->f, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "top-objects") == 0)
+        rc = query_top_objects(s, &a->f, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "object") == 0)
+        rc = query_object(s, id, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "versions") == 0)
+        rc = query_versions(s, id, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "sessions") == 0)
+        rc = query_sessions(s, &a->f, a->format, err, sizeof err);
+    else
+        rc = query_totals(s, a->format, err, sizeof err);
+    if (rc == QUERY_OK)
+        return 0;
+    fprintf(stderr, "%s: %s\n", prog, err);
+    return rc == QUERY_NOT_FOUND ? EXIT_NOT_FOUND : EXIT_DB;
+}
+
+int main(int argc, char **argv)
+{
+    struct args a = {.db = "cvre.db", .format = OUT_TABLE, .f = {.limit = ADMIN_LIMIT_DEFAULT}};
+    int rc = parse_options(argc, argv, NULL, &a);
+    if (rc)
+        return rc;
+    if (a.version) {
+        printf("cvre-admin %s (schema version %d)\n", CVRE_VERSION, db_schema_version());
+        return 0;
+    }
+    if (a.help) {
+        fputs(usage, stdout);
+        return 0;
+    }
+    if (optind >= argc)
+        return usage_error(NULL, "%s", "no command given");
+    const char *name = argv[optind];
+    int sub_argc = argc - optind;
+    char **sub_argv = argv + optind;
+    if (strcmp(name, "help") == 0) {
+        const struct command *c = sub_argc > 1 ? find_command(sub_argv[1]) : NULL;
+        if (sub_argc > 1 && !c)
+            return usage_error(NULL, "no command \"%s\"", sub_argv[1]);
+        fputs(c ? c->help : usage, stdout);
+        return 0;
+    }
+    const struct command *cmd = find_command(name);
+    if (!cmd)
+        return usage_error(NULL, "no command \"%s\"", name);
+    rc = parse_options(sub_argc, sub_argv, cmd, &a);
+    if (rc)
+        return rc;
+    if (a.help) {
+        fputs(cmd->help, stdout);
+        return 0;
+    }
+    long long id = 0;
+    int positional = sub_argc - optind;
+    if (positional > cmd->wants_id)
+        return usage_error(cmd->name, "unexpected argument \"%s\"", sub_argv[optind + cmd->wants_id]);
+    if (positional < cmd->wants_id)
+        return usage_error(cmd->name, "%s", "wants an object id");
+    if (cmd->wants_id && parse_int(sub_argv[optind], 1, INT64_MAX, &id) < 0)
+        return usage_error(cmd->name, "wants a positive whole number as the object id, not \"%s\"", sub_argv[optind]);
+    if (a.format == OUT_TABLE && a.f.limit == 0)
+        a.f.limit = ADMIN_LIMIT_MAX; /* a table is held in memory */
+
+    if (access(a.db, F_OK) != 0) {
+        fprintf(stderr, "%s: %s: %s (give the database with --db FILE)\n", prog, a.db, strerror(errno));
+        return EXIT_DB;
+    }
+    char err[512];
+    db *d = db_open(a.db, DB_READONLY, err, sizeof err);
+    if (!d) {
+        fprintf(stderr, "%s: not usable as a cvre database: %s\n", prog, err);
+        return EXIT_DB;
+    }
+    sqlite3 *s = db_sqlite(d);
+    /* Belt and braces on top of the read-only open. */
+    if (sqlite3_exec(s, "PRAGMA query_only = 1", NULL, NULL, NULL) != SQLITE_OK) {
+        fprintf(stderr, "%s: %s: %s\n", prog, a.db, sqlite3_errmsg(s));
+        db_close(d);
+        return EXIT_DB;
+    }
+    rc = run_command(cmd, s, &a, (int64_t)id);
+    db_close(d);
+    return rc;
+}

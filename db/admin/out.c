@@ -1,0 +1,300 @@
+#include "out.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "alloc.h"
+
+/* Longest formatted cell other than text: an ISO time or a %.17g number. */
+#define OUT_CELL_MAX 64
+/* Most columns in a result: the widest, collisions, has 21. */
+#define OUT_MAX_COLUMNS 64
+
+struct out {
+    int format, ncols, vertical;
+    FILE *f;
+    const out_column *cols;
+    long rows;
+    /* Table form: cells of the shown columns, row after row. */
+    char **cells;
+    size_t ncells, cap;
+};
+
+out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int vertical)
+{
+    if (ncols < 1 || ncols > OUT_MAX_COLUMNS)
+        abort(); /* a programming error: the column lists are constants */
+    out *o = xcalloc(1, sizeof *o);
+    o->format = format;
+    o->f = f;
+    o->cols = cols;
+    o->ncols = ncols;
+    o->vertical = vertical;
+    if (format == OUT_CSV)
+        for (int i = 0; i < ncols; i++)
+            fprintf(f, "%s%s", i ? "," : "", cols[i].name); /* names never need quoting */
+    if (format == OUT_CSV)
+        fputs("\r\n", f);
+    if (format == OUT_JSON)
+        fputc('[', f);
+    return o;
+}
+
+/* Unix seconds as ISO-8601 UTC with `digits` decimals (3 or 6). Values no
+ * calendar can show are printed as numbers. */
+static void format_time(char *buf, double t, int digits)
+{
+    double scale = digits == 3 ? 1e3 : 1e6;
+    if (!isfinite(t) || fabs(t) > 1e11) {
+        snprintf(buf, OUT_CELL_MAX, "%.17g", t);
+        return;
+    }
+    long long units = llround(t * scale), per = (long long)scale;
+    long long secs = units / per, frac = units % per;
+    if (frac < 0) {
+        frac += per;
+        secs--;
+    }
+    time_t tt = (time_t)secs;
+    struct tm tm;
+    gmtime_r(&tt, &tm);
+    size_t n = strftime(buf, OUT_CELL_MAX, "%Y-%m-%dT%H:%M:%S", &tm);
+    snprintf(buf + n, OUT_CELL_MAX - n, ".%0*lldZ", digits, frac);
+}
+
+/* The shortest %g form that reads back as the same double. */
+static void format_real(char *buf, double v)
+{
+    for (int prec = 15; prec <= 17; prec++) {
+        snprintf(buf, OUT_CELL_MAX, "%.*g", prec, v);
+        if (strtod(buf, NULL) == v)
+            return;
+    }
+}
+
+static void format_duration(char *buf, double s)
+{
+    long long t = llround(s);
+    if (!isfinite(s) || t < 0)
+        snprintf(buf, OUT_CELL_MAX, "%.3f", s);
+    else
+        snprintf(buf, OUT_CELL_MAX, "%lld:%02lld:%02lld", t / 3600, t / 60 % 60, t % 60);
+}
+
+/* The table form of one cell, in a new string. Control characters in text
+ * become '?', so that a crafted name cannot drive the terminal. */
+static char *table_cell(sqlite3_stmt *st, int i, int kind)
+{
+    char buf[OUT_CELL_MAX];
+    if (sqlite3_column_type(st, i) == SQLITE_NULL)
+        return strcpy(xmalloc(2), "-");
+    switch (kind) {
+    case OUT_INT: snprintf(buf, sizeof buf, "%lld", (long long)sqlite3_column_int64(st, i)); break;
+    case OUT_REAL: snprintf(buf, sizeof buf, "%.3f", sqlite3_column_double(st, i)); break;
+    case OUT_TIME: format_time(buf, sqlite3_column_double(st, i), 3); break;
+    case OUT_SECONDS: format_duration(buf, sqlite3_column_double(st, i)); break;
+    case OUT_BOOL: snprintf(buf, sizeof buf, "%s", sqlite3_column_int64(st, i) ? "yes" : "no"); break;
+    default: {
+        const unsigned char *t = sqlite3_column_text(st, i);
+        size_t n = (size_t)sqlite3_column_bytes(st, i);
+        char *s = xmalloc(n + 1);
+        for (size_t k = 0; k < n; k++)
+            s[k] = t[k] < 0x20 || t[k] == 0x7f ? '?' : (char)t[k];
+        s[n] = 0;
+        return s;
+    }
+    }
+    return strcpy(xmalloc(strlen(buf) + 1), buf);
+}
+
+static void csv_text(FILE *f, const unsigned char *t, size_t n)
+{
+    if (!memchr(t, ',', n) && !memchr(t, '"', n) && !memchr(t, '\n', n) && !memchr(t, '\r', n)) {
+        fwrite(t, 1, n, f);
+        return;
+    }
+    fputc('"', f);
+    for (size_t k = 0; k < n; k++) {
+        if (t[k] == '"')
+            fputc('"', f);
+        fputc(t[k], f);
+    }
+    fputc('"', f);
+}
+
+static void json_text(FILE *f, const unsigned char *t, size_t n)
+{
+    fputc('"', f);
+    for (size_t k = 0; k < n; k++) {
+        unsigned char c = t[k];
+        if (c == '"' || c == '\\')
+            fprintf(f, "\\%c", c);
+        else if (c < 0x20 || c == 0x7f)
+            fprintf(f, "\\u%04x", c);
+        else
+            fputc(c, f);
+    }
+    fputc('"', f);
+}
+
+/* One cell in CSV or JSON form. */
+static void stream_cell(out *o, sqlite3_stmt *st, int i)
+{
+    int json = o->format == OUT_JSON, kind = o->cols[i].kind;
+    char buf[OUT_CELL_MAX];
+    if (sqlite3_column_type(st, i) == SQLITE_NULL) {
+        if (json)
+            fputs("null", o->f);
+        return;
+    }
+    double v = kind == OUT_INT || kind == OUT_BOOL || kind == OUT_TEXT ? 0 : sqlite3_column_double(st, i);
+    switch (kind) {
+    case OUT_INT: fprintf(o->f, "%lld", (long long)sqlite3_column_int64(st, i)); break;
+    case OUT_BOOL:
+        fputs(sqlite3_column_int64(st, i) ? (json ? "true" : "1") : (json ? "false" : "0"), o->f);
+        break;
+    case OUT_TIME:
+        format_time(buf, v, 6);
+        if (json)
+            fprintf(o->f, "\"%s\"", buf);
+        else
+            fputs(buf, o->f);
+        break;
+    case OUT_REAL:
+    case OUT_SECONDS:
+        if (json && !isfinite(v)) {
+            fputs("null", o->f); /* JSON has no infinity */
+        } else {
+            format_real(buf, v);
+            fputs(buf, o->f);
+        }
+        break;
+    default: {
+        const unsigned char *t = sqlite3_column_text(st, i);
+        size_t n = (size_t)sqlite3_column_bytes(st, i);
+        if (json)
+            json_text(o->f, t, n);
+        else
+            csv_text(o->f, t, n);
+    }
+    }
+}
+
+void out_row(out *o, sqlite3_stmt *st)
+{
+    if (o->format == OUT_TABLE) {
+        for (int i = 0; i < o->ncols; i++) {
+            if (o->cols[i].detail_only)
+                continue;
+            if (o->ncells == o->cap) {
+                o->cap = o->cap ? o->cap * 2 : 256;
+                o->cells = xrealloc(o->cells, o->cap * sizeof *o->cells);
+            }
+            o->cells[o->ncells++] = table_cell(st, i, o->cols[i].kind);
+        }
+    } else if (o->format == OUT_CSV) {
+        for (int i = 0; i < o->ncols; i++) {
+            if (i)
+                fputc(',', o->f);
+            stream_cell(o, st, i);
+        }
+        fputs("\r\n", o->f);
+    } else {
+        fputs(o->rows ? ",\n{" : "\n{", o->f);
+        for (int i = 0; i < o->ncols; i++) {
+            fprintf(o->f, "%s\"%s\": ", i ? ", " : "", o->cols[i].name);
+            stream_cell(o, st, i);
+        }
+        fputc('}', o->f);
+    }
+    o->rows++;
+}
+
+/* Characters a terminal shows for s: UTF-8 continuation bytes take none. */
+static size_t width(const char *s)
+{
+    size_t w = 0;
+    for (; *s; s++)
+        w += ((unsigned char)*s & 0xc0) != 0x80;
+    return w;
+}
+
+static void pad(FILE *f, size_t n)
+{
+    while (n--)
+        fputc(' ', f);
+}
+
+static void print_table(out *o)
+{
+    int shown[OUT_MAX_COLUMNS], n = 0;
+    for (int i = 0; i < o->ncols; i++)
+        if (!o->cols[i].detail_only)
+            shown[n++] = i;
+    if (n == 0)
+        return;
+    if (o->vertical) {
+        size_t w = 0;
+        for (int k = 0; k < n; k++)
+            if (width(o->cols[shown[k]].name) > w)
+                w = width(o->cols[shown[k]].name);
+        for (size_t r = 0; r < o->ncells / (size_t)n; r++) {
+            if (r)
+                fputc('\n', o->f);
+            for (int k = 0; k < n; k++) {
+                fputs(o->cols[shown[k]].name, o->f);
+                pad(o->f, w - width(o->cols[shown[k]].name) + 2);
+                fprintf(o->f, "%s\n", o->cells[r * (size_t)n + (size_t)k]);
+            }
+        }
+        return;
+    }
+    size_t w[OUT_MAX_COLUMNS];
+    for (int k = 0; k < n; k++)
+        w[k] = width(o->cols[shown[k]].name);
+    for (size_t c = 0; c < o->ncells; c++)
+        if (width(o->cells[c]) > w[c % (size_t)n])
+            w[c % (size_t)n] = width(o->cells[c]);
+    for (size_t r = 0; r <= o->ncells / (size_t)n + 1; r++) {
+        for (int k = 0; k < n; k++) {
+            int kind = o->cols[shown[k]].kind;
+            int right = kind == OUT_INT || kind == OUT_REAL || kind == OUT_SECONDS;
+            const char *s = r == 0 ? o->cols[shown[k]].name : NULL;
+            if (r == 1) {
+                for (size_t i = 0; i < w[k]; i++)
+                    fputc('-', o->f);
+            } else {
+                if (!s)
+                    s = o->cells[(r - 2) * (size_t)n + (size_t)k];
+                if (right)
+                    pad(o->f, w[k] - width(s));
+                fputs(s, o->f);
+                if (!right && k + 1 < n)
+                    pad(o->f, w[k] - width(s));
+            }
+            if (k + 1 < n)
+                fputs("  ", o->f);
+        }
+        fputc('\n', o->f);
+    }
+}
+
+long out_end(out *o)
+{
+    if (o->format == OUT_TABLE)
+        print_table(o);
+    else if (o->format == OUT_JSON)
+        fputs(o->rows ? "\n]\n" : "]\n", o->f);
+    long rows = o->rows;
+    FILE *f = o->f;
+    for (size_t i = 0; i < o->ncells; i++)
+        free(o->cells[i]);
+    free(o->cells);
+    free(o);
+    if (fflush(f) != 0 || ferror(f))
+        return -1;
+    return rows;
+}

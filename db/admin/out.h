@@ -1,0 +1,52 @@
+/*
+ * out.h: cvre-admin's result printer. One result set (the rows of one
+ * prepared statement) goes out in one of three forms:
+ *   - table (default): for people; columns aligned, a header and a rule,
+ *     times as ISO-8601 UTC to the millisecond, reals to 3 decimals, NULL as
+ *     "-". Columns marked detail_only are left out to keep it readable. A
+ *     vertical result (one record) prints as "field  value" lines.
+ *   - csv: RFC 4180, a header line, every column; NULL is an empty field.
+ *   - json: one JSON array of objects, one object per line, every column;
+ *     NULL is null. Times are ISO-8601 strings in UTC to the microsecond,
+ *     reals are printed with the fewest digits that read back exactly.
+ * Table output is held until out_end, to size the columns; the others
+ * stream. Out of memory aborts (xmalloc): this is a command-line tool.
+ */
+#ifndef CVRE_ADMIN_OUT_H
+#define CVRE_ADMIN_OUT_H
+
+#include <sqlite3.h>
+#include <stdio.h>
+
+enum out_format { OUT_TABLE, OUT_CSV, OUT_JSON };
+
+enum out_kind {
+    OUT_INT,      /* integer */
+    OUT_REAL,     /* real number */
+    OUT_TIME,     /* Unix seconds (REAL), printed as ISO-8601 UTC */
+    OUT_SECONDS,  /* a duration in seconds: h:mm:ss in a table, a number otherwise */
+    OUT_BOOL,     /* 0/1: yes/no in a table, true/false in JSON, 1/0 in CSV */
+    OUT_TEXT
+};
+
+typedef struct out_column {
+    const char *name;
+    int kind;        /* enum out_kind */
+    int detail_only; /* left out of the table form */
+} out_column;
+
+typedef struct out out;
+
+/* Starts a result set with these columns, printed to f. The columns array
+ * must outlive the out. vertical: a single record, shown as field/value
+ * lines in the table form. */
+out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int vertical);
+
+/* Adds the current row of st: column i of st is cols[i]. */
+void out_row(out *o, sqlite3_stmt *st);
+
+/* Prints what is held, frees o. Returns the number of rows, or -1 if
+ * writing failed (stdout closed, disk full). */
+long out_end(out *o);
+
+#endif

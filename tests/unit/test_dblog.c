@@ -1,0 +1,444 @@
+/* The collision log writer: every field round-trips exactly, stop drains the
+ * queue, a full queue drops and counts, the rtree matches the table, readers
+ * run beside the writer, and database errors are counted, not fatal. Build it
+ * once with -fsanitize=thread too: the producer and writer share a ring. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "db.h"
+#include "dblog.h"
+#include "log.h"
+
+static char path[64];
+
+static void remove_db(void)
+{
+    char p[80];
+    unlink(path);
+    snprintf(p, sizeof p, "%s-wal", path);
+    unlink(p);
+    snprintf(p, sizeof p, "%s-shm", path);
+    unlink(p);
+}
+
+static int setup(void **state)
+{
+    (void)state;
+    snprintf(path, sizeof path, "/tmp/cvre-test-dblog-%d.sqlite", (int)getpid());
+    remove_db();
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    (void)state;
+    remove_db();
+    return 0;
+}
+
+/* A row whose every field depends on i, with values that a float or an
+ * int64 must carry exactly (thirds, large ids, negative coordinates). */
+static void make_row(dblog_row *r, uint32_t i)
+{
+    memset(r, 0, sizeof *r);
+    r->at = 1795000000.0 + i / 3.0;
+    r->session_id = INT64_C(1) << 40 | i;
+    r->user_id = i % 7 == 0 ? 0 : (int64_t)(i % 1000) + 1; /* 0: unknown -> NULL */
+    r->object_id = INT64_MAX - (i % 50);
+    r->avatar_id = 0x10000u | (i & 0xffffu);
+    r->ecm_version = 1 + i % 5;
+    r->box_index = i % 13;
+    r->inside = i % 2;
+    for (int k = 0; k < 3; k++) {
+        float f = (float)i + (float)k / 3.0f;
+        r->avatar[k] = -f;
+        r->world[k] = f * 0.5f - 250.0f;
+        r->local[k] = f / 7.0f;
+        r->normal[k] = k == 1 ? 1.0f : -1.0f / 3.0f;
+        r->vel[k] = 1e-3f * f;
+    }
+}
+
+static sqlite3 *open_ro(void)
+{
+    sqlite3 *s;
+    assert_int_equal(sqlite3_open_v2(path, &s, SQLITE_OPEN_READONLY, NULL), SQLITE_OK);
+    sqlite3_busy_timeout(s, 5000);
+    return s;
+}
+
+static int64_t scalar(sqlite3 *s, const char *sql)
+{
+    sqlite3_stmt *st;
+    assert_int_equal(sqlite3_prepare_v2(s, sql, -1, &st, NULL), SQLITE_OK);
+    assert_int_equal(sqlite3_step(st), SQLITE_ROW);
+    int64_t v = sqlite3_column_int64(st, 0);
+    sqlite3_finalize(st);
+    return v;
+}
+
+/* Every collision has exactly one rtree row, a box of zero size at its
+ * world contact point. */
+static void check_rtree(sqlite3 *s, int64_t rows)
+{
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions_rtree"), rows);
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions c JOIN collisions_rtree r ON r.id = c.id "
+                               "WHERE r.min_x = c.world_x AND r.max_x = c.world_x AND r.min_y = c.world_y "
+                               "AND r.max_y = c.world_y AND r.min_z = c.world_z AND r.max_z = c.world_z"),
+                     rows);
+}
+
+static void test_fields_exact(void **state)
+{
+    (void)state;
+    char err[256];
+    enum { N = 5000 };
+    dblog_config cfg = {.queue_rows = 1024, .batch_rows = 100, .batch_ms = 5};
+    dblog *l = dblog_open(path, &cfg, err, sizeof err);
+    assert_non_null(l);
+    dblog_row r;
+    for (uint32_t i = 0; i < N; i++) {
+        make_row(&r, i);
+        while (dblog_push(l, &r) != 0) /* a small queue: wait for room */
+            usleep(100);
+    }
+    dblog_stats st;
+    assert_int_equal(dblog_stop(l, &st), 0);
+    assert_int_equal(st.written, N);
+    assert_int_equal(st.pushed, N + st.dropped);
+    assert_int_equal(st.lost, 0);
+    assert_int_equal(st.last_error, 0);
+    assert_true(st.batches >= 2);
+
+    sqlite3 *s = open_ro();
+    sqlite3_stmt *q;
+    assert_int_equal(sqlite3_prepare_v2(s,
+                                        "SELECT at, session_id, user_id, avatar_id, object_id, ecm_version, "
+                                        "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, "
+                                        "world_z, local_x, local_y, local_z, normal_x, normal_y, normal_z, vel_x, "
+                                        "vel_y, vel_z, typeof(user_id) FROM collisions ORDER BY id",
+                                        -1, &q, NULL),
+                     SQLITE_OK);
+    uint32_t i = 0;
+    while (sqlite3_step(q) == SQLITE_ROW) {
+        make_row(&r, i);
+        assert_true(sqlite3_column_double(q, 0) == r.at);
+        assert_int_equal(sqlite3_column_int64(q, 1), r.session_id);
+        if (r.user_id == 0)
+            assert_string_equal((const char *)sqlite3_column_text(q, 23), "null");
+        else
+            assert_int_equal(sqlite3_column_int64(q, 2), r.user_id);
+        assert_int_equal(sqlite3_column_int64(q, 3), r.avatar_id);
+        assert_int_equal(sqlite3_column_int64(q, 4), r.object_id);
+        assert_int_equal(sqlite3_column_int64(q, 5), r.ecm_version);
+        assert_int_equal(sqlite3_column_int64(q, 6), r.box_index);
+        assert_int_equal(sqlite3_column_int64(q, 7), r.inside);
+        const float *v[5] = {r.avatar, r.world, r.local, r.normal, r.vel};
+        for (int k = 0; k < 5; k++)
+            for (int c = 0; c < 3; c++)
+                assert_true(sqlite3_column_double(q, 8 + 3 * k + c) == (double)v[k][c]);
+        i++;
+    }
+    sqlite3_finalize(q);
+    assert_int_equal(i, N);
+    check_rtree(s, N);
+    /* A region query through the rtree finds exactly the rows inside. */
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions_rtree WHERE min_x >= -200 AND max_x <= -100 "
+                               "AND min_y >= -1000 AND max_y <= 1000 AND min_z >= -1000 AND max_z <= 1000"),
+                     scalar(s, "SELECT count(*) FROM collisions WHERE world_x BETWEEN -200 AND -100"));
+    sqlite3_close(s);
+}
+
+/* Pushes n rows as fast as one thread can, then stops; returns the stats. */
+static dblog_stats flood(const dblog_config *cfg, uint32_t n)
+{
+    char err[256];
+    dblog *l = dblog_open(path, cfg, err, sizeof err);
+    assert_non_null(l);
+    dblog_row r;
+    for (uint32_t i = 0; i < n; i++) {
+        make_row(&r, i);
+        dblog_push(l, &r);
+    }
+    dblog_stats st;
+    assert_int_equal(dblog_stop(l, &st), 0);
+    assert_int_equal(st.pushed, n);
+    assert_int_equal(st.written + st.dropped, n);
+    assert_int_equal(st.lost, 0);
+    assert_int_equal(st.queued, 0);
+    assert_true(st.high_water <= (cfg->queue_rows ? cfg->queue_rows : DBLOG_QUEUE_ROWS_DEFAULT));
+    sqlite3 *s = open_ro();
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), st.written);
+    check_rtree(s, (int64_t)st.written);
+    sqlite3_close(s);
+    return st;
+}
+
+static void test_small_queue_drops_and_counts(void **state)
+{
+    (void)state;
+    dblog_config cfg = {.queue_rows = 256, .batch_rows = 64, .batch_ms = 50};
+    dblog_stats st = flood(&cfg, 200000);
+    /* The writer cannot keep up with a bare loop through 256 slots. */
+    assert_true(st.dropped > 0);
+    assert_true(st.written >= 64);
+    assert_int_equal(st.high_water, 256);
+}
+
+static void test_large_queue_loses_nothing(void **state)
+{
+    (void)state;
+    dblog_config cfg = {0}; /* the defaults: 2^18 slots */
+    dblog_stats st = flood(&cfg, 200000);
+    assert_int_equal(st.dropped, 0);
+    assert_int_equal(st.written, 200000);
+}
+
+static void test_invalid_rows_refused(void **state)
+{
+    (void)state;
+    char err[256];
+    dblog *l = dblog_open(path, NULL, err, sizeof err);
+    assert_non_null(l);
+    dblog_row r;
+    make_row(&r, 1);
+    r.world[1] = NAN;
+    assert_int_equal(dblog_push(l, &r), -1);
+    make_row(&r, 2);
+    r.vel[2] = INFINITY;
+    assert_int_equal(dblog_push(l, &r), -1);
+    make_row(&r, 3);
+    assert_int_equal(dblog_push(l, &r), 0);
+    dblog_stats st;
+    assert_int_equal(dblog_stop(l, &st), 0);
+    assert_int_equal(st.invalid, 2);
+    assert_int_equal(st.written, 1);
+    assert_int_equal(st.pushed, 3);
+}
+
+/* A transaction that has been inserting for batch_ms commits early; the
+ * rest of the batch follows in the next one, and nothing is lost. */
+static void test_hold_cap_cuts_batches(void **state)
+{
+    (void)state;
+    char err[256];
+    enum { N = 20000 };
+    dblog_config cfg = {.queue_rows = 1u << 16, .batch_rows = 16384, .batch_ms = 1};
+    dblog *l = dblog_open(path, &cfg, err, sizeof err);
+    assert_non_null(l);
+    dblog_row r;
+    for (uint32_t i = 0; i < N; i++) {
+        make_row(&r, i);
+        assert_int_equal(dblog_push(l, &r), 0);
+    }
+    dblog_stats st;
+    do { /* all of it before stop, whose last transaction is not capped */
+        usleep(1000);
+        dblog_stats_get(l, &st);
+    } while (st.written < N);
+    assert_int_equal(dblog_stop(l, &st), 0);
+    assert_int_equal(st.written, N);
+    /* A 1 ms cap, checked every 256 rows, cuts every transaction short. */
+    assert_true(st.batches >= 10);
+    sqlite3 *s = open_ro();
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), N);
+    assert_int_equal(scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
+    check_rtree(s, N);
+    sqlite3_close(s);
+}
+
+struct reader {
+    _Atomic int stop;
+    int queries;
+    int failures;
+    int went_backwards;
+};
+
+/* A separate read-only connection queries in a loop while the writer
+ * commits; WAL must let every query through without SQLITE_BUSY. */
+static void *reader_main(void *arg)
+{
+    struct reader *rd = arg;
+    sqlite3 *s;
+    if (sqlite3_open_v2(path, &s, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        rd->failures++;
+        return NULL;
+    }
+    /* No busy timeout: a reader in WAL mode should never need one. */
+    sqlite3_stmt *count, *region;
+    if (sqlite3_prepare_v2(s, "SELECT count(*) FROM collisions", -1, &count, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(s, "SELECT count(*) FROM collisions_rtree WHERE min_x <= 0 AND max_x >= -100", -1,
+                           &region, NULL) != SQLITE_OK) {
+        rd->failures++;
+        sqlite3_close(s);
+        return NULL;
+    }
+    int64_t last = 0;
+    while (!atomic_load(&rd->stop)) {
+        int rc = sqlite3_step(count);
+        if (rc == SQLITE_ROW) {
+            int64_t n = sqlite3_column_int64(count, 0);
+            rd->went_backwards += n < last;
+            last = n;
+        } else {
+            rd->failures++;
+        }
+        sqlite3_reset(count);
+        rc = sqlite3_step(region);
+        rd->failures += rc != SQLITE_ROW;
+        sqlite3_reset(region);
+        rd->queries++;
+    }
+    sqlite3_finalize(count);
+    sqlite3_finalize(region);
+    sqlite3_close(s);
+    return NULL;
+}
+
+static void test_reader_beside_writer(void **state)
+{
+    (void)state;
+    char err[256];
+    dblog_config cfg = {.queue_rows = 1u << 16, .batch_rows = 512, .batch_ms = 5};
+    dblog *l = dblog_open(path, &cfg, err, sizeof err);
+    assert_non_null(l);
+    struct reader rd = {0};
+    pthread_t t;
+    assert_int_equal(pthread_create(&t, NULL, reader_main, &rd), 0);
+    dblog_row r;
+    dblog_stats st;
+    /* Rounds of 1000 rows, each waited for, so that at least 60 commits
+     * interleave with the reads however slow the build. */
+    for (uint32_t i = 0; i < 60000; i++) {
+        make_row(&r, i);
+        assert_int_equal(dblog_push(l, &r), 0);
+        if (i % 1000 == 999)
+            do {
+                usleep(500);
+                dblog_stats_get(l, &st);
+            } while (st.written < i + 1);
+    }
+    assert_int_equal(dblog_stop(l, &st), 0);
+    atomic_store(&rd.stop, 1);
+    pthread_join(t, NULL);
+    assert_int_equal(st.written, 60000);
+    assert_true(st.batches >= 60);
+    assert_int_equal(rd.failures, 0);
+    assert_int_equal(rd.went_backwards, 0);
+    assert_true(rd.queries > 10);
+}
+
+/* Disk full, simulated with a file size limit: writes past it fail with
+ * EFBIG, which SQLite reports as a full disk or an I/O error. Batches are
+ * retried, then counted as lost; the writer carries on when space returns,
+ * and the database stays intact. */
+static void test_disk_full(void **state)
+{
+    (void)state;
+    char err[256];
+    int level = log_level();
+    log_set_level(LOG_OFF); /* the expected errors would clutter the output */
+    dblog_config cfg = {.queue_rows = 1u << 16, .batch_rows = 1000, .batch_ms = 5};
+    dblog *l = dblog_open(path, &cfg, err, sizeof err);
+    assert_non_null(l);
+    dblog_row r;
+    uint32_t i = 0;
+    for (; i < 2000; i++) {
+        make_row(&r, i);
+        assert_int_equal(dblog_push(l, &r), 0);
+    }
+    dblog_stats st;
+    do {
+        usleep(1000);
+        dblog_stats_get(l, &st);
+    } while (st.written < 2000);
+
+    struct rlimit old, lim;
+    struct stat sb;
+    char wal[80];
+    snprintf(wal, sizeof wal, "%s-wal", path);
+    assert_int_equal(stat(wal, &sb), 0);
+    assert_int_equal(getrlimit(RLIMIT_FSIZE, &old), 0);
+    signal(SIGXFSZ, SIG_IGN);
+    lim = old;
+    lim.rlim_cur = (rlim_t)sb.st_size + 8192; /* room for a page or so, not a batch */
+    assert_int_equal(setrlimit(RLIMIT_FSIZE, &lim), 0);
+    for (; i < 12000; i++) {
+        make_row(&r, i);
+        assert_int_equal(dblog_push(l, &r), 0);
+    }
+    do {
+        usleep(1000);
+        dblog_stats_get(l, &st);
+    } while (st.written + st.lost < 12000);
+    assert_int_equal(setrlimit(RLIMIT_FSIZE, &old), 0);
+    assert_true(st.lost > 0);
+    assert_true(st.failures >= DBLOG_ATTEMPTS);
+    assert_int_not_equal(st.last_error, 0);
+
+    for (; i < 13000; i++) {
+        make_row(&r, i);
+        assert_int_equal(dblog_push(l, &r), 0);
+    }
+    assert_int_equal(dblog_stop(l, &st), -1); /* rows were lost */
+    log_set_level(level);
+    signal(SIGXFSZ, SIG_DFL);
+    assert_int_equal(st.pushed, 13000);
+    assert_int_equal(st.written + st.lost, 13000);
+    assert_true(st.written >= 3000); /* before the limit, and after it was lifted */
+
+    sqlite3 *s = open_ro();
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), st.written);
+    check_rtree(s, (int64_t)st.written);
+    sqlite3_stmt *q;
+    assert_int_equal(sqlite3_prepare_v2(s, "PRAGMA integrity_check", -1, &q, NULL), SQLITE_OK);
+    assert_int_equal(sqlite3_step(q), SQLITE_ROW);
+    assert_string_equal((const char *)sqlite3_column_text(q, 0), "ok");
+    sqlite3_finalize(q);
+    sqlite3_close(s);
+}
+
+static void test_bad_config(void **state)
+{
+    (void)state;
+    char err[256];
+    dblog_config cfg = {.queue_rows = 1000};
+    assert_null(dblog_open(path, &cfg, err, sizeof err));
+    assert_non_null(strstr(err, "power of two"));
+    cfg = (dblog_config){.queue_rows = 1024, .batch_rows = 513};
+    assert_null(dblog_open(path, &cfg, err, sizeof err));
+    assert_non_null(strstr(err, "batch_rows"));
+    cfg = (dblog_config){.batch_ms = DBLOG_BATCH_MS_MAX + 1};
+    assert_null(dblog_open(path, &cfg, err, sizeof err));
+    assert_non_null(strstr(err, "batch_ms"));
+    assert_null(dblog_open("/nonexistent/dir/x.db", NULL, err, sizeof err));
+    assert_non_null(strstr(err, "cannot open"));
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_fields_exact, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_small_queue_drops_and_counts, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_large_queue_loses_nothing, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_invalid_rows_refused, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_hold_cap_cuts_batches, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_reader_beside_writer, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_disk_full, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_bad_config, setup, teardown),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
