@@ -191,6 +191,16 @@ int db_begin(db *d) { return exec(d, "BEGIN IMMEDIATE"); }
 
 int db_commit(db *d) { return exec(d, "COMMIT"); }
 
+void db_rollback(db *d)
+{
+    if (!sqlite3_get_autocommit(d->sql))
+        sqlite3_exec(d->sql, "ROLLBACK", NULL, NULL, NULL);
+}
+
+void db_set_busy_timeout(db *d, int ms) { sqlite3_busy_timeout(d->sql, ms); }
+
+int db_busy(db *d) { return (sqlite3_extended_errcode(d->sql) & 0xff) == SQLITE_BUSY; }
+
 /* Runs a prepared statement to completion and resets it for the next use. */
 static int run(db *d, sqlite3_stmt *st)
 {

@@ -33,6 +33,12 @@ double db_now(void);
 
 int db_begin(db *d);
 int db_commit(db *d);
+/* Rolls back the transaction in progress, if any. */
+void db_rollback(db *d);
+/* How long a write waits for another connection's lock (default 5 s). */
+void db_set_busy_timeout(db *d, int ms);
+/* True when the last failure was another connection holding the lock. */
+int db_busy(db *d);
 
 /* Sessions. A new session id is max(id) + 1 at start-up, counted up in
  * memory, so that ids can be handed out before their row is written. */

@@ -223,11 +223,7 @@ static void on_place(server *s, client *c, const proto_object_place *m)
 {
     if (!owned(s, c, m->object_id))
         return;
-    if (db_object_place(s->db, m->object_id, m->at.pos, m->at.yaw, m->at.scale) < 0) {
-        log_error("object %u: %s", m->object_id, db_error(s->db));
-        reject(s, c, m->object_id, PROTO_ERR_INTERNAL, "the server could not store the new place");
-        return;
-    }
+    server__event_push(s, EVT_PLACE, m->object_id)->at_place = m->at;
     scene_place(s->scene, m->object_id, &m->at);
     broadcast_info(s, scene_get(s->scene, m->object_id), NULL, 0);
 }
@@ -236,11 +232,7 @@ static void on_remove(server *s, client *c, uint32_t id)
 {
     if (!owned(s, c, id))
         return;
-    if (db_object_remove(s->db, id, db_now()) < 0) {
-        log_error("object %u: %s", id, db_error(s->db));
-        reject(s, c, id, PROTO_ERR_INTERNAL, "the server could not remove the object");
-        return;
-    }
+    server__event_push(s, EVT_REMOVE, id);
     scene_remove(s->scene, id);
     log_info("object %u removed by %s", id, c->peer);
     for (uint32_t i = 0; i < s->nclients; i++) {

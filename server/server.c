@@ -70,13 +70,13 @@ client *server__client_by_session(server *s, int64_t session)
 
 /* ---- session log ------------------------------------------------------ */
 
-static session_event *event_push(server *s, int kind, int64_t session)
+store_event *server__event_push(server *s, int kind, int64_t session)
 {
     if (s->nevents == s->events_cap) {
         s->events_cap = s->events_cap ? s->events_cap * 2 : 64;
         s->events = xrealloc(s->events, s->events_cap * sizeof *s->events);
     }
-    session_event *e = &s->events[s->nevents++];
+    store_event *e = &s->events[s->nevents++];
     memset(e, 0, sizeof *e);
     e->kind = kind;
     e->session = session;
@@ -93,7 +93,7 @@ static void events_flush(server *s)
         return;
     int rc = db_begin(s->db);
     for (uint32_t i = 0; rc == 0 && i < s->nevents; i++) {
-        const session_event *e = &s->events[i];
+        const store_event *e = &s->events[i];
         switch (e->kind) {
         case EVT_OPEN: rc = db_session_open(s->db, e->session, e->token, e->text, e->at); break;
         case EVT_JOIN: {
@@ -104,14 +104,23 @@ static void events_flush(server *s)
                 c->user_id = uid;
             break;
         }
-        default: rc = db_session_close(s->db, e->session, e->text, e->at); break;
+        case EVT_CLOSE: rc = db_session_close(s->db, e->session, e->text, e->at); break;
+        case EVT_PLACE:
+            rc = db_object_place(s->db, e->session, e->at_place.pos, e->at_place.yaw, e->at_place.scale);
+            break;
+        default: rc = db_object_remove(s->db, e->session, e->at); break;
         }
     }
     if (rc == 0)
         rc = db_commit(s->db);
     if (rc != 0) {
-        log_error("database: %s; %u session records lost", db_error(s->db), s->nevents);
-        sqlite3_exec(db_sqlite(s->db), "ROLLBACK", NULL, NULL, NULL);
+        int busy = db_busy(s->db);
+        db_rollback(s->db);
+        if (busy && !s->stopping) {
+            log_debug("database busy: %u records wait for the next tick", s->nevents);
+            return;
+        }
+        log_error("database: %s; %u session and object records lost", db_error(s->db), s->nevents);
     }
     s->nevents = 0;
 }
@@ -224,7 +233,7 @@ static void on_hello(server *s, client *c, const proto_hello *m)
         return;
     }
     c->session_id = ++s->last_session_id;
-    session_event *e = event_push(s, EVT_OPEN, c->session_id);
+    store_event *e = server__event_push(s, EVT_OPEN, c->session_id);
     hex(c->token, sizeof c->token, e->token);
     snprintf(e->text, sizeof e->text, "%s", c->peer);
 
@@ -254,7 +263,7 @@ static void on_join(server *s, client *c, const proto_join *m)
     c->avatar_id = a->id;
     c->state = ST_JOINED;
     s->by_slot[world_slot(a->id)] = c;
-    session_event *e = event_push(s, EVT_JOIN, c->session_id);
+    store_event *e = server__event_push(s, EVT_JOIN, c->session_id);
     e->avatar = a->id;
     memcpy(e->text, a->name, sizeof a->name);
     log_info("%s (session %lld) joined as \"%s\", avatar %u", c->peer, (long long)c->session_id, a->name, a->id);
@@ -623,7 +632,7 @@ static void reap(server *s, client *c)
         s->by_slot[world_slot(c->avatar_id)] = NULL;
     }
     if (c->session_id) {
-        session_event *e = event_push(s, EVT_CLOSE, c->session_id);
+        store_event *e = server__event_push(s, EVT_CLOSE, c->session_id);
         snprintf(e->text, sizeof e->text, "%s", c->end_reason[0] ? c->end_reason : "closed");
         log_info("%s (session %lld) ended: %s", c->peer, (long long)c->session_id, e->text);
     }
@@ -944,6 +953,8 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     s->log = dblog_open(cfg->db_path, &lc, err, errlen);
     if (!s->log || objects__start(s, err, errlen) < 0 || listen_on(s, err, errlen) < 0)
         goto fail;
+    /* From now on this connection is the tick's: it must never wait. */
+    db_set_busy_timeout(s->db, 0);
     uint64_t tick_ns = (uint64_t)1000000000 / (uint64_t)cfg->tick_hz;
     if (ev_io_add(s->loop, s->listen_fd, EV_READ, on_accept, s) < 0 ||
         ev_io_add(s->loop, s->signal_fd, EV_READ, on_signal, s) < 0 ||
@@ -974,6 +985,7 @@ int server_run(server *s)
             snprintf(s->clients[i]->end_reason, sizeof s->clients[i]->end_reason, "shutdown");
     while (s->nclients)
         reap(s, s->clients[0]);
+    db_set_busy_timeout(s->db, SRV_DB_BUSY_SHUTDOWN_MS); /* the last flush may wait */
     events_flush(s);
     dblog_stats ls;
     dblog_stop(s->log, &ls);

@@ -58,18 +58,21 @@ typedef struct client {
     client_upload upload;
 } client;
 
-enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE };
+enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE, EVT_PLACE, EVT_REMOVE };
 
-/* A session change waiting to be written; the tick batches them into one
- * transaction so that a burst of joins costs one commit. */
-typedef struct session_event {
+/* A change waiting to be written (a session's, or an object's place); the
+ * tick batches them into one transaction so that a burst of joins costs one
+ * commit, and the tick never waits for the database: when the collision
+ * log's writer holds the lock, the batch simply waits for the next tick. */
+typedef struct store_event {
     int kind;
-    int64_t session;
+    int64_t session; /* the object id for EVT_PLACE and EVT_REMOVE */
+    proto_transform at_place;
     double at;
     uint32_t avatar;
     char text[PROTO_MESSAGE_MAX + 16]; /* peer (open), name (join), reason (close) */
     char token[2 * PROTO_TOKEN_SIZE + 1];
-} session_event;
+} store_event;
 
 typedef struct stats {
     uint64_t frames_in, moves_in, bytes_in, bytes_out;
@@ -94,7 +97,7 @@ struct server {
     uint32_t *left;
     /* Per avatar slot: which id was stamped, and when (update_view). */
     uint32_t *mark_id, *mark_stamp, stamp;
-    session_event *events;
+    store_event *events;
     uint32_t nevents, events_cap;
     int64_t last_session_id;
     int stopping;
@@ -110,6 +113,8 @@ struct server {
 };
 
 uint64_t server__now(const server *s);
+/* Queues a change for the next flush (see store_event). */
+store_event *server__event_push(server *s, int kind, int64_t session);
 /* Reserves need bytes of c's output (disconnecting it at the hard limit:
  * -1) and appends what w holds; see server.c. */
 int server__out_begin(server *s, client *c, size_t need, proto_writer *w);

@@ -80,6 +80,9 @@
  * model here (the city block has 400,020) and still fits in memory. */
 #define SRV_MAX_TRIANGLES_DEFAULT 4000000u
 
+/* At shutdown the last session records may wait this long for the lock. */
+#define SRV_DB_BUSY_SHUTDOWN_MS 5000
+
 /* listen(2) backlog: the bot swarm connects 1,000 per second. */
 #define SRV_LISTEN_BACKLOG 4096
 

@@ -24,7 +24,9 @@
  * - Its readers leak their mesh (1.3-2.4 KB) whenever they throw on a
  *   malformed file: a cut ASCII STL facet, an OBJ face naming a missing
  *   vertex, a PLY value that is not a number. A client could leak server
- *   memory at will, so the pre-checks refuse what makes them throw.
+ *   memory at will, so the pre-checks refuse what makes them throw, which
+ *   means reading the file as Assimp does (fuzzing found two ways its OBJ
+ *   reader counts vertices differently from a plain reading).
  * - PLY: the reader loops over every element the header declares even
  *   past the end of the data: a 200-byte ASCII file declaring 5*10^8
  *   vertices took 56 s and 5.9 GB, one declaring 5*10^8 faces over 16 GB,
@@ -93,7 +95,9 @@ _Static_assert(IMPORT_MAX_PLY_PROPERTIES >= 16 && IMPORT_MAX_PLY_PROPERTIES <= 4
 
 static pthread_mutex_t assimp_lock = PTHREAD_MUTEX_INITIALIZER;
 
-/* Formats a message into err and returns rc. */
+/* Formats a message into err and returns rc. Bytes that are not
+ * printable ASCII (from the hint, or file text quoted by Assimp) become
+ * '?', so the message stays one line whatever the upload held. */
 __attribute__((format(printf, 4, 5))) static int fail(char *err, size_t errlen, int rc,
                                                       const char *fmt, ...)
 {
@@ -103,6 +107,9 @@ __attribute__((format(printf, 4, 5))) static int fail(char *err, size_t errlen, 
         va_start(ap, fmt);
         vsnprintf(err, errlen, fmt, ap);
         va_end(ap);
+        for (char *c = err; *c; c++)
+            if ((unsigned char)*c < 0x20 || (unsigned char)*c > 0x7e)
+                *c = '?';
     }
     return rc;
 }
@@ -407,20 +414,25 @@ static int obj_vertex_ref(const unsigned char *w, size_t n, long long *v)
 
 /*
  * OBJ: Assimp's reader leaks its mesh when a face names a vertex that does
- * not exist, and throws on a malformed number (in a statement we check),
- * so we check what it would choke on. Position indices count from 1, or
- * back from the last position read when negative; 0 is refused. Also
- * bounds the named parts (IMPORT_MAX_PARTS).
+ * not exist, so we count vertices exactly as it does and check every
+ * index. It picks a statement by the line's first character ("l1 2" is a
+ * line element, " v 1 2 3" nothing) and counts a vertex's numbers by their
+ * first character (".5" is not one), so anything those rules could read
+ * differently from us is refused: an unknown word starting with f, l, p
+ * or v, an indented vertex or element, a number that is not plainly one.
+ * Indices count from 1, or back from the last vertex read when negative;
+ * 0 is refused. Also bounds the named parts (IMPORT_MAX_PARTS).
  */
 static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
 {
-    unsigned long long positions = 0, line = 0, parts = 0;
+    unsigned long long vertices = 0, line = 0, parts = 0;
     long long highest = 0; /* the largest positive index used */
 
     for (size_t at = 0; at < n; at++, line++) {
         size_t eol = at, cur = at, wl, end;
         const unsigned char *w, *x;
         size_t xl;
+        int vertex, element;
         while (eol < n && p[eol] != '\n')
             eol++;
         end = eol > at && p[eol - 1] == '\r' ? eol - 1 : eol;
@@ -428,38 +440,44 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
             return fail(err, errlen, -EINVAL, "OBJ line %llu: line continuations are not supported",
                         line + 1);
         wl = next_word(p, eol, &cur, &w);
-        if (kw_is(w, wl, "v") || kw_is(w, wl, "vt") || kw_is(w, wl, "vn")) {
+        vertex = kw_is(w, wl, "v") || kw_is(w, wl, "vt") || kw_is(w, wl, "vn");
+        element = kw_is(w, wl, "f") || kw_is(w, wl, "l") || kw_is(w, wl, "p");
+        if (wl && ((w != p + at && (vertex || element)) ||
+                   (w == p + at && strchr("flpv", *w) && !vertex && !element)))
+            return fail(err, errlen, -EINVAL, "OBJ line %llu: unknown or indented statement",
+                        line + 1);
+        if (vertex) {
             int k = 0;
             while ((xl = next_word(p, eol, &cur, &x)) != 0) {
-                if (!is_number(x, xl))
+                if (!is_number(x, xl) || x[0] == '.')
                     return fail(err, errlen, -EINVAL, "OBJ line %llu: malformed number", line + 1);
                 k++;
             }
-            if (wl == 1 && k != 3 && k != 4 && k != 6)
-                return fail(err, errlen, -EINVAL, "OBJ line %llu: a position has 3, 4 or 6 numbers",
+            if (wl == 1 ? k != 3 && k != 4 && k != 6 : w[1] == 'n' ? k != 3 : k < 1 || k > 3)
+                return fail(err, errlen, -EINVAL, "OBJ line %llu: wrong count of numbers",
                             line + 1);
-            positions += wl == 1;
-        } else if (kw_is(w, wl, "f") || kw_is(w, wl, "l") || kw_is(w, wl, "p")) {
+            vertices += wl == 1;
+        } else if (element) {
             while ((xl = next_word(p, eol, &cur, &x)) != 0) {
                 long long v = 0;
                 if (!obj_vertex_ref(x, xl, &v) || v == 0)
                     return fail(err, errlen, -EINVAL, "OBJ line %llu: malformed vertex index",
                                 line + 1);
-                if (v < 0 && (unsigned long long)-v > positions)
+                if (v < 0 && (unsigned long long)-v > vertices)
                     return fail(err, errlen, -EINVAL,
                                 "OBJ line %llu: vertex index %lld before the first vertex",
                                 line + 1, v);
                 if (v > highest)
                     highest = v;
             }
-        } else if (kw_is(w, wl, "o") || kw_is(w, wl, "g") || kw_is(w, wl, "usemtl")) {
-            parts++;
+        } else if (wl && (*w == 'o' || *w == 'g' || kw_is(w, wl, "usemtl"))) {
+            parts++; /* Assimp takes any word starting with o or g */
         }
         at = eol;
     }
-    if ((unsigned long long)highest > positions)
+    if ((unsigned long long)highest > vertices)
         return fail(err, errlen, -EINVAL, "OBJ vertex index %lld, but the file has %llu", highest,
-                    positions);
+                    vertices);
     if (parts > IMPORT_MAX_PARTS)
         return fail(err, errlen, -EINVAL,
                     "%llu OBJ objects, groups and material switches, over the limit of %u", parts,
@@ -594,16 +612,23 @@ static int parse_u32(const unsigned char *w, size_t n, uint32_t *v)
     return 1;
 }
 
-/* Reads the header into h; returns the offset of the body, or 0 with err
- * set. Keywords match case-insensitively and unknown lines are skipped,
- * like Assimp, so that no line it takes for an element escapes us. */
+/*
+ * Reads the header into h; returns the offset of the body, or 0 with err
+ * set. Keywords are Assimp's, case and all. Like Assimp we skip lines we
+ * do not know (Blender writes one); Assimp also ends an element's
+ * properties at the first such line and ignores properties after it, so
+ * we refuse those rather than count them differently.
+ */
 static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, char *err,
                                size_t errlen)
 {
     size_t at = 0;
-    int have_format = 0;
+    int have_format = 0, in_props = 0;
 
     memset(h, 0, sizeof *h);
+    while (at < n && p[at] != '\n') /* the "ply" line */
+        at++;
+    at++;
     while (at < n) {
         const unsigned char *w[6];
         size_t wl[6], k, eol = at;
@@ -612,20 +637,20 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             eol++;
         k = split_words(p + at, eol - at, w, wl, 6);
         at = eol < n ? eol + 1 : n;
-        if (k == 0)
+        if (k == 0 || kw_is(w[0], wl[0], "comment"))
             continue;
-        if (word_is(w[0], wl[0], "end_header")) {
+        if (kw_is(w[0], wl[0], "end_header")) {
             if (!have_format)
                 return (size_t)fail(err, errlen, 0, "PLY header has no format line");
             return at;
         }
-        if (word_is(w[0], wl[0], "format") && k >= 2) {
+        if (kw_is(w[0], wl[0], "format") && k >= 2) {
             have_format = 1;
-            h->ascii = word_is(w[1], wl[1], "ascii");
-            h->big_endian = word_is(w[1], wl[1], "binary_big_endian");
-            if (!h->ascii && !h->big_endian && !word_is(w[1], wl[1], "binary_little_endian"))
+            h->ascii = kw_is(w[1], wl[1], "ascii");
+            h->big_endian = kw_is(w[1], wl[1], "binary_big_endian");
+            if (!h->ascii && !h->big_endian && !kw_is(w[1], wl[1], "binary_little_endian"))
                 return (size_t)fail(err, errlen, 0, "PLY format is not ascii or binary");
-        } else if (word_is(w[0], wl[0], "element")) {
+        } else if (kw_is(w[0], wl[0], "element")) {
             ply_elem *e;
             if (h->nelems == IMPORT_MAX_PLY_PROPERTIES)
                 return (size_t)fail(err, errlen, 0, "PLY header declares too many elements");
@@ -633,17 +658,19 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             if (k < 3 || !parse_u32(w[2], wl[2], &e->count))
                 return (size_t)fail(err, errlen, 0, "PLY element line without a count");
             e->first = h->nprops;
-        } else if (word_is(w[0], wl[0], "property")) {
+            in_props = 1;
+            continue;
+        } else if (kw_is(w[0], wl[0], "property")) {
             ply_prop *q;
             int kind, count_kind;
-            if (h->nelems == 0)
-                return (size_t)fail(err, errlen, 0, "PLY property before any element");
+            if (!in_props)
+                return (size_t)fail(err, errlen, 0, "PLY property outside an element");
             if (h->nprops == IMPORT_MAX_PLY_PROPERTIES)
                 return (size_t)fail(err, errlen, 0, "PLY header declares over %d properties",
                                     IMPORT_MAX_PLY_PROPERTIES);
             q = &h->props[h->nprops++];
             h->elems[h->nelems - 1].nprops++;
-            if (k >= 2 && word_is(w[1], wl[1], "list")) {
+            if (k >= 2 && kw_is(w[1], wl[1], "list")) {
                 if (k < 4 || !(q->count_size = ply_type(w[2], wl[2], &count_kind)) ||
                     count_kind == PLY_FLOAT || !(q->size = ply_type(w[3], wl[3], &kind)))
                     return (size_t)fail(err, errlen, 0, "PLY list property of unknown type");
@@ -651,7 +678,9 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             } else if (k < 2 || !(q->size = ply_type(w[1], wl[1], &kind))) {
                 return (size_t)fail(err, errlen, 0, "PLY property of unknown type");
             }
+            continue;
         }
+        in_props = 0; /* format, obj_info or a line Assimp skips */
     }
     return (size_t)fail(err, errlen, 0, "PLY header has no end_header line");
 }

@@ -5,12 +5,13 @@
  * Parsing is Assimp's (C API); this module decides which files reach it.
  * Only the formats in import_formats() are accepted, recognised by their
  * content, and each is pre-checked where Assimp 5.2.5 was found to crash,
- * hang or allocate without bound on hostile input (see import.c). The file
- * is read from memory only: references to other files (OBJ mtllib, glTF
- * buffer and image URIs) are never opened.
+ * hang, leak or allocate without bound on hostile input (see import.c).
+ * The file is read from memory only: references to other files (OBJ
+ * mtllib, glTF buffer and image URIs) are never opened.
  *
- * Every function here may be called from any thread; imports are
- * serialised internally (Assimp keeps its last error in a global).
+ * Every function here may be called from any thread. Assimp's parse step
+ * is serialised internally (it keeps its last error in a global); the
+ * checks before it and the walk after it run in parallel.
  */
 #ifndef CVRE_IMPORT_H
 #define CVRE_IMPORT_H
@@ -117,10 +118,7 @@ typedef struct import_options {
 } import_options;
 
 /* Y-up metres, the default triangle limit. */
-#define IMPORT_OPTIONS_DEFAULT                                                                     \
-    {                                                                                              \
-        0, 1.0f, IMPORT_MAX_TRIANGLES                                                              \
-    }
+#define IMPORT_OPTIONS_DEFAULT {0, 1.0f, IMPORT_MAX_TRIANGLES}
 
 typedef struct import_mesh {
     float *tris;          /* 9 floats per triangle: x,y,z of its three vertices */
