@@ -279,9 +279,6 @@ static int restore_one(void *ctx, const db_object *o)
     return 0;
 }
 
-/* The user that owns the objects of the world file. */
-#define WORLD_OWNER "world"
-
 static int world_has(const server *s, const char *name)
 {
     for (uint32_t i = 0; i < scene_count(s->scene); i++) {

@@ -255,6 +255,10 @@ static void on_hello(server *s, client *c, const proto_hello *m)
 
 static void on_join(server *s, client *c, const proto_join *m)
 {
+    if (m->name.len == sizeof WORLD_OWNER - 1 && memcmp(m->name.ptr, WORLD_OWNER, m->name.len) == 0) {
+        server__protocol_error(s, c, PROTO_ERR_BAD_VALUE, "the name \"%s\" is reserved", WORLD_OWNER);
+        return;
+    }
     const world_avatar *a = world_add(s->world, m->name.ptr, m->name.len, m->box);
     if (!a) {
         server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "the world is full (%u avatars)", world_count(s->world));

@@ -18,6 +18,9 @@
 #include "world.h"
 
 #define NS_PER_MS ((uint64_t)1000000)
+/* The user that owns the objects of the world file; no client may join
+ * under this name (ownership goes by name). */
+#define WORLD_OWNER "world"
 
 /* An upload in progress: the file grows chunk by chunk up to its size. */
 typedef struct client_upload {

@@ -91,6 +91,7 @@ def test_bad_names_and_boxes():
     rejected(hello() + frame(T["JOIN"], bytes([3]) + b"a\x01b" + struct.pack("<3f", 0.6, 1.8, 0.6)),
              E["BAD_STRING"])
     rejected(hello() + join("tiny", (0.01, 1.8, 0.6)), E["BAD_VALUE"])
+    rejected(hello() + join("world"), E["BAD_VALUE"], words="reserved")  # owns the world file's objects
 
 
 def test_not_finite_coordinates():
