@@ -100,7 +100,13 @@ ssize_t conn_flush(conn *c)
         }
         c->out_head += (size_t)n;
     }
-    if (c->out_head == c->out_tail)
+    if (c->out_head == c->out_tail) {
         c->out_head = c->out_tail = 0;
+        if (c->out_cap > SRV_OUTBUF_KEEP) { /* a burst (a join's objects) is over */
+            free(c->out);
+            c->out = NULL;
+            c->out_cap = 0;
+        }
+    }
     return (ssize_t)conn_out_pending(c);
 }

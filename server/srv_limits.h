@@ -36,6 +36,10 @@
 #define SRV_OUTBUF_HARD (2u * 1024u * 1024u)
 #endif
 #define SRV_OUTBUF_SOFT_MS 5000u
+/* An output buffer that grew past this for a burst (a join in a world of
+ * many objects) is freed once drained: 10,000 clients keeping 256 KiB each
+ * would hold 2.5 GiB for nothing. A tick's snapshot stays below it. */
+#define SRV_OUTBUF_KEEP (16u * 1024u)
 /* Kernel send buffer per client socket. Left to autotuning, Linux lets each
  * grow to 4 MiB (tcp_wmem), 40 GiB for 10,000 stalled clients, and a stalled
  * reader would hide behind it for a long time before the soft limit sees it.
