@@ -17,16 +17,18 @@
  *   two (glb) it asks everyone when both decline. Some crash or hang on
  *   small files (its own test models: an OpenGEX file segfaults, an OFF
  *   and an SMD file hang), COLLADA expands a 3 KB file of shared
- *   instance_node references into 14 GB, and an extensionless buffer is as
- *   likely taken for OBJ as for what it is (binary STL, GLB). So we
- *   recognise the four formats we accept ourselves, always name one, and
- *   make sure its reader takes the file.
+ *   instance_node references into 14 GB, and without an extension a
+ *   binary STL is taken for OBJ and a GLB for nothing. So we recognise
+ *   the four formats we accept ourselves, always name one, and make sure
+ *   its reader takes the file.
  * - Its readers leak their mesh (1.3-2.4 KB) whenever they throw on a
  *   malformed file: a cut ASCII STL facet, an OBJ face naming a missing
  *   vertex, a PLY value that is not a number. A client could leak server
- *   memory at will, so the pre-checks refuse what makes them throw, which
- *   means reading the file as Assimp does (fuzzing found two ways its OBJ
- *   reader counts vertices differently from a plain reading).
+ *   memory at will, so the pre-checks refuse what makes them throw. That
+ *   means reading the file as Assimp does: fuzzing found its readers
+ *   ending lines at NUL and CR, taking "l1" for a statement, ".5" for no
+ *   number and an STL vertex's numbers only from its own line; files a
+ *   plain reading would take differently are refused.
  * - PLY: the reader loops over every element the header declares even
  *   past the end of the data: a 200-byte ASCII file declaring 5*10^8
  *   vertices took 56 s and 5.9 GB, one declaring 5*10^8 faces over 16 GB,
@@ -327,6 +329,18 @@ static int sniff(const unsigned char *p, size_t n)
 
 /* ---- OBJ and ASCII STL pre-check --------------------------------------- */
 
+/* Offset of the first control character other than tab and line ends in
+ * p[0..n), or n. Assimp's text readers end a line or the whole file at
+ * NUL, CR or form feed where a plain reading would not, so text formats
+ * must not hold them elsewhere. */
+static size_t find_control(const unsigned char *p, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (p[i] < 0x20 && p[i] != '\t' && p[i] != '\n' && p[i] != '\r')
+            return i;
+    return n;
+}
+
 /* Reads the next whitespace-separated word of p[0..n) from *at. */
 static size_t next_word(const unsigned char *p, size_t n, size_t *at, const unsigned char **w)
 {
@@ -427,16 +441,18 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
 {
     unsigned long long vertices = 0, line = 0, parts = 0;
     long long highest = 0; /* the largest positive index used */
+    size_t bad = find_control(p, n);
 
-    for (size_t at = 0; at < n; at++, line++) {
-        size_t eol = at, cur = at, wl, end;
+    if (bad < n)
+        return fail(err, errlen, -EINVAL, "OBJ: control character at byte %zu", bad);
+    for (size_t at = 0, eol; at < n; at = eol + 1) {
+        size_t cur = at, wl;
         const unsigned char *w, *x;
         size_t xl;
         int vertex, element;
-        while (eol < n && p[eol] != '\n')
-            eol++;
-        end = eol > at && p[eol - 1] == '\r' ? eol - 1 : eol;
-        if (end > at && p[end - 1] == '\\')
+        for (eol = at; eol < n && p[eol] != '\n' && p[eol] != '\r'; eol++) /* CR ends one too */
+            ;
+        if (eol > at && p[eol - 1] == '\\')
             return fail(err, errlen, -EINVAL, "OBJ line %llu: line continuations are not supported",
                         line + 1);
         wl = next_word(p, eol, &cur, &w);
@@ -473,7 +489,7 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
         } else if (wl && (*w == 'o' || *w == 'g' || kw_is(w, wl, "usemtl"))) {
             parts++; /* Assimp takes any word starting with o or g */
         }
-        at = eol;
+        line += eol < n && p[eol] == '\n';
     }
     if ((unsigned long long)highest > vertices)
         return fail(err, errlen, -EINVAL, "OBJ vertex index %lld, but the file has %llu", highest,
@@ -485,23 +501,40 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
     return 0;
 }
 
+/* Reads the next word of p[0..n) from *at if it is on the same line. */
+static size_t same_line_word(const unsigned char *p, size_t n, size_t *at, const unsigned char **w)
+{
+    while (*at < n && (p[*at] == ' ' || p[*at] == '\t'))
+        (*at)++;
+    if (*at < n && (p[*at] == '\n' || p[*at] == '\r'))
+        return 0;
+    return next_word(p, n, at, w);
+}
+
 /*
  * ASCII STL: Assimp's reader leaks its mesh and node (2.4 KB) whenever it
  * throws, which any cut or malformed facet makes it do, so a client could
  * leak server memory at will. We accept only what it reads without
  * throwing: solids of whole facets, each a normal and three vertices of
- * three numbers. Also bounds the solids (IMPORT_MAX_PARTS).
+ * three numbers, "normal" and the numbers on the line of the keyword
+ * before them as Assimp reads them (fuzzing found that one). Also bounds
+ * the solids (IMPORT_MAX_PARTS).
  */
 static int check_stl(const unsigned char *p, size_t n, char *err, size_t errlen)
 {
+    /* after "facet"; '#' is a number; '+' marks a word that must be on
+     * the line of the one before it */
     static const char *const facet[] = {
-        "normal", "#", "#", "#", "outer",  "loop", "vertex", "#", "#",       "#",
-        "vertex", "#", "#", "#", "vertex", "#",    "#",      "#", "endloop", "endfacet"};
+        "+normal", "+#", "+#", "+#", "outer",  "loop", "vertex", "+#", "+#",      "+#",
+        "vertex",  "+#", "+#", "+#", "vertex", "+#",   "+#",     "+#", "endloop", "endfacet"};
     size_t at = 0, wl, solids = 0;
     const unsigned char *w;
 
     if (is_binary_stl(p, n))
         return 0;
+    if ((at = find_control(p, n)) < n)
+        return fail(err, errlen, -EINVAL, "STL: control character at byte %zu", at);
+    at = 0;
     while ((wl = next_word(p, n, &at, &w)) != 0) {
         if (!kw_is(w, wl, "solid"))
             return fail(err, errlen, -EINVAL, "STL: 'solid' expected at byte %zu", at - wl);
@@ -515,9 +548,10 @@ static int check_stl(const unsigned char *p, size_t n, char *err, size_t errlen)
                 return fail(err, errlen, -EINVAL, "STL: facet or endsolid expected at byte %zu",
                             at - wl);
             for (size_t k = 0; k < sizeof facet / sizeof facet[0]; k++) {
-                wl = next_word(p, n, &at, &w);
-                if (facet[k][0] == '#' ? !is_number(w, wl) : !kw_is(w, wl, facet[k]))
-                    return fail(err, errlen, -EINVAL, "STL: malformed facet at byte %zu", at - wl);
+                const char *want = facet[k] + (facet[k][0] == '+');
+                wl = facet[k][0] == '+' ? same_line_word(p, n, &at, &w) : next_word(p, n, &at, &w);
+                if (want[0] == '#' ? !is_number(w, wl) : !kw_is(w, wl, want))
+                    return fail(err, errlen, -EINVAL, "STL: malformed facet at byte %zu", at);
             }
         }
         while (at < n && p[at] != '\n') /* the name again */
@@ -735,10 +769,18 @@ static int ply_ascii_line(const unsigned char *p, size_t at, size_t eol, const p
 static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
 {
     ply_header h;
-    size_t at = ply_parse_header(p, n, &h, err, errlen), line = 0;
+    size_t at = ply_parse_header(p, n, &h, err, errlen), line = 0, bad, text;
 
     if (at == 0)
         return -EINVAL;
+    /* the text: the header, and the body if ASCII; Assimp also ends a
+     * PLY line at a CR, so one may only come before a line feed */
+    text = h.ascii ? n : at;
+    if ((bad = find_control(p, text)) < text)
+        return fail(err, errlen, -EINVAL, "PLY: control character at byte %zu", bad);
+    for (size_t i = 0; i < text; i++)
+        if (p[i] == '\r' && (i + 1 == n || p[i + 1] != '\n'))
+            return fail(err, errlen, -EINVAL, "PLY: carriage return inside a line at byte %zu", i);
     for (uint32_t e = 0; e < h.nelems; e++) {
         const ply_elem *el = &h.elems[e];
         if (el->count > 0 && el->nprops == 0)
