@@ -24,17 +24,22 @@
 #ifndef DBLOG_CACHE_KIB
 #define DBLOG_CACHE_KIB 65536
 #endif
-/* WAL pages before a commit checkpoints (PASSIVE: readers are never
- * blocked). Kept at SQLite's default on purpose: the trigger is per
- * connection but the WAL is shared, so if this writer let the WAL grow past
- * the 1000 pages at which the server's own connection checkpoints, that
- * connection's next commit would run the checkpoint on the tick thread.
- * Larger values made no measurable difference to the writer (db/README). */
+/* WAL pages after a commit of the writer's at which its checkpointer thread
+ * runs a checkpoint (PASSIVE: readers are never blocked). The checkpoint
+ * runs beside the writer, on a connection of its own, so that the writer
+ * goes on inserting while the pages are copied and synced (on the
+ * benchmark's disk that wait was a fifth of the writer's time). Kept at
+ * SQLite's default on purpose: the trigger is per connection but the WAL is
+ * shared, so if the WAL stayed past the 1000 pages at which the server's own
+ * connection checkpoints, that connection's next commit would run the
+ * checkpoint on the tick thread (while ours runs, its attempt returns at
+ * once: a PASSIVE checkpoint does not wait for another). */
 #ifndef DBLOG_WAL_AUTOCHECKPOINT
 #define DBLOG_WAL_AUTOCHECKPOINT 1000
 #endif
-/* The cap on a transaction's inserting time (batch_ms) is checked once per
- * this many rows, a few milliseconds of inserts at most. */
+/* The smallest batch the time cap (batch_ms) shrinks transactions to: a
+ * millisecond or so of inserts, so that a slow moment cannot make the
+ * writer commit row by row. */
 #define DBLOG_CLOCK_ROWS 256u
 /* A cache line's worth of padding keeps the producer's counters, the
  * writer's and the shared wake-up flag on separate lines, so that each side's
@@ -42,18 +47,58 @@
  * _Alignas: the struct comes from malloc, which promises only 16 bytes. */
 #define DBLOG_CACHE_LINE 64
 
-enum { ST_COLLISION, ST_RTREE, ST_COUNT };
+/* The writer remembers the groups (and the users in each) it created for
+ * the current time bucket, so that it adds a group only once per object,
+ * version, bucket and cell. Open addressing, cleared (by a generation bump)
+ * when the bucket moves on, when half full, and after a failed batch (whose
+ * groups were rolled back). Forgetting is always safe: a second group with
+ * the same key is as exact as one, only a little more to read. 2^16 groups
+ * are 3.5 MiB; a world with more active cells per 10 s makes a few more
+ * groups, nothing worse. */
+#define DBLOG_GROUP_SLOTS (1u << 16)
+#define DBLOG_USER_SLOTS (1u << 17)
+_Static_assert((DBLOG_GROUP_SLOTS & (DBLOG_GROUP_SLOTS - 1)) == 0, "group slots: a power of two");
+/* Rows ahead whose map slots (and, once sorted, ring slots) are fetched
+ * into the cache while the current one is handled: far enough to hide a
+ * memory access behind the work of a few rows. */
+#define DBLOG_PREFETCH 8u
+_Static_assert((DBLOG_USER_SLOTS & (DBLOG_USER_SLOTS - 1)) == 0, "user slots: a power of two");
+
+enum { ST_COLLISION, ST_GROUP, ST_CELL, ST_USER, ST_SEGMENT, ST_COUNT };
 
 static const char *const stmt_sql[ST_COUNT] = {
-    [ST_COLLISION] = "INSERT INTO collisions(at, session_id, user_id, avatar_id, object_id, ecm_version, box_index, "
-                     "inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, local_z, "
-                     "normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
+    [ST_COLLISION] = "INSERT INTO collisions(id, g, at, session_id, user_id, avatar_id, object_id, ecm_version, "
+                     "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, "
+                     "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
                      "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18, "
-                     "?19, ?20, ?21, ?22, ?23)",
-    /* OR REPLACE: an rtree row left behind by a deleted collision whose id
-     * is handed out again must not fail every batch from then on. */
-    [ST_RTREE] = "INSERT OR REPLACE INTO collisions_rtree(id, min_x, max_x, min_y, max_y, min_z, max_z) "
-                 "VALUES (?1, ?2, ?2, ?3, ?3, ?4, ?4)",
+                     "?19, ?20, ?21, ?22, ?23, ?24, ?25)",
+    [ST_GROUP] = "INSERT INTO collision_groups(object_id, ecm_version, bucket, cell_x, cell_y, cell_z) "
+                 "VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+    /* OR REPLACE: an rtree row left behind by a deleted group whose id is
+     * handed out again must not fail every batch from then on. */
+    [ST_CELL] = "INSERT OR REPLACE INTO collision_cells(g, min_x, max_x, min_y, max_y, min_z, max_z, min_t, max_t) "
+                "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
+    [ST_USER] = "INSERT OR IGNORE INTO collision_users(user_id, g) VALUES (?1, ?2)",
+    [ST_SEGMENT] = "INSERT INTO collision_segments(first_id, last_id, bucket) VALUES (?1, ?2, ?3)",
+};
+
+/* A group met in the batch being written: its sort key, and where its rows
+ * go. */
+struct batch_group {
+    int64_t bucket, object, g;
+    uint32_t version, index; /* index: in the unsorted array, for the rows to find it */
+};
+
+struct group_slot {
+    int64_t object, bucket, cell[3], g;
+    uint32_t version, gen;
+    uint64_t batch; /* the batch that last met it (l->batch_no), and its index there */
+    uint32_t in_batch, unused;
+};
+
+struct user_slot {
+    int64_t user, g;
+    uint32_t gen, unused;
 };
 
 struct dblog {
@@ -81,10 +126,29 @@ struct dblog {
     sqlite3 *sql;
     sqlite3_stmt *st[ST_COUNT];
     pthread_t thread;
+    /* The checkpointer: its connection and thread; ckpt_want and ckpt_stop
+     * under ckpt_mu. */
+    sqlite3 *ckpt_sql;
+    pthread_t ckpt_thread;
+    int ckpt_started, ckpt_want, ckpt_stop;
+    pthread_mutex_t ckpt_mu;
+    pthread_cond_t ckpt_cv;
     /* The writer's own. */
     uint64_t reported_dropped, reported_lost;
     uint64_t report_due_ms;
     int failing; /* a batch was lost and none has succeeded since */
+    int64_t next_id; /* the id of the next row, as committed */
+    struct group_slot *groups;
+    struct user_slot *users;
+    uint32_t gen, ngroups, nusers; /* slots of generation gen are in use */
+    int64_t map_bucket;            /* the newest bucket seen */
+    uint64_t batch_no;             /* transactions begun */
+    uint32_t cap_rows;             /* rows per capped transaction, adapted to batch_ms */
+    /* Per batch, batch_rows entries each: each row's group (index into bg),
+     * the groups met, then sorted, and each group's next place in the
+     * sorted batch. */
+    uint32_t *row_group, *order, *place;
+    struct batch_group *bg, *sorted;
     char errmsg[256];
 };
 
@@ -184,59 +248,275 @@ static void wait_for(dblog *l, uint64_t rows, int timeout_ms)
     (void)r; /* EAGAIN: nothing was pending */
 }
 
-/* Binds one queued row to the two insert statements and runs them. Returns
- * SQLITE_OK or the error code. */
-static int insert_row(dblog *l, const dblog_row *r)
+int64_t dblog_bucket(double at)
 {
-    sqlite3_stmt *st = l->st[ST_COLLISION];
-    sqlite3_bind_double(st, 1, r->at);
-    sqlite3_bind_int64(st, 2, r->session_id);
-    if (r->user_id)
-        sqlite3_bind_int64(st, 3, r->user_id);
-    else
-        sqlite3_bind_null(st, 3);
-    sqlite3_bind_int64(st, 4, r->avatar_id);
-    sqlite3_bind_int64(st, 5, r->object_id);
-    sqlite3_bind_int64(st, 6, r->ecm_version);
-    sqlite3_bind_int64(st, 7, r->box_index);
-    sqlite3_bind_int(st, 8, r->inside != 0);
-    const float *v[5] = {r->avatar, r->world, r->local, r->normal, r->vel};
-    for (int k = 0; k < 5; k++)
-        for (int i = 0; i < 3; i++)
-            sqlite3_bind_double(st, 9 + 3 * k + i, v[k][i]);
+    double b = floor(at / DBLOG_BUCKET_S);
+    if (!(b > (double)-DBLOG_BUCKET_MAX)) /* also NaN, which rows never hold */
+        return -DBLOG_BUCKET_MAX;
+    return b < (double)DBLOG_BUCKET_MAX ? (int64_t)b : DBLOG_BUCKET_MAX;
+}
+
+int64_t dblog_cell(double v)
+{
+    double c = floor(v / DBLOG_CELL_M);
+    if (!(c > (double)-DBLOG_CELL_MAX))
+        return -DBLOG_CELL_MAX;
+    return c < (double)DBLOG_CELL_MAX ? (int64_t)c : DBLOG_CELL_MAX;
+}
+
+/* Forgets every remembered group and user entry. */
+static void forget_groups(dblog *l)
+{
+    if (++l->gen == 0) { /* wrapped: slots of an old generation 0 would look current */
+        memset(l->groups, 0, DBLOG_GROUP_SLOTS * sizeof *l->groups);
+        memset(l->users, 0, DBLOG_USER_SLOTS * sizeof *l->users);
+        l->gen = 1;
+    }
+    l->ngroups = l->nusers = 0;
+}
+
+static uint64_t mix(uint64_t h, uint64_t v)
+{
+    h ^= v + 0x9e3779b97f4a7c15u + (h << 6) + (h >> 2);
+    return h * 0xff51afd7ed558ccdu;
+}
+
+static int step_done(sqlite3_stmt *st)
+{
     int rc = sqlite3_step(st);
-    sqlite3_reset(st);
-    if (rc != SQLITE_DONE)
-        return rc;
-    st = l->st[ST_RTREE];
-    sqlite3_bind_int64(st, 1, sqlite3_last_insert_rowid(l->sql));
-    for (int i = 0; i < 3; i++)
-        sqlite3_bind_double(st, 2 + i, r->world[i]);
-    rc = sqlite3_step(st);
     sqlite3_reset(st);
     return rc == SQLITE_DONE ? SQLITE_OK : rc;
 }
 
+/* The key of row r's group: its bucket *b, cells c, and their hash. */
+static uint64_t group_key(const dblog_row *r, int64_t *b, int64_t c[3])
+{
+    *b = dblog_bucket(r->at);
+    for (int k = 0; k < 3; k++)
+        c[k] = dblog_cell(r->world[k]);
+    return mix(mix(mix(mix(mix(mix(0, (uint64_t)r->object_id), r->ecm_version), (uint64_t)*b), (uint64_t)c[0]),
+                   (uint64_t)c[1]),
+               (uint64_t)c[2]);
+}
+
+/* The group of row r (bucket b, cell c): the remembered one, or a new one
+ * inserted with its rtree cell; and its index among the groups of this
+ * batch (l->bg, *nbg of them). Returns SQLITE_OK with *bi set, or the
+ * error. */
+static int find_group(dblog *l, const dblog_row *r, int64_t b, const int64_t c[3], uint64_t h, uint32_t *nbg,
+                      uint32_t *bi)
+{
+    uint32_t mask = DBLOG_GROUP_SLOTS - 1u, i = (uint32_t)(h >> 32) & mask;
+    struct group_slot *sl;
+    for (;; i = (i + 1u) & mask) {
+        sl = &l->groups[i];
+        if (sl->gen != l->gen)
+            break;
+        if (sl->object == r->object_id && sl->version == r->ecm_version && sl->bucket == b && sl->cell[0] == c[0] &&
+            sl->cell[1] == c[1] && sl->cell[2] == c[2]) {
+            if (sl->batch != l->batch_no) {
+                sl->batch = l->batch_no;
+                sl->in_batch = (*nbg)++;
+                l->bg[sl->in_batch] = (struct batch_group){.bucket = b, .object = r->object_id, .g = sl->g,
+                                                           .version = r->ecm_version, .index = sl->in_batch};
+            }
+            *bi = sl->in_batch;
+            return SQLITE_OK;
+        }
+    }
+    sqlite3_stmt *st = l->st[ST_GROUP];
+    sqlite3_bind_int64(st, 1, r->object_id);
+    sqlite3_bind_int64(st, 2, r->ecm_version);
+    sqlite3_bind_int64(st, 3, b);
+    for (int k = 0; k < 3; k++)
+        sqlite3_bind_int64(st, 4 + k, c[k]);
+    int rc = step_done(st);
+    if (rc != SQLITE_OK)
+        return rc;
+    int64_t g = sqlite3_last_insert_rowid(l->sql);
+    st = l->st[ST_CELL];
+    sqlite3_bind_int64(st, 1, g);
+    for (int k = 0; k < 3; k++) {
+        /* The outermost cells reach to infinity (the rtree stores floats). */
+        sqlite3_bind_double(st, 2 + 2 * k, c[k] == -DBLOG_CELL_MAX ? -3.0e38 : (double)c[k] * DBLOG_CELL_M);
+        sqlite3_bind_double(st, 3 + 2 * k, c[k] == DBLOG_CELL_MAX ? 3.0e38 : (double)(c[k] + 1) * DBLOG_CELL_M);
+    }
+    sqlite3_bind_double(st, 8, b == -DBLOG_BUCKET_MAX ? -3.0e38 : (double)b * DBLOG_BUCKET_S);
+    sqlite3_bind_double(st, 9, b == DBLOG_BUCKET_MAX ? 3.0e38 : (double)(b + 1) * DBLOG_BUCKET_S);
+    rc = step_done(st);
+    if (rc != SQLITE_OK)
+        return rc;
+    *bi = (*nbg)++;
+    l->bg[*bi] = (struct batch_group){.bucket = b, .object = r->object_id, .g = g, .version = r->ecm_version,
+                                      .index = *bi};
+    if (l->ngroups >= DBLOG_GROUP_SLOTS / 2) {
+        forget_groups(l);
+        return SQLITE_OK;
+    }
+    l->ngroups++;
+    *sl = (struct group_slot){.object = r->object_id, .bucket = b, .cell = {c[0], c[1], c[2]}, .g = g,
+                              .version = r->ecm_version, .gen = l->gen, .batch = l->batch_no, .in_batch = *bi};
+    return SQLITE_OK;
+}
+
+/* Records that group g holds a row of user u, once per group. h is
+ * mix(group key hash, u): the same for the same user and group. */
+static int note_user(dblog *l, int64_t u, int64_t g, uint64_t h)
+{
+    uint32_t mask = DBLOG_USER_SLOTS - 1u, i = (uint32_t)(h >> 32) & mask;
+    for (;; i = (i + 1u) & mask) {
+        struct user_slot *sl = &l->users[i];
+        if (sl->gen != l->gen)
+            break;
+        if (sl->user == u && sl->g == g)
+            return SQLITE_OK;
+    }
+    sqlite3_stmt *st = l->st[ST_USER];
+    sqlite3_bind_int64(st, 1, u);
+    sqlite3_bind_int64(st, 2, g);
+    int rc = step_done(st);
+    if (rc != SQLITE_OK)
+        return rc;
+    if (l->nusers >= DBLOG_USER_SLOTS / 2) {
+        forget_groups(l);
+        return SQLITE_OK;
+    }
+    l->nusers++;
+    l->users[i] = (struct user_slot){.user = u, .g = g, .gen = l->gen};
+    return SQLITE_OK;
+}
+
+/* Inserts one queued row under the given id and group. Returns SQLITE_OK
+ * or the error code. */
+static int insert_row(dblog *l, const dblog_row *r, int64_t id, int64_t g)
+{
+    sqlite3_stmt *st = l->st[ST_COLLISION];
+    sqlite3_bind_int64(st, 1, id);
+    sqlite3_bind_int64(st, 2, g);
+    sqlite3_bind_double(st, 3, r->at);
+    sqlite3_bind_int64(st, 4, r->session_id);
+    if (r->user_id)
+        sqlite3_bind_int64(st, 5, r->user_id);
+    else
+        sqlite3_bind_null(st, 5);
+    sqlite3_bind_int64(st, 6, r->avatar_id);
+    sqlite3_bind_int64(st, 7, r->object_id);
+    sqlite3_bind_int64(st, 8, r->ecm_version);
+    sqlite3_bind_int64(st, 9, r->box_index);
+    sqlite3_bind_int(st, 10, r->inside != 0);
+    const float *v[5] = {r->avatar, r->world, r->local, r->normal, r->vel};
+    for (int k = 0; k < 5; k++)
+        for (int i = 0; i < 3; i++)
+            sqlite3_bind_double(st, 11 + 3 * k + i, v[k][i]);
+    return step_done(st);
+}
+
+/* The order of a segment: bucket, object, version, group. */
+static int by_key(const void *pa, const void *pb)
+{
+    const struct batch_group *a = pa, *b = pb;
+    if (a->bucket != b->bucket)
+        return a->bucket < b->bucket ? -1 : 1;
+    if (a->object != b->object)
+        return a->object < b->object ? -1 : 1;
+    if (a->version != b->version)
+        return a->version < b->version ? -1 : 1;
+    return a->g < b->g ? -1 : a->g > b->g;
+}
+
+/* Writes rows [from, from + n) of the ring inside the open transaction:
+ * finds (or makes) each row's group and user entry, sorts the batch by
+ * (bucket, object, version, group), and inserts it as one id range from
+ * l->next_id with one segment per bucket. Returns SQLITE_OK or the error. */
+static int write_rows(dblog *l, uint64_t from, uint32_t n)
+{
+    uint32_t nbg = 0;
+    int rc = SQLITE_OK;
+    l->batch_no++;
+    for (uint32_t i = 0; rc == SQLITE_OK && i < n; i++) {
+        int64_t b, c[3];
+        if (i + DBLOG_PREFETCH < n) { /* the slots a later row will probe: cache misses otherwise */
+            const dblog_row *q = &l->ring[(from + i + DBLOG_PREFETCH) & l->mask];
+            uint64_t hq = group_key(q, &b, c);
+            __builtin_prefetch(&l->groups[(uint32_t)(hq >> 32) & (DBLOG_GROUP_SLOTS - 1u)]);
+            __builtin_prefetch(&l->users[(uint32_t)(mix(hq, (uint64_t)q->user_id) >> 32) & (DBLOG_USER_SLOTS - 1u)]);
+        }
+        const dblog_row *r = &l->ring[(from + i) & l->mask];
+        uint64_t h = group_key(r, &b, c);
+        if (b > l->map_bucket) { /* the groups of older buckets are closed */
+            forget_groups(l);
+            l->map_bucket = b;
+        }
+        rc = find_group(l, r, b, c, h, &nbg, &l->row_group[i]);
+        if (rc == SQLITE_OK && r->user_id)
+            rc = note_user(l, r->user_id, l->bg[l->row_group[i]].g, mix(h, (uint64_t)r->user_id));
+    }
+    if (rc != SQLITE_OK)
+        return rc;
+    /* Counting sort of the rows by their group's rank. */
+    memcpy(l->sorted, l->bg, nbg * sizeof *l->bg);
+    qsort(l->sorted, nbg, sizeof *l->sorted, by_key);
+    memset(l->place, 0, nbg * sizeof *l->place);
+    for (uint32_t i = 0; i < n; i++)
+        l->place[l->row_group[i]]++;
+    uint32_t at = 0;
+    for (uint32_t k = 0; k < nbg; k++) {
+        uint32_t idx = l->sorted[k].index, cnt = l->place[idx];
+        l->place[idx] = at;
+        at += cnt;
+    }
+    for (uint32_t i = 0; i < n; i++)
+        l->order[l->place[l->row_group[i]]++] = i;
+    int64_t id0 = l->next_id, seg_first = id0;
+    for (uint32_t i = 0; rc == SQLITE_OK && i < n; i++) {
+        if (i + DBLOG_PREFETCH < n)
+            __builtin_prefetch(&l->ring[(from + l->order[i + DBLOG_PREFETCH]) & l->mask]);
+        uint32_t ri = l->order[i];
+        const struct batch_group *grp = &l->bg[l->row_group[ri]];
+        rc = insert_row(l, &l->ring[(from + ri) & l->mask], id0 + i, grp->g);
+        uint32_t next = i + 1 < n ? l->row_group[l->order[i + 1]] : UINT32_MAX;
+        if (rc == SQLITE_OK && (next == UINT32_MAX || l->bg[next].bucket != grp->bucket)) {
+            sqlite3_stmt *st = l->st[ST_SEGMENT];
+            sqlite3_bind_int64(st, 1, seg_first);
+            sqlite3_bind_int64(st, 2, id0 + i);
+            sqlite3_bind_int64(st, 3, grp->bucket);
+            rc = step_done(st);
+            seg_first = id0 + i + 1;
+        }
+    }
+    return rc;
+}
+
 /* One attempt at committing rows [from, from + *n) of the ring in one
- * transaction. With a time cap (cap_ms > 0) it stops inserting once the
- * transaction has been open that long and commits what it has, setting *n to
- * that count. On failure the transaction is rolled back, so the database
- * holds all of the batch or none of it, and the message is kept in
- * l->errmsg. Returns SQLITE_OK or the extended error code. */
+ * transaction. With a time cap (cap_ms > 0) the transaction takes at most
+ * l->cap_rows rows, setting *n to that count, and cap_rows follows the time
+ * the last capped transaction took: a sorted batch cannot be cut short part
+ * way, so the cap is kept by sizing batches. On failure the transaction is
+ * rolled back, so the database holds all of the batch or none of it, and the
+ * message is kept in l->errmsg. Returns SQLITE_OK or the extended error
+ * code. */
 static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
 {
     uint64_t start = now_ms();
+    if (cap_ms && *n > l->cap_rows)
+        *n = l->cap_rows;
     int rc = sqlite3_exec(l->sql, "BEGIN IMMEDIATE", NULL, NULL, NULL);
-    for (uint64_t i = 0; rc == SQLITE_OK && i < *n; i++) {
-        if (cap_ms && i % DBLOG_CLOCK_ROWS == DBLOG_CLOCK_ROWS - 1 && now_ms() - start >= cap_ms)
-            *n = i;
-        else
-            rc = insert_row(l, &l->ring[(from + i) & l->mask]);
-    }
+    if (rc == SQLITE_OK)
+        rc = write_rows(l, from, (uint32_t)*n);
     if (rc == SQLITE_OK)
         rc = sqlite3_exec(l->sql, "COMMIT", NULL, NULL, NULL);
-    if (rc == SQLITE_OK)
+    if (rc == SQLITE_OK) {
+        l->next_id += (int64_t)*n;
+        uint64_t took = now_ms() - start;
+        if (cap_ms && took > cap_ms) {
+            uint64_t rows = (uint64_t)l->cap_rows * cap_ms / took;
+            l->cap_rows = rows < DBLOG_CLOCK_ROWS ? DBLOG_CLOCK_ROWS : (uint32_t)rows;
+        } else if (cap_ms && took < cap_ms / 2 && *n == l->cap_rows) {
+            l->cap_rows = l->cap_rows > l->batch_rows / 2 ? l->batch_rows : l->cap_rows * 2;
+        }
         return SQLITE_OK;
+    }
+    forget_groups(l); /* the groups this transaction made are rolled back */
     rc = sqlite3_extended_errcode(l->sql);
     snprintf(l->errmsg, sizeof l->errmsg, "%s", sqlite3_errmsg(l->sql));
     if (!sqlite3_get_autocommit(l->sql))
@@ -244,8 +524,8 @@ static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
     return rc;
 }
 
-/* Commits up to n of the oldest queued rows (fewer if batch_ms cuts the
- * transaction short; the last one, at stop, is not cut), retrying a failed batch,
+/* Commits up to n of the oldest queued rows (fewer if batch_ms has shrunk
+ * transactions; the last one, at stop, takes all), retrying a failed batch,
  * and retires them from the ring, written or lost. Failures are logged one
  * by one until a batch is lost; from then on, until a batch succeeds again,
  * report() sums them up, so a full disk does not flood the log. */
@@ -345,6 +625,55 @@ static void *writer_main(void *arg)
     return NULL;
 }
 
+/* ---- checkpointer ------------------------------------------------------- */
+
+/* SQLite calls this after each commit of the writer's connection, with the
+ * WAL's size in pages; it replaces the connection's own autocheckpoint. */
+static int on_wal_commit(void *arg, sqlite3 *conn, const char *name, int pages)
+{
+    (void)conn, (void)name;
+    dblog *l = arg;
+    if (pages >= DBLOG_WAL_AUTOCHECKPOINT) {
+        pthread_mutex_lock(&l->ckpt_mu);
+        l->ckpt_want = 1;
+        pthread_cond_signal(&l->ckpt_cv);
+        pthread_mutex_unlock(&l->ckpt_mu);
+    }
+    return SQLITE_OK;
+}
+
+/* The checkpointer thread: one PASSIVE checkpoint per request, until stop.
+ * Its failures (SQLITE_BUSY while another checkpoint runs) are harmless:
+ * the next commit asks again. */
+static void *ckpt_main(void *arg)
+{
+    dblog *l = arg;
+    for (;;) {
+        pthread_mutex_lock(&l->ckpt_mu);
+        while (!l->ckpt_want && !l->ckpt_stop)
+            pthread_cond_wait(&l->ckpt_cv, &l->ckpt_mu);
+        int stop = l->ckpt_stop;
+        l->ckpt_want = 0;
+        pthread_mutex_unlock(&l->ckpt_mu);
+        if (stop)
+            break;
+        sqlite3_wal_checkpoint_v2(l->ckpt_sql, NULL, SQLITE_CHECKPOINT_PASSIVE, NULL, NULL);
+    }
+    return NULL;
+}
+
+static void ckpt_stop(dblog *l)
+{
+    if (!l->ckpt_started)
+        return;
+    pthread_mutex_lock(&l->ckpt_mu);
+    l->ckpt_stop = 1;
+    pthread_cond_signal(&l->ckpt_cv);
+    pthread_mutex_unlock(&l->ckpt_mu);
+    pthread_join(l->ckpt_thread, NULL);
+    l->ckpt_started = 0;
+}
+
 /* ---- life cycle --------------------------------------------------------- */
 
 static int check_config(const dblog_config *cfg, char *err, size_t errlen)
@@ -369,9 +698,20 @@ static int check_config(const dblog_config *cfg, char *err, size_t errlen)
 /* Frees what dblog_open took; the thread must not be running. */
 static void destroy(dblog *l)
 {
+    ckpt_stop(l);
+    sqlite3_close(l->ckpt_sql);
+    pthread_mutex_destroy(&l->ckpt_mu);
+    pthread_cond_destroy(&l->ckpt_cv);
     for (int i = 0; i < ST_COUNT; i++)
         sqlite3_finalize(l->st[i]);
     db_close(l->store);
+    free(l->groups);
+    free(l->users);
+    free(l->row_group);
+    free(l->order);
+    free(l->place);
+    free(l->bg);
+    free(l->sorted);
     if (l->efd >= 0)
         close(l->efd);
     free(l->ring);
@@ -396,6 +736,8 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
         return NULL;
     }
     l->efd = -1;
+    pthread_mutex_init(&l->ckpt_mu, NULL);
+    pthread_cond_init(&l->ckpt_cv, NULL);
     l->mask = c.queue_rows - 1u;
     l->batch_rows = c.batch_rows;
     l->batch_ms = c.batch_ms;
@@ -407,6 +749,21 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
     /* Touch every page now, so that the tick thread never takes a page
      * fault the first time it goes round the ring. */
     memset(l->ring, 0, (size_t)c.queue_rows * sizeof *l->ring);
+    l->groups = cvre_calloc(DBLOG_GROUP_SLOTS, sizeof *l->groups);
+    l->users = cvre_calloc(DBLOG_USER_SLOTS, sizeof *l->users);
+    /* The last transaction, at stop, takes every queued row. */
+    l->row_group = cvre_malloc((size_t)c.queue_rows * sizeof *l->row_group);
+    l->order = cvre_malloc((size_t)c.queue_rows * sizeof *l->order);
+    l->place = cvre_malloc((size_t)c.queue_rows * sizeof *l->place);
+    l->bg = cvre_malloc((size_t)c.queue_rows * sizeof *l->bg);
+    l->sorted = cvre_malloc((size_t)c.queue_rows * sizeof *l->sorted);
+    if (!l->groups || !l->users || !l->row_group || !l->order || !l->place || !l->bg || !l->sorted) {
+        snprintf(err, errlen, "out of memory for the group map");
+        goto fail;
+    }
+    l->cap_rows = c.batch_rows;
+    l->gen = 1;
+    l->map_bucket = -DBLOG_BUCKET_MAX;
     l->efd = eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
     if (l->efd < 0) {
         snprintf(err, errlen, "eventfd: %s", strerror(errno));
@@ -417,10 +774,14 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
         goto fail;
     l->sql = db_sqlite(l->store);
     char pragmas[128];
-    snprintf(pragmas, sizeof pragmas, "PRAGMA cache_size = -%d; PRAGMA wal_autocheckpoint = %d", DBLOG_CACHE_KIB,
-             DBLOG_WAL_AUTOCHECKPOINT);
+    snprintf(pragmas, sizeof pragmas, "PRAGMA cache_size = -%d", DBLOG_CACHE_KIB);
     if (sqlite3_exec(l->sql, pragmas, NULL, NULL, NULL) != SQLITE_OK) {
         snprintf(err, errlen, "%s: %s", path, sqlite3_errmsg(l->sql));
+        goto fail;
+    }
+    if (sqlite3_open_v2(path, &l->ckpt_sql, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK ||
+        sqlite3_exec(l->ckpt_sql, "PRAGMA synchronous = NORMAL", NULL, NULL, NULL) != SQLITE_OK) {
+        snprintf(err, errlen, "%s: checkpointer: %s", path, l->ckpt_sql ? sqlite3_errmsg(l->ckpt_sql) : "out of memory");
         goto fail;
     }
     for (int i = 0; i < ST_COUNT; i++)
@@ -429,15 +790,30 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
             goto fail;
         }
 
+    sqlite3_stmt *q;
+    if (sqlite3_prepare_v2(l->sql, "SELECT coalesce(max(id), 0) + 1 FROM collisions", -1, &q, NULL) != SQLITE_OK ||
+        sqlite3_step(q) != SQLITE_ROW) {
+        snprintf(err, errlen, "%s: cannot read the last collision id: %s", path, sqlite3_errmsg(l->sql));
+        sqlite3_finalize(q);
+        goto fail;
+    }
+    l->next_id = sqlite3_column_int64(q, 0);
+    sqlite3_finalize(q);
+
     /* The writer takes no signals: a server that reads them from a signalfd
      * must find them pending, not delivered to this thread. */
     sigset_t all, old;
     sigfillset(&all);
     pthread_sigmask(SIG_SETMASK, &all, &old);
-    int rc = pthread_create(&l->thread, NULL, writer_main, l);
+    int rc = pthread_create(&l->ckpt_thread, NULL, ckpt_main, l);
+    l->ckpt_started = rc == 0;
+    if (rc == 0) {
+        sqlite3_wal_hook(l->sql, on_wal_commit, l);
+        rc = pthread_create(&l->thread, NULL, writer_main, l);
+    }
     pthread_sigmask(SIG_SETMASK, &old, NULL);
     if (rc != 0) {
-        snprintf(err, errlen, "cannot start the writer thread: %s", strerror(rc));
+        snprintf(err, errlen, "cannot start the writer threads: %s", strerror(rc));
         goto fail;
     }
     return l;
@@ -453,6 +829,7 @@ int dblog_stop(dblog *log, dblog_stats *final)
     ssize_t w = write(log->efd, &one, sizeof one);
     (void)w; /* EAGAIN: a wake-up is already pending */
     pthread_join(log->thread, NULL);
+    ckpt_stop(log);
     dblog_stats s;
     dblog_stats_get(log, &s);
     if (final)

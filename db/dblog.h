@@ -1,11 +1,13 @@
 /*
  * dblog.h: the collision log writer. The tick thread hands over one row per
  * blocked move; a writer thread of its own, with its own SQLite connection,
- * commits them in batched transactions to `collisions` and `collisions_rtree`
- * (db/migrations/0002_objects_collisions.sql).
+ * commits them in batched transactions to `collisions` and its group
+ * tables `collision_groups`, `collision_cells` (the R*Tree) and
+ * `collision_users` (db/migrations/0002_objects_collisions.sql).
  *
  * Data flow: tick thread --dblog_push--> bounded ring --writer thread-->
- * BEGIN IMMEDIATE; INSERT x N (+ one rtree row each); COMMIT.
+ * BEGIN IMMEDIATE; INSERT x N (+ a group for each new object, version,
+ * bucket and cell, + a user entry for each new user in a group); COMMIT.
  *
  * The producer never waits on the disk or on the writer. dblog_push copies
  * the row into a single-producer / single-consumer lock-free ring (no lock,
@@ -23,13 +25,16 @@
  *
  * Commit policy: a batch is committed when it reaches batch_rows, or
  * batch_ms after its first row was seen, whichever comes first; and a
- * transaction that has been inserting for batch_ms commits early with what
- * it has, so the write lock is never held much longer than that. Rows stay in
+ * transaction that took longer than batch_ms makes the next ones smaller in
+ * proportion (a batch is sorted before it is inserted, so it cannot be cut
+ * part way), so the write lock is not held much longer than that. A
+ * checkpointer thread with its own connection checkpoints the WAL beside
+ * the writer. Rows stay in
  * the ring until their transaction commits, so a failed batch is retried
  * as is: a database error (disk full, locked beyond the busy timeout) is
  * logged and the same batch retried up to DBLOG_ATTEMPTS times, then its rows
  * are counted as lost. Every batch is one transaction: an error can lose a
- * batch, never leave half of one or a collision without its rtree row.
+ * batch, never leave half of one or a collision without its group.
  *
  * Error convention (as db.h): functions return 0 or -1, or NULL with the
  * message in the caller's buffer.
@@ -45,21 +50,20 @@
  * writer slower than the tick on average; it carries the tick over the
  * writer's pauses (a commit, a WAL checkpoint, another process holding the
  * lock) and over bursts. 2^18 rows are 1.3 s of the 200,000 rows/s that
- * 10,000 avatars colliding on every tick at 20 Hz would log, and 5 s at the
- * 50,000 rows/s this writer sustains on the benchmark; the benchmark's
- * high-water mark at a sustainable rate is a small fraction of it. */
+ * 10,000 avatars colliding on every tick at 20 Hz would log, which this
+ * writer sustains on the benchmark (db/README.md) with the queue's
+ * high-water mark at a sixth of it. */
 #ifndef DBLOG_QUEUE_ROWS_DEFAULT
 #define DBLOG_QUEUE_ROWS_DEFAULT (1u << 18)
 #endif
 /* Largest ring accepted: 2^24 rows = 2 GiB, more than any server should pin. */
 #define DBLOG_QUEUE_ROWS_MAX (1u << 24)
 
-/* Default rows per transaction. A commit writes every page it dirtied to the
- * WAL, and the by-object and by-user indexes dirty one leaf per distinct
- * object and user in the batch, so small batches multiply page writes: on
- * the benchmark, 4096 rows a batch run at 3/4 of the rate of 16384. 65536
- * gain another sixth but would hold the write lock for about a second, past
- * the time cap (DBLOG_BATCH_MS_DEFAULT) anyway. */
+/* Default rows per transaction. Each commit has fixed costs (the WAL
+ * frames of the pages it touched, a segment per bucket, a sort), and the
+ * segments the queries binary-search are a batch long, so fewer, larger
+ * batches are cheaper to write and to read; 65536 rows would hold the write
+ * lock past the time cap (DBLOG_BATCH_MS_DEFAULT) anyway. */
 #ifndef DBLOG_BATCH_ROWS_DEFAULT
 #define DBLOG_BATCH_ROWS_DEFAULT 16384u
 #endif
@@ -107,11 +111,37 @@ _Static_assert(DBLOG_BATCH_MS_DEFAULT >= 1 && DBLOG_BATCH_MS_DEFAULT <= DBLOG_BA
 _Static_assert(DBLOG_ATTEMPTS >= 1 && DBLOG_ATTEMPTS <= 10, "attempts out of range");
 _Static_assert(DBLOG_RETRY_MS <= 10000, "retry delay out of range");
 
+/* The collision log's groups (db/README.md, "Collision log storage"): rows
+ * are gathered per object, ECM version, time bucket and cell of the world
+ * contact point, and queries find the groups first.
+ * - 10 s buckets: a time query reads at most 10 s of rows too many at each
+ *   end, and at 200,000 rows/s a group holds many rows, so the writer adds
+ *   one group (a row, an rtree entry, an index entry) per thousands of rows.
+ * - 4 m cells: about an avatar's reach and a room's width, so a region
+ *   query reads little outside its box while an avatar pressing against a
+ *   wall stays in one or two groups per bucket.
+ * Changing either changes where existing rows are looked for: both are part
+ * of the schema, not tunables. */
+#define DBLOG_BUCKET_S 10.0
+#define DBLOG_CELL_M 4.0
+/* Cells and buckets beyond these (67,000 km; 350,000 years) are clamped to
+ * the last one, whose rtree box is unbounded on that side. */
+#define DBLOG_CELL_MAX (INT64_C(1) << 24)
+#define DBLOG_BUCKET_MAX (INT64_C(1) << 40)
+
 typedef struct dblog dblog;
 
-/* One collision, as the collisions table stores it. Coordinates are float,
- * as the simulation computes them: the rtree keeps 32-bit floats, so a float
- * contact point is stored there exactly, as a box of zero size. */
+/* The time bucket of a row at Unix time at (finite): floor(at / 10 s),
+ * clamped to +-DBLOG_BUCKET_MAX. Monotonic in at, so rows with
+ * since <= at < until lie in buckets dblog_bucket(since) ..
+ * dblog_bucket(until). */
+int64_t dblog_bucket(double at);
+/* The cell index of a world coordinate v (finite): floor(v / 4 m), clamped
+ * to +-DBLOG_CELL_MAX. */
+int64_t dblog_cell(double v);
+
+/* One collision, as the collisions table stores it (the writer adds its id
+ * and group). Coordinates are float, as the simulation computes them. */
 typedef struct dblog_row {
     double at;            /* Unix seconds (db_now) */
     int64_t session_id;
@@ -132,8 +162,9 @@ typedef struct dblog_row {
 typedef struct dblog_config {
     uint32_t queue_rows; /* ring capacity: a power of two, 2..DBLOG_QUEUE_ROWS_MAX */
     uint32_t batch_rows; /* rows per transaction: 1..queue_rows/2 */
-    uint32_t batch_ms;   /* 1..DBLOG_BATCH_MS_MAX: gathering a batch, and inserting it
-                            (the last transaction, at stop, is not cut short) */
+    uint32_t batch_ms;   /* 1..DBLOG_BATCH_MS_MAX: gathering a batch, and (by sizing the
+                            next ones) inserting it; the last transaction, at stop,
+                            takes every queued row */
 } dblog_config;
 
 /* Counters since dblog_open. After dblog_stop,
@@ -153,8 +184,9 @@ typedef struct dblog_stats {
 } dblog_stats;
 
 /* Opens a connection to the database at path (creating and migrating it like
- * db_open(DB_READWRITE)), prepares the statements and starts the writer
- * thread with every signal blocked. cfg may be NULL for the defaults. On
+ * db_open(DB_READWRITE)) and one for checkpoints, prepares the statements
+ * and starts the writer and checkpointer threads with every signal
+ * blocked. cfg may be NULL for the defaults. On
  * failure returns NULL and writes "what went wrong" to err. */
 dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t errlen);
 

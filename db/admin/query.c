@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "db.h"
+#include "dblog.h"
 #include "out.h"
 
 /* Longest SQL text assembled here (the collisions query with every filter
@@ -49,9 +50,15 @@ static void bind_int(sqlite3_stmt *st, const char *name, int64_t v)
 }
 
 /* Binds every filter value the statement names: the SQL decides which are
- * used, the values never enter it. */
-static void bind_filter(sqlite3_stmt *st, const query_filter *f, int64_t user_id)
+ * used, the values never enter it. ranges (may be NULL) is the JSON array
+ * of [first_id, last_id] pairs that :ranges names (see find_ranges). */
+static void bind_filter(sqlite3_stmt *st, const query_filter *f, int64_t user_id, const char *ranges)
 {
+    int at = sqlite3_bind_parameter_index(st, ":ranges");
+    if (at)
+        sqlite3_bind_text(st, at, ranges ? ranges : "[]", -1, SQLITE_STATIC);
+    bind_int(st, ":b0", f->has_since ? dblog_bucket(f->since) : -DBLOG_BUCKET_MAX);
+    bind_int(st, ":b1", f->has_until ? dblog_bucket(f->until) : DBLOG_BUCKET_MAX);
     static const char *const corner[6] = {":x0", ":y0", ":z0", ":x1", ":y1", ":z1"};
     if (f->has_object)
         bind_int(st, ":object", f->object);
@@ -68,13 +75,13 @@ static void bind_filter(sqlite3_stmt *st, const query_filter *f, int64_t user_id
 }
 
 /* Runs sql with f's values and prints its rows as cols. */
-static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_id, const out_column *cols, int ncols,
-               int vertical, int format, char *err, size_t errlen)
+static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_id, const char *ranges,
+               const out_column *cols, int ncols, int vertical, int format, char *err, size_t errlen)
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
         return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
-    bind_filter(st, f, user_id);
+    bind_filter(st, f, user_id, ranges);
     out *o = out_begin(format, stdout, cols, ncols, vertical);
     int rc;
     while ((rc = sqlite3_step(st)) == SQLITE_ROW)
@@ -116,7 +123,7 @@ static int lookup(sqlite3 *s, const char *sql, const char *text, int64_t num, in
  * does not exist, so that a typo does not read as "no collisions". */
 static int resolve(sqlite3 *s, const query_filter *f, int64_t *user_id, char *err, size_t errlen)
 {
-    int found, rc;
+    int found = 0, rc;
     int64_t id;
     *user_id = 0;
     if (f->user) {
@@ -152,6 +159,229 @@ static int end_snapshot(sqlite3 *s, int rc)
     return rc;
 }
 
+/* ---- finding collision rows (db/README.md, "Collision log storage") ---- */
+
+/* A growing JSON array of [first_id, last_id] pairs, adjacent ranges
+ * merged. */
+typedef struct ranges {
+    char *text;
+    size_t len, cap;
+    int64_t lo, hi; /* the pending range; lo > hi: none */
+    int64_t rows;   /* ids covered so far, pending range included */
+    int failed;     /* out of memory */
+} ranges;
+
+static void ranges_flush(ranges *r)
+{
+    if (r->lo > r->hi || r->failed)
+        return;
+    char item[64];
+    int k = snprintf(item, sizeof item, "%s[%lld,%lld]", r->len > 1 ? "," : "", (long long)r->lo, (long long)r->hi);
+    if (r->len + (size_t)k + 2 > r->cap) {
+        size_t cap = r->cap ? r->cap * 2 : 4096;
+        char *t = realloc(r->text, cap);
+        if (!t) {
+            r->failed = 1;
+            return;
+        }
+        r->text = t;
+        r->cap = cap;
+    }
+    memcpy(r->text + r->len, item, (size_t)k);
+    r->len += (size_t)k;
+    r->lo = 1, r->hi = 0;
+}
+
+static void ranges_init(ranges *r)
+{
+    *r = (ranges){.lo = 1, .hi = 0};
+    r->text = malloc(4096);
+    if (!r->text) {
+        r->failed = 1;
+        return;
+    }
+    r->cap = 4096;
+    r->text[0] = '[';
+    r->len = 1;
+}
+
+static void ranges_add(ranges *r, int64_t lo, int64_t hi)
+{
+    if (lo > hi)
+        return;
+    r->rows += hi - lo + 1;
+    if (r->lo <= r->hi && lo == r->hi + 1) {
+        r->hi = hi;
+        return;
+    }
+    ranges_flush(r);
+    r->lo = lo, r->hi = hi;
+}
+
+/* Closes the array; returns its text (owned by r), or NULL if out of
+ * memory. */
+static const char *ranges_end(ranges *r)
+{
+    ranges_flush(r);
+    if (r->failed)
+        return NULL;
+    r->text[r->len] = ']';
+    r->text[r->len + 1] = 0;
+    return r->text;
+}
+
+/* The key a segment is sorted by, of the first row with id >= id, or
+ * found = 0 past the end. */
+struct probe {
+    sqlite3_stmt *st; /* SELECT id, object_id, ecm_version, g ... id >= ?1 ORDER BY id LIMIT 1 */
+    int rc;           /* the first error */
+};
+
+static int key_cmp(const int64_t a[3], const int64_t b[3], int n)
+{
+    for (int k = 0; k < n; k++)
+        if (a[k] != b[k])
+            return a[k] < b[k] ? -1 : 1;
+    return 0;
+}
+
+/* The smallest id in [lo, hi + 1] such that the first row at or after it
+ * (within the segment) has a key whose first n parts are >= key (> key if
+ * strict); hi + 1 if there is none. Keys are non-decreasing along the
+ * segment's ids, so this is a binary search of log2(hi - lo) probes. */
+static int64_t seek(struct probe *p, int64_t lo, int64_t hi, const int64_t key[3], int n, int strict)
+{
+    int64_t end = hi + 1;
+    while (lo < end) {
+        int64_t mid = lo + (end - lo) / 2, k[3];
+        sqlite3_bind_int64(p->st, 1, mid);
+        int rc = sqlite3_step(p->st);
+        int after; /* the row found is at or past the key */
+        if (rc == SQLITE_ROW && sqlite3_column_int64(p->st, 0) <= hi) {
+            for (int i = 0; i < 3; i++)
+                k[i] = sqlite3_column_int64(p->st, 1 + i);
+            int c = key_cmp(k, key, n);
+            after = strict ? c > 0 : c >= 0;
+        } else {
+            if (rc != SQLITE_ROW && rc != SQLITE_DONE && !p->rc)
+                p->rc = rc;
+            after = 1; /* past the segment's last row */
+        }
+        sqlite3_reset(p->st);
+        if (after)
+            end = mid;
+        else
+            lo = mid + 1;
+    }
+    return lo;
+}
+
+/* Fills r with the id ranges holding the candidate groups that groups_sql
+ * selects (columns: bucket, object_id, ecm_version, g; ordered by bucket),
+ * bound with f. In each segment of a group's bucket its rows are one id
+ * range, found by binary search. n: how many key parts to match (1: the
+ * whole object, 3: the group). Returns QUERY_OK or QUERY_ERROR. */
+static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f, int64_t user_id, int n, ranges *r,
+                       char *err, size_t errlen)
+{
+    sqlite3_stmt *gq = NULL, *sq = NULL;
+    struct probe p = {0};
+    int rc = QUERY_OK, step;
+    int64_t (*seg)[2] = NULL;
+    size_t nseg = 0, capseg = 0;
+    int64_t seg_bucket = 0, last_key[3] = {0, 0, 0};
+    int have_bucket = 0, have_key = 0;
+    if (sqlite3_prepare_v2(s, groups_sql, -1, &gq, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(s, "SELECT first_id, last_id FROM collision_segments WHERE bucket = ?1 ORDER BY first_id",
+                           -1, &sq, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(s, "SELECT id, object_id, ecm_version, g FROM collisions WHERE id >= ?1 ORDER BY id LIMIT 1",
+                           -1, &p.st, NULL) != SQLITE_OK) {
+        rc = fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        goto cleanup;
+    }
+    bind_filter(gq, f, user_id, NULL);
+    while ((step = sqlite3_step(gq)) == SQLITE_ROW) {
+        int64_t bucket = sqlite3_column_int64(gq, 0);
+        int64_t key[3] = {sqlite3_column_int64(gq, 1), sqlite3_column_int64(gq, 2), sqlite3_column_int64(gq, 3)};
+        if (!have_bucket || bucket != seg_bucket) { /* the segments of a new bucket */
+            have_bucket = 1, have_key = 0;
+            seg_bucket = bucket;
+            nseg = 0;
+            sqlite3_bind_int64(sq, 1, bucket);
+            while ((step = sqlite3_step(sq)) == SQLITE_ROW) {
+                if (nseg == capseg) {
+                    size_t cap = capseg ? capseg * 2 : 64;
+                    void *t = realloc(seg, cap * sizeof *seg);
+                    if (!t) {
+                        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+                        goto cleanup;
+                    }
+                    seg = t, capseg = cap;
+                }
+                seg[nseg][0] = sqlite3_column_int64(sq, 0);
+                seg[nseg][1] = sqlite3_column_int64(sq, 1);
+                nseg++;
+            }
+            sqlite3_reset(sq);
+            if (step != SQLITE_DONE)
+                break;
+        }
+        if (have_key && key_cmp(key, last_key, n) == 0)
+            continue; /* the same object again (n = 1) */
+        memcpy(last_key, key, sizeof key);
+        have_key = 1;
+        for (size_t k = 0; k < nseg; k++) {
+            int64_t a = seek(&p, seg[k][0], seg[k][1], key, n, 0);
+            int64_t b = seek(&p, a, seg[k][1], key, n, 1);
+            ranges_add(r, a, b - 1);
+        }
+    }
+    if (step != SQLITE_DONE || p.rc)
+        rc = fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+cleanup:
+    free(seg);
+    sqlite3_finalize(gq);
+    sqlite3_finalize(sq);
+    sqlite3_finalize(p.st);
+    return rc;
+}
+
+/* Fills r with whole segments of the buckets in [:b0, :b1], newest first;
+ * with stop_at > 0, stops after the first bucket that brings the rows of
+ * buckets strictly inside the range to stop_at (the newest stop_at rows
+ * that match a time filter lie in those buckets). */
+static int segment_ranges(sqlite3 *s, const query_filter *f, int64_t stop_at, ranges *r, char *err, size_t errlen)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(s, "SELECT first_id, last_id, bucket FROM collision_segments "
+                              "WHERE bucket BETWEEN :b0 AND :b1 ORDER BY bucket DESC, first_id DESC",
+                           -1, &st, NULL) != SQLITE_OK)
+        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    bind_filter(st, f, 0, NULL);
+    int64_t b0 = f->has_since ? dblog_bucket(f->since) : -DBLOG_BUCKET_MAX;
+    int64_t b1 = f->has_until ? dblog_bucket(f->until) : DBLOG_BUCKET_MAX;
+    int64_t inside = 0, bucket = 0;
+    int step, have = 0;
+    while ((step = sqlite3_step(st)) == SQLITE_ROW) {
+        int64_t b = sqlite3_column_int64(st, 2);
+        if (have && b != bucket && stop_at > 0 && inside >= stop_at)
+            break;
+        have = 1, bucket = b;
+        int64_t lo = sqlite3_column_int64(st, 0), hi = sqlite3_column_int64(st, 1);
+        ranges_add(r, lo, hi);
+        if (b > b0 && b < b1)
+            inside += hi - lo + 1;
+    }
+    int ok = step == SQLITE_DONE || step == SQLITE_ROW;
+    if (!ok)
+        fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    sqlite3_finalize(st);
+    return ok ? QUERY_OK : QUERY_ERROR;
+}
+
+/* The rows read through ranges: SQL for "FROM ..." with c the collision. */
+#define FROM_RANGES "FROM json_each(:ranges) j JOIN collisions c ON c.id BETWEEN j.value ->> 0 AND j.value ->> 1 "
+
 int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, size_t errlen)
 {
     static const out_column cols[] = {
@@ -163,17 +393,35 @@ int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, s
         {"normal_x", OUT_REAL, 1},   {"normal_y", OUT_REAL, 1},    {"normal_z", OUT_REAL, 1},
         {"velocity_x", OUT_REAL, 1}, {"velocity_y", OUT_REAL, 1},  {"velocity_z", OUT_REAL, 1},
     };
+    /* Candidate groups: through the rtree for a region, collision_users
+     * for a user, the by-object index for an object, buckets for time. */
+    char groups[QUERY_SQL_MAX] = "SELECT gr.bucket, gr.object_id, gr.ecm_version, gr.g ";
+    cat(groups, f->has_region ? "FROM collision_cells r JOIN collision_groups gr ON gr.g = r.g "
+                              : "FROM collision_groups gr ");
+    if (f->user)
+        cat(groups, "JOIN collision_users cu ON cu.g = gr.g AND cu.user_id = :user_id ");
+    cat(groups, "WHERE gr.bucket BETWEEN :b0 AND :b1 ");
+    if (f->has_region)
+        cat(groups, "AND r.min_x <= :x1 AND r.max_x >= :x0 AND r.min_y <= :y1 AND r.max_y >= :y0 "
+                    "AND r.min_z <= :z1 AND r.max_z >= :z0 ");
+    if (f->has_region && f->has_since)
+        cat(groups, "AND r.max_t >= :since ");
+    if (f->has_region && f->has_until)
+        cat(groups, "AND r.min_t <= :until ");
+    if (f->has_object)
+        cat(groups, "AND gr.object_id = :object ");
+    cat(groups, "ORDER BY gr.bucket, gr.object_id, gr.ecm_version, gr.g");
+
     char sql[QUERY_SQL_MAX] = "SELECT c.id, c.at, u.name, c.session_id, c.avatar_id, c.object_id, c.ecm_version, "
                               "c.box_index, c.inside, c.world_x, c.world_y, c.world_z, c.local_x, c.local_y, "
                               "c.local_z, c.normal_x, c.normal_y, c.normal_z, c.vel_x, c.vel_y, c.vel_z ";
-    /* A region goes through the rtree (each contact point is a box of zero
-     * size there); the exact test on the row keeps the answer exact. */
-    cat(sql, f->has_region ? "FROM collisions_rtree r JOIN collisions c ON c.id = r.id " : "FROM collisions c ");
+    int whole = !f->has_region && !f->user && !f->has_object && !f->has_since && !f->has_until && f->limit <= 0;
+    cat(sql, whole ? "FROM collisions c " : FROM_RANGES);
+    /* The exact filter on every row read keeps the answer exact. */
     cat(sql, "LEFT JOIN users u ON u.id = c.user_id WHERE 1 ");
     if (f->has_region)
-        cat(sql, "AND r.min_x <= :x1 AND r.max_x >= :x0 AND r.min_y <= :y1 AND r.max_y >= :y0 "
-                 "AND r.min_z <= :z1 AND r.max_z >= :z0 AND c.world_x BETWEEN :x0 AND :x1 "
-                 "AND c.world_y BETWEEN :y0 AND :y1 AND c.world_z BETWEEN :z0 AND :z1 ");
+        cat(sql, "AND c.world_x BETWEEN :x0 AND :x1 AND c.world_y BETWEEN :y0 AND :y1 "
+                 "AND c.world_z BETWEEN :z0 AND :z1 ");
     if (f->has_object)
         cat(sql, "AND c.object_id = :object ");
     if (f->user)
@@ -189,8 +437,20 @@ int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, s
         return rc;
     int64_t user_id;
     rc = resolve(s, f, &user_id, err, errlen);
+    ranges r;
+    ranges_init(&r);
+    if (rc == QUERY_OK && !whole) {
+        if (f->has_region || f->user || f->has_object)
+            rc = find_ranges(s, groups, f, user_id, 3, &r, err, errlen);
+        else
+            rc = segment_ranges(s, f, f->limit, &r, err, errlen);
+    }
+    const char *text = ranges_end(&r);
+    if (rc == QUERY_OK && !text)
+        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
     if (rc == QUERY_OK)
-        rc = run(s, sql, f, user_id, cols, LEN(cols), 0, format, err, errlen);
+        rc = run(s, sql, f, user_id, text, cols, LEN(cols), 0, format, err, errlen);
+    free(r.text);
     return end_snapshot(s, rc);
 }
 
@@ -201,21 +461,45 @@ int query_top_objects(sqlite3 *s, const query_filter *f, int format, char *err, 
         {"collisions", OUT_INT, 0}, {"users", OUT_INT, 0},  {"first", OUT_TIME, 0},
         {"last", OUT_TIME, 0},      {"in_world", OUT_BOOL, 1},
     };
+    /* Counting every collision reads every row in the time range: the
+     * whole table without one. */
+    int whole = !f->has_since && !f->has_until;
     char sql[QUERY_SQL_MAX] = "SELECT t.object_id, o.name, u.name, t.n, t.users, t.first, t.last, "
                               "o.id IS NOT NULL AND o.removed_at IS NULL "
-                              "FROM (SELECT object_id, count(*) AS n, count(DISTINCT user_id) AS users, "
-                              "min(at) AS first, max(at) AS last FROM collisions WHERE 1 ";
+                              "FROM (SELECT c.object_id, count(*) AS n, count(DISTINCT c.user_id) AS users, "
+                              "min(c.at) AS first, max(c.at) AS last ";
+    cat(sql, whole ? "FROM collisions c " : FROM_RANGES);
+    cat(sql, "WHERE 1 ");
     if (f->has_since)
-        cat(sql, "AND at >= :since ");
+        cat(sql, "AND c.at >= :since ");
     if (f->has_until)
-        cat(sql, "AND at < :until ");
-    cat(sql, "GROUP BY object_id ORDER BY n DESC, object_id LIMIT :limit) t "
+        cat(sql, "AND c.at < :until ");
+    cat(sql, "GROUP BY c.object_id ORDER BY n DESC, c.object_id LIMIT :limit) t "
              "LEFT JOIN objects o ON o.id = t.object_id LEFT JOIN users u ON u.id = o.owner_id "
              "ORDER BY t.n DESC, t.object_id");
     int rc = begin_snapshot(s, err, errlen);
+    if (rc != QUERY_OK)
+        return rc;
+    ranges r;
+    ranges_init(&r);
+    if (!whole)
+        rc = segment_ranges(s, f, 0, &r, err, errlen);
+    const char *text = ranges_end(&r);
+    if (rc == QUERY_OK && !text)
+        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
     if (rc == QUERY_OK)
-        rc = run(s, sql, f, 0, cols, LEN(cols), 0, format, err, errlen);
+        rc = run(s, sql, f, 0, text, cols, LEN(cols), 0, format, err, errlen);
+    free(r.text);
     return end_snapshot(s, rc);
+}
+
+/* The id ranges of every collision of object f->object (all versions). */
+static int object_ranges(sqlite3 *s, const query_filter *f, ranges *r, char *err, size_t errlen)
+{
+    return find_ranges(s,
+                       "SELECT bucket, object_id, 0, 0 FROM collision_groups WHERE object_id = :object "
+                       "GROUP BY bucket ORDER BY bucket",
+                       f, 0, 1, r, err, errlen);
 }
 
 int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
@@ -240,20 +524,28 @@ int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
         "o.scale, o.tri_count, o.min_x, o.min_y, o.min_z, o.max_x, o.max_y, o.max_z, o.ecm_version, "
         "(SELECT count(*) FROM ecm_versions v WHERE v.object_id = o.id), "
         "(SELECT box_count FROM ecm_versions v WHERE v.object_id = o.id AND v.version = o.ecm_version), "
-        "(SELECT count(*) FROM collisions c WHERE c.object_id = o.id), "
-        "(SELECT count(*) FROM collisions c WHERE c.object_id = o.id AND c.ecm_version = o.ecm_version), "
-        "(SELECT count(DISTINCT user_id) FROM collisions c WHERE c.object_id = o.id), "
-        "(SELECT min(at) FROM collisions c WHERE c.object_id = o.id), "
-        "(SELECT max(at) FROM collisions c WHERE c.object_id = o.id) "
-        "FROM objects o LEFT JOIN users u ON u.id = o.owner_id WHERE o.id = :object";
+        "k.n, k.current, k.users, k.first, k.last "
+        "FROM objects o LEFT JOIN users u ON u.id = o.owner_id, "
+        "(SELECT count(*) AS n, coalesce(sum(c.ecm_version = (SELECT ecm_version FROM objects WHERE id = :object)), 0) "
+        "AS current, "
+        "count(DISTINCT c.user_id) AS users, min(c.at) AS first, max(c.at) AS last " FROM_RANGES
+        "WHERE c.object_id = :object) k WHERE o.id = :object";
     query_filter f = {.has_object = 1, .object = id};
     int rc = begin_snapshot(s, err, errlen);
     if (rc != QUERY_OK)
         return rc;
     int64_t unused;
     rc = resolve(s, &f, &unused, err, errlen);
+    ranges r;
+    ranges_init(&r);
     if (rc == QUERY_OK)
-        rc = run(s, sql, &f, 0, cols, LEN(cols), 1, format, err, errlen);
+        rc = object_ranges(s, &f, &r, err, errlen);
+    const char *text = ranges_end(&r);
+    if (rc == QUERY_OK && !text)
+        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+    if (rc == QUERY_OK)
+        rc = run(s, sql, &f, 0, text, cols, LEN(cols), 1, format, err, errlen);
+    free(r.text);
     return end_snapshot(s, rc);
 }
 
@@ -264,18 +556,27 @@ int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
         {"boxes", OUT_INT, 0},   {"collisions", OUT_INT, 0},  {"current", OUT_BOOL, 0},
     };
     static const char sql[] =
-        "SELECT v.version, v.created_at, v.reason, v.box_count, "
-        "(SELECT count(*) FROM collisions c WHERE c.object_id = v.object_id AND c.ecm_version = v.version), "
-        "v.version = o.ecm_version "
-        "FROM ecm_versions v JOIN objects o ON o.id = v.object_id WHERE v.object_id = :object ORDER BY v.version";
+        "SELECT v.version, v.created_at, v.reason, v.box_count, coalesce(k.n, 0), v.version = o.ecm_version "
+        "FROM ecm_versions v JOIN objects o ON o.id = v.object_id "
+        "LEFT JOIN (SELECT c.ecm_version AS version, count(*) AS n " FROM_RANGES
+        "WHERE c.object_id = :object GROUP BY c.ecm_version) k ON k.version = v.version "
+        "WHERE v.object_id = :object ORDER BY v.version";
     query_filter f = {.has_object = 1, .object = id};
     int rc = begin_snapshot(s, err, errlen);
     if (rc != QUERY_OK)
         return rc;
     int64_t unused;
     rc = resolve(s, &f, &unused, err, errlen);
+    ranges r;
+    ranges_init(&r);
     if (rc == QUERY_OK)
-        rc = run(s, sql, &f, 0, cols, LEN(cols), 0, format, err, errlen);
+        rc = object_ranges(s, &f, &r, err, errlen);
+    const char *text = ranges_end(&r);
+    if (rc == QUERY_OK && !text)
+        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+    if (rc == QUERY_OK)
+        rc = run(s, sql, &f, 0, text, cols, LEN(cols), 0, format, err, errlen);
+    free(r.text);
     return end_snapshot(s, rc);
 }
 
@@ -287,18 +588,22 @@ int query_totals(sqlite3 *s, int format, char *err, size_t errlen)
         {"first", OUT_TIME, 0},      {"last", OUT_TIME, 0},
     };
     /* The span covers sessions (start to end, or start if still open) and
-     * collisions. */
+     * collisions: the first and last collisions lie in the segments of the
+     * first and last buckets. */
     static const char sql[] =
         "SELECT (SELECT count(*) FROM users), (SELECT count(*) FROM sessions), "
         "(SELECT count(*) FROM sessions WHERE ended_at IS NULL), (SELECT count(*) FROM objects), "
         "(SELECT count(*) FROM objects WHERE removed_at IS NULL), (SELECT count(*) FROM collisions), "
-        "(SELECT min(t) FROM (SELECT min(started_at) AS t FROM sessions UNION ALL SELECT min(at) FROM collisions)), "
+        "(SELECT min(t) FROM (SELECT min(started_at) AS t FROM sessions UNION ALL SELECT min(c.at) "
+        "FROM collision_segments g JOIN collisions c ON c.id BETWEEN g.first_id AND g.last_id "
+        "WHERE g.bucket = (SELECT min(bucket) FROM collision_segments))), "
         "(SELECT max(t) FROM (SELECT max(coalesce(ended_at, started_at)) AS t FROM sessions "
-        "UNION ALL SELECT max(at) FROM collisions))";
+        "UNION ALL SELECT max(c.at) FROM collision_segments g JOIN collisions c "
+        "ON c.id BETWEEN g.first_id AND g.last_id WHERE g.bucket = (SELECT max(bucket) FROM collision_segments)))";
     query_filter f = {0};
     int rc = begin_snapshot(s, err, errlen);
     if (rc == QUERY_OK)
-        rc = run(s, sql, &f, 0, cols, LEN(cols), 1, format, err, errlen);
+        rc = run(s, sql, &f, 0, NULL, cols, LEN(cols), 1, format, err, errlen);
     return end_snapshot(s, rc);
 }
 
@@ -327,6 +632,6 @@ int query_sessions(sqlite3 *s, const query_filter *f, int format, char *err, siz
     int64_t user_id;
     rc = resolve(s, f, &user_id, err, errlen);
     if (rc == QUERY_OK)
-        rc = run(s, sql, f, user_id, cols, LEN(cols), 0, format, err, errlen);
+        rc = run(s, sql, f, user_id, NULL, cols, LEN(cols), 0, format, err, errlen);
     return end_snapshot(s, rc);
 }

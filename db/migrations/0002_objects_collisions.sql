@@ -45,9 +45,29 @@ CREATE TABLE ecm_boxes (
     FOREIGN KEY (object_id, version) REFERENCES ecm_versions(object_id, version)
 ) WITHOUT ROWID;
 
+-- The collision log (db/README.md, "Collision log storage").
+--
+-- Rows are gathered into groups: one per object, ECM version, 10 s time
+-- bucket (floor(at / 10)) and 4 m cell of the world contact point
+-- (floor(world / 4) on each axis). The writer appends each batch as one id
+-- range sorted by (bucket, object_id, ecm_version, g): a segment per bucket.
+-- Queries find candidate groups (region: the R*Tree of their cells; user:
+-- collision_users; object: collision_groups by object; time: buckets), then
+-- the segments of their buckets, then, by binary search on the sorted ids,
+-- the id ranges holding them, and read only those rows with an exact filter.
+CREATE TABLE collision_groups (
+    g            INTEGER PRIMARY KEY,
+    object_id    INTEGER NOT NULL,
+    ecm_version  INTEGER NOT NULL,
+    bucket       INTEGER NOT NULL,           -- floor(at / 10) of every row in it
+    cell_x INTEGER NOT NULL, cell_y INTEGER NOT NULL, cell_z INTEGER NOT NULL  -- floor(world / 4), clamped
+);
+CREATE INDEX collision_groups_by_object ON collision_groups(object_id, ecm_version, bucket);
+
 -- One row per blocking contact between an avatar and an ECM box.
 CREATE TABLE collisions (
-    id           INTEGER PRIMARY KEY,
+    id           INTEGER PRIMARY KEY,        -- sorted within its segment, see above
+    g            INTEGER NOT NULL,           -- collision_groups.g
     at           REAL    NOT NULL,           -- Unix seconds
     session_id   INTEGER NOT NULL,
     user_id      INTEGER,
@@ -62,9 +82,26 @@ CREATE TABLE collisions (
     normal_x REAL NOT NULL, normal_y REAL NOT NULL, normal_z REAL NOT NULL,  -- world
     vel_x    REAL NOT NULL, vel_y    REAL NOT NULL, vel_z    REAL NOT NULL   -- m/s, world
 );
-CREATE INDEX collisions_by_object ON collisions(object_id, ecm_version, at);
-CREATE INDEX collisions_by_user ON collisions(user_id, at);
-CREATE INDEX collisions_by_time ON collisions(at);
 
--- Region queries: each collision's world contact point as a degenerate box.
-CREATE VIRTUAL TABLE collisions_rtree USING rtree(id, min_x, max_x, min_y, max_y, min_z, max_z);
+-- Id ranges whose rows all lie in one bucket, sorted by
+-- (object_id, ecm_version, g).
+CREATE TABLE collision_segments (
+    first_id  INTEGER PRIMARY KEY,
+    last_id   INTEGER NOT NULL,
+    bucket    INTEGER NOT NULL
+);
+CREATE INDEX collision_segments_by_bucket ON collision_segments(bucket);
+
+-- The groups holding at least one collision of a (known) user.
+CREATE TABLE collision_users (
+    user_id  INTEGER NOT NULL,
+    g        INTEGER NOT NULL,
+    PRIMARY KEY (user_id, g)
+) WITHOUT ROWID;
+
+-- Region queries: each group's cell (a 4 m cube, the outermost cells
+-- unbounded) as a box, and its bucket's time span [10 b, 10 b + 10) in Unix
+-- seconds as a 4th dimension, so that region and time narrow the search
+-- together (32-bit floats, rounded outwards: about 2 minutes coarse today;
+-- the exact bucket is in collision_groups).
+CREATE VIRTUAL TABLE collision_cells USING rtree(g, min_x, max_x, min_y, max_y, min_z, max_z, min_t, max_t);

@@ -8,7 +8,9 @@ import csv
 import hashlib
 import io
 import json
+import math
 import os
+import random
 import shutil
 import sqlite3
 import subprocess
@@ -115,17 +117,57 @@ def make_db():
     return srv.db
 
 
+BUCKET_S, CELL_M, BUCKET_MAX, CELL_MAX = 10.0, 4.0, 1 << 40, 1 << 24  # db/dblog.h
+
+
+def bucket_of(at):
+    return max(-BUCKET_MAX, min(BUCKET_MAX, math.floor(at / BUCKET_S)))
+
+
+def cell_of(v):
+    return max(-CELL_MAX, min(CELL_MAX, math.floor(v / CELL_M)))
+
+
 def insert_collisions(db, rows):
+    """Writes rows as one batch, laid out as the log writer (db/dblog.c)
+    lays out its batches: each row in the group of its object, version,
+    10 s bucket and 4 m cell (made with its rtree cell and time span if
+    new), the users of
+    each group noted, and the batch sorted by (bucket, object, version,
+    group) under new ids, one segment per bucket. Sets each row's "id"."""
+    next_id = db.execute("SELECT coalesce(max(id), 0) + 1 FROM collisions").fetchone()[0]
+    keyed = []
     for c in rows:
-        db.execute("INSERT INTO collisions(id, at, session_id, user_id, avatar_id, object_id, ecm_version, box_index, "
-                   "inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, local_z, "
-                   "normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
-                   "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 0, 0, 0, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                   (c["id"], c["at"], c["session"], c["user"], c["avatar"], c["object"], c["version"], c["box"],
-                    c["inside"], *c["world"], *c["local"], *c["normal"], *c["vel"]))
-        w = c["world"]
-        db.execute("INSERT INTO collisions_rtree VALUES (?, ?, ?, ?, ?, ?, ?)",
-                   (c["id"], w[0], w[0], w[1], w[1], w[2], w[2]))
+        b, cell = bucket_of(c["at"]), tuple(cell_of(v) for v in c["world"])
+        got = db.execute("SELECT g FROM collision_groups WHERE object_id = ? AND ecm_version = ? AND bucket = ? "
+                         "AND cell_x = ? AND cell_y = ? AND cell_z = ?", (c["object"], c["version"], b, *cell)).fetchone()
+        if got:
+            g = got[0]
+        else:
+            g = db.execute("INSERT INTO collision_groups(object_id, ecm_version, bucket, cell_x, cell_y, cell_z) "
+                           "VALUES (?, ?, ?, ?, ?, ?)", (c["object"], c["version"], b, *cell)).lastrowid
+            box = []
+            for k in cell:
+                box += [-3e38 if k == -CELL_MAX else k * CELL_M, 3e38 if k == CELL_MAX else (k + 1) * CELL_M]
+            box += [-3e38 if b == -BUCKET_MAX else b * BUCKET_S, 3e38 if b == BUCKET_MAX else (b + 1) * BUCKET_S]
+            db.execute("INSERT INTO collision_cells VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (g, *box))
+        if c["user"] is not None:
+            db.execute("INSERT OR IGNORE INTO collision_users(user_id, g) VALUES (?, ?)", (c["user"], g))
+        keyed.append(((b, c["object"], c["version"], g), c))
+    keyed.sort(key=lambda k: k[0])
+    first = next_id
+    for i, (key, c) in enumerate(keyed):
+        c["id"] = next_id + i
+        db.execute("INSERT INTO collisions(id, g, at, session_id, user_id, avatar_id, object_id, ecm_version, "
+                   "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, "
+                   "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
+                   "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, 0, 0, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                   (c["id"], key[3], c["at"], c["session"], c["user"], c["avatar"], c["object"], c["version"],
+                    c["box"], c["inside"], *c["world"], *c["local"], *c["normal"], *c["vel"]))
+        if i + 1 == len(keyed) or keyed[i + 1][0][0] != key[0]:
+            db.execute("INSERT INTO collision_segments(first_id, last_id, bucket) VALUES (?, ?, ?)",
+                       (first, c["id"], key[0]))
+            first = c["id"] + 1
 
 
 DB = make_db()
@@ -493,6 +535,105 @@ def test_while_a_writer_commits():
     assert len(counts) >= 5, counts
 
 
+def test_random_log_against_brute_force():
+    """A few thousand random collisions written in random batches (the
+    writer's layout: groups, segments); every query form, filters combined,
+    returns exactly what filtering the rows in Python returns."""
+    rnd = random.Random(20261122)
+    tmp = tempfile.mkdtemp(prefix="cvre-admin-")
+    TEMP_DIRS.append(tmp)
+    path = os.path.join(tmp, "random.db")
+    shutil.copy(DB, path)
+    db = sqlite3.connect(path)
+    db.execute("DELETE FROM collisions")
+    for t in ("collision_groups", "collision_cells", "collision_users", "collision_segments"):
+        db.execute(f"DELETE FROM {t}")
+    rows = []
+    users = [1, 2, 3, 4, None]
+    grid = lambda lo, hi: rnd.randint(int(lo * 8), int(hi * 8)) / 8.0  # exact in binary
+    while len(rows) < 3000:
+        batch = []
+        for _ in range(rnd.randint(1, 400)):
+            obj = rnd.choice([1, 1, 2, 3])
+            far = rnd.random() < 0.01  # beyond the clamped cells now and then
+            batch.append(dict(
+                at=T0 + 0.25 * rnd.randint(0, 4000), user=rnd.choice(users), session=rnd.randint(1, 9),
+                avatar=65536 + rnd.randint(0, 9), object=obj, version=rnd.choice([1, 2]) if obj == 1 else 1,
+                box=rnd.randint(0, 2), inside=rnd.randint(0, 1),
+                world=(grid(-30, 30) * (1e8 if far else 1), grid(-2, 6), grid(-30, 30)),
+                local=(grid(-2, 2), grid(0, 3), grid(-1, 1)), normal=(1.0, 0.0, 0.0),
+                vel=(grid(-2, 2), 0.0, grid(-2, 2))))
+        insert_collisions(db, batch)
+        rows += batch
+    db.commit()
+    db.close()
+
+    def query(*argv):
+        _, out, _ = admin(*argv, "--json", db=path)
+        return json.loads(out)
+
+    checked = 0
+    for _ in range(60):
+        argv, conds = ["collisions"], []
+        if rnd.random() < 0.5:
+            x0, y0, z0 = grid(-35, 30), grid(-3, 5), grid(-35, 30)
+            box = (x0, y0, z0, x0 + grid(0, 25), y0 + grid(0, 4), z0 + grid(0, 25))
+            if rnd.random() < 0.1:
+                box = (-1e12, -10.0, -40.0, 1e12, 10.0, 40.0)
+            argv += ["--region", ",".join(repr(v) for v in box)]
+            conds.append(lambda c, box=box: all(box[k] <= c["world"][k] <= box[k + 3] for k in range(3)))
+        if rnd.random() < 0.4:
+            u = rnd.choice([1, 2, 3, 4])
+            argv += ["--user", USERS[u]]
+            conds.append(lambda c, u=u: c["user"] == u)
+        if rnd.random() < 0.3:
+            o = rnd.choice([1, 2, 3])
+            argv += ["--object", str(o)]
+            conds.append(lambda c, o=o: c["object"] == o)
+        if rnd.random() < 0.5:
+            lo = T0 + 0.25 * rnd.randint(-100, 4000)
+            argv += ["--since", repr(lo)]
+            conds.append(lambda c, lo=lo: c["at"] >= lo)
+        if rnd.random() < 0.5:
+            hi = T0 + 0.25 * rnd.randint(0, 4100)
+            argv += ["--until", repr(hi)]
+            conds.append(lambda c, hi=hi: c["at"] < hi)
+        limit = rnd.choice([0, 0, 1, 5, 100, 1000])
+        argv += ["--limit", str(limit)]
+        want = newest_first([c for c in rows if all(f(c) for f in conds)])
+        if limit:
+            want = want[:limit]
+        got = query(*argv)
+        assert got == [as_json(c) for c in want], (argv, len(got), len(want))
+        checked += len(want)
+    assert checked > 1000, checked
+
+    for lo, hi in ((None, None), (T0 + 100, None), (None, T0 + 500.25), (T0 + 333, T0 + 777)):
+        argv = (["--since", repr(lo)] if lo else []) + (["--until", repr(hi)] if hi else [])
+        sel = [c for c in rows if (lo is None or c["at"] >= lo) and (hi is None or c["at"] < hi)]
+        want = sorted(({"object": o, "collisions": len(m), "users": len({c["user"] for c in m if c["user"]}),
+                        "first": iso(min(c["at"] for c in m)), "last": iso(max(c["at"] for c in m))}
+                       for o in (1, 2, 3) for m in [[c for c in sel if c["object"] == o]] if m),
+                      key=lambda r: (-r["collisions"], r["object"]))
+        got = [{k: r[k] for k in ("object", "collisions", "users", "first", "last")}
+               for r in query("top-objects", "--limit", "0", *argv)]
+        assert got == want, (argv, got, want)
+    for o in (1, 2, 3):
+        mine = [c for c in rows if c["object"] == o]
+        current = {1: 2, 2: 1, 3: 1}[o]
+        got = query("object", str(o))[0]
+        assert (got["collisions"], got["collisions_current"], got["users"], got["first_collision"],
+                got["last_collision"]) == (len(mine), len([c for c in mine if c["version"] == current]),
+                                           len({c["user"] for c in mine if c["user"]}),
+                                           iso(min(c["at"] for c in mine)), iso(max(c["at"] for c in mine))), got
+        got = {r["version"]: r["collisions"] for r in query("versions", str(o))}
+        assert got == {v: len([c for c in mine if c["version"] == v]) for v in got}, got
+    got = query("totals")[0]
+    assert got["collisions"] == len(rows), got
+    assert got["last"] == iso(max(T0 + 7500, max(c["at"] for c in rows))), got
+
+
 run([test_collisions_every_form, test_collisions_filters, test_unknown_object_and_user, test_top_objects,
      test_object_summary, test_versions, test_totals, test_sessions, test_help_and_bad_arguments,
-     test_unusable_databases, test_read_only, test_while_a_writer_commits])
+     test_unusable_databases, test_read_only, test_while_a_writer_commits,
+     test_random_log_against_brute_force])

@@ -191,7 +191,9 @@ def test_collisions_are_sent_and_logged():
     assert r[:4] == (obj["id"], 1, 0, 0) and r[8] == -1.0 and r[10] == 1, r
     # Object-local: the world point minus the object's position (no turn, scale 1).
     assert abs(r[5] - (r[4] - obj["pos"][0])) < 1e-4 and abs(r[5] - ROOM_MIN[0]) < 1e-3, r
-    assert db.execute("SELECT count(*) FROM collisions_rtree").fetchone()[0] == len(rows)
+    assert db.execute("SELECT count(*) FROM collisions c JOIN collision_cells r ON r.g = c.g "
+                      "WHERE c.world_x BETWEEN r.min_x AND r.max_x AND c.world_y BETWEEN r.min_y AND r.max_y "
+                      "AND c.world_z BETWEEN r.min_z AND r.max_z").fetchone()[0] == len(rows)
 
 
 def test_log_complete_after_sigterm_under_load():

@@ -1,5 +1,6 @@
 /* The collision log writer: every field round-trips exactly, stop drains the
- * queue, a full queue drops and counts, the rtree matches the table, readers
+ * queue, a full queue drops and counts, the groups, cells, user entries and
+ * segments describe the table exactly (db/README.md), readers
  * run beside the writer, and database errors are counted, not fatal. Build it
  * once with -fsanitize=thread too: the producer and writer share a ring. */
 #include <stdarg.h>
@@ -90,15 +91,57 @@ static int64_t scalar(sqlite3 *s, const char *sql)
     return v;
 }
 
-/* Every collision has exactly one rtree row, a box of zero size at its
- * world contact point. */
-static void check_rtree(sqlite3 *s, int64_t rows)
+/* The layout the queries rely on (db/README.md, "Collision log storage"):
+ * every collision is in the group of its object, version, bucket and cell,
+ * whose rtree box holds its world point; a known user has an entry for that
+ * group; the segments cover the ids exactly, each within one bucket and
+ * sorted by (object, version, group). */
+static void check_layout(sqlite3 *s, int64_t rows)
 {
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions_rtree"), rows);
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions c JOIN collisions_rtree r ON r.id = c.id "
-                               "WHERE r.min_x = c.world_x AND r.max_x = c.world_x AND r.min_y = c.world_y "
-                               "AND r.max_y = c.world_y AND r.min_z = c.world_z AND r.max_z = c.world_z"),
-                     rows);
+    sqlite3_stmt *q;
+    assert_int_equal(
+        sqlite3_prepare_v2(
+            s,
+            "SELECT c.id, c.at, c.object_id, c.ecm_version, c.g, c.world_x, c.world_y, c.world_z, "
+            "gr.object_id, gr.ecm_version, gr.bucket, gr.cell_x, gr.cell_y, gr.cell_z, "
+            "r.min_x <= c.world_x AND c.world_x <= r.max_x AND r.min_y <= c.world_y AND c.world_y <= r.max_y "
+            "AND r.min_z <= c.world_z AND c.world_z <= r.max_z, "
+            "c.user_id IS NULL OR EXISTS (SELECT 1 FROM collision_users u WHERE u.user_id = c.user_id AND u.g = c.g), "
+            "s.first_id, s.last_id, s.bucket "
+            "FROM collisions c JOIN collision_groups gr ON gr.g = c.g JOIN collision_cells r ON r.g = c.g "
+            "JOIN collision_segments s ON s.first_id = "
+            "(SELECT max(first_id) FROM collision_segments WHERE first_id <= c.id) ORDER BY c.id",
+            -1, &q, NULL),
+        SQLITE_OK);
+    int64_t n = 0, prev_id = 0, prev_key[3] = {0, 0, 0}, prev_seg = -1;
+    while (sqlite3_step(q) == SQLITE_ROW) {
+        int64_t id = sqlite3_column_int64(q, 0);
+        double at = sqlite3_column_double(q, 1);
+        int64_t key[3] = {sqlite3_column_int64(q, 2), sqlite3_column_int64(q, 3), sqlite3_column_int64(q, 4)};
+        assert_int_equal(sqlite3_column_int64(q, 8), key[0]);
+        assert_int_equal(sqlite3_column_int64(q, 9), key[1]);
+        assert_int_equal(sqlite3_column_int64(q, 10), dblog_bucket(at));
+        for (int k = 0; k < 3; k++)
+            assert_int_equal(sqlite3_column_int64(q, 11 + k), dblog_cell(sqlite3_column_double(q, 5 + k)));
+        assert_int_equal(sqlite3_column_int(q, 14), 1);
+        assert_int_equal(sqlite3_column_int(q, 15), 1);
+        int64_t first = sqlite3_column_int64(q, 16);
+        assert_true(id <= sqlite3_column_int64(q, 17));
+        assert_int_equal(sqlite3_column_int64(q, 18), dblog_bucket(at));
+        if (n > 0)
+            assert_int_equal(id, prev_id + 1); /* no gaps */
+        if (first == prev_seg) /* sorted within a segment */
+            assert_true(prev_key[0] < key[0] || (prev_key[0] == key[0] && (prev_key[1] < key[1] ||
+                        (prev_key[1] == key[1] && prev_key[2] <= key[2]))));
+        else
+            assert_int_equal(first, id); /* a segment starts at its first id */
+        prev_seg = first, prev_id = id;
+        memcpy(prev_key, key, sizeof key);
+        n++;
+    }
+    sqlite3_finalize(q);
+    assert_int_equal(n, rows);
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), rows);
 }
 
 static void test_fields_exact(void **state)
@@ -129,10 +172,10 @@ static void test_fields_exact(void **state)
                                         "SELECT at, session_id, user_id, avatar_id, object_id, ecm_version, "
                                         "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, "
                                         "world_z, local_x, local_y, local_z, normal_x, normal_y, normal_z, vel_x, "
-                                        "vel_y, vel_z, typeof(user_id) FROM collisions ORDER BY id",
+                                        "vel_y, vel_z, typeof(user_id) FROM collisions ORDER BY at",
                                         -1, &q, NULL),
                      SQLITE_OK);
-    uint32_t i = 0;
+    uint32_t i = 0; /* ids are in sorted order within a batch; times are unique */
     while (sqlite3_step(q) == SQLITE_ROW) {
         make_row(&r, i);
         assert_true(sqlite3_column_double(q, 0) == r.at);
@@ -154,10 +197,12 @@ static void test_fields_exact(void **state)
     }
     sqlite3_finalize(q);
     assert_int_equal(i, N);
-    check_rtree(s, N);
-    /* A region query through the rtree finds exactly the rows inside. */
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions_rtree WHERE min_x >= -200 AND max_x <= -100 "
-                               "AND min_y >= -1000 AND max_y <= 1000 AND min_z >= -1000 AND max_z <= 1000"),
+    check_layout(s, N);
+    assert_int_equal(scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
+    /* A region query through the rtree's cells, with the exact filter on
+     * the rows, finds exactly the rows inside. */
+    assert_int_equal(scalar(s, "SELECT count(*) FROM collision_cells r JOIN collisions c ON c.g = r.g "
+                               "WHERE r.min_x <= -100 AND r.max_x >= -200 AND c.world_x BETWEEN -200 AND -100"),
                      scalar(s, "SELECT count(*) FROM collisions WHERE world_x BETWEEN -200 AND -100"));
     sqlite3_close(s);
 }
@@ -182,7 +227,7 @@ static dblog_stats flood(const dblog_config *cfg, uint32_t n)
     assert_true(st.high_water <= (cfg->queue_rows ? cfg->queue_rows : DBLOG_QUEUE_ROWS_DEFAULT));
     sqlite3 *s = open_ro();
     assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), st.written);
-    check_rtree(s, (int64_t)st.written);
+    check_layout(s, (int64_t)st.written);
     sqlite3_close(s);
     return st;
 }
@@ -229,8 +274,9 @@ static void test_invalid_rows_refused(void **state)
     assert_int_equal(st.pushed, 3);
 }
 
-/* A transaction that has been inserting for batch_ms commits early; the
- * rest of the batch follows in the next one, and nothing is lost. */
+/* A transaction that took longer than batch_ms makes the next ones
+ * smaller (a sorted batch cannot be cut part way); the rest follows, and
+ * nothing is lost. */
 static void test_hold_cap_cuts_batches(void **state)
 {
     (void)state;
@@ -251,12 +297,13 @@ static void test_hold_cap_cuts_batches(void **state)
     } while (st.written < N);
     assert_int_equal(dblog_stop(l, &st), 0);
     assert_int_equal(st.written, N);
-    /* A 1 ms cap, checked every 256 rows, cuts every transaction short. */
-    assert_true(st.batches >= 10);
+    /* A 1 ms cap: the first transaction takes 16384 rows and longer than
+     * that, so the ones after it shrink. */
+    assert_true(st.batches >= 3);
     sqlite3 *s = open_ro();
     assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), N);
     assert_int_equal(scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
-    check_rtree(s, N);
+    check_layout(s, N);
     sqlite3_close(s);
 }
 
@@ -280,7 +327,7 @@ static void *reader_main(void *arg)
     /* No busy timeout: a reader in WAL mode should never need one. */
     sqlite3_stmt *count, *region;
     if (sqlite3_prepare_v2(s, "SELECT count(*) FROM collisions", -1, &count, NULL) != SQLITE_OK ||
-        sqlite3_prepare_v2(s, "SELECT count(*) FROM collisions_rtree WHERE min_x <= 0 AND max_x >= -100", -1,
+        sqlite3_prepare_v2(s, "SELECT count(*) FROM collision_cells WHERE min_x <= 0 AND max_x >= -100", -1,
                            &region, NULL) != SQLITE_OK) {
         rd->failures++;
         sqlite3_close(s);
@@ -402,7 +449,7 @@ static void test_disk_full(void **state)
 
     sqlite3 *s = open_ro();
     assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), st.written);
-    check_rtree(s, (int64_t)st.written);
+    check_layout(s, (int64_t)st.written);
     sqlite3_stmt *q;
     assert_int_equal(sqlite3_prepare_v2(s, "PRAGMA integrity_check", -1, &q, NULL), SQLITE_OK);
     assert_int_equal(sqlite3_step(q), SQLITE_ROW);
