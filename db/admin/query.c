@@ -502,6 +502,31 @@ static int object_ranges(sqlite3 *s, const query_filter *f, ranges *r, char *err
                        f, 0, 1, r, err, errlen);
 }
 
+/* Runs sql, a query about one object that reads its collisions through the
+ * id ranges of its groups, in one read snapshot; QUERY_NOT_FOUND if there is
+ * no such object. */
+static int per_object(sqlite3 *s, int64_t id, const char *sql, const out_column *cols, int ncols, int vertical,
+                      int format, char *err, size_t errlen)
+{
+    query_filter f = {.has_object = 1, .object = id};
+    int rc = begin_snapshot(s, err, errlen);
+    if (rc != QUERY_OK)
+        return rc;
+    int64_t unused;
+    rc = resolve(s, &f, &unused, err, errlen);
+    ranges r;
+    ranges_init(&r);
+    if (rc == QUERY_OK)
+        rc = object_ranges(s, &f, &r, err, errlen);
+    const char *text = ranges_end(&r);
+    if (rc == QUERY_OK && !text)
+        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+    if (rc == QUERY_OK)
+        rc = run(s, sql, &f, 0, text, cols, ncols, vertical, format, err, errlen);
+    free(r.text);
+    return end_snapshot(s, rc);
+}
+
 int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
 {
     static const out_column cols[] = {
@@ -530,23 +555,7 @@ int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
         "AS current, "
         "count(DISTINCT c.user_id) AS users, min(c.at) AS first, max(c.at) AS last " FROM_RANGES
         "WHERE c.object_id = :object) k WHERE o.id = :object";
-    query_filter f = {.has_object = 1, .object = id};
-    int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
-        return rc;
-    int64_t unused;
-    rc = resolve(s, &f, &unused, err, errlen);
-    ranges r;
-    ranges_init(&r);
-    if (rc == QUERY_OK)
-        rc = object_ranges(s, &f, &r, err, errlen);
-    const char *text = ranges_end(&r);
-    if (rc == QUERY_OK && !text)
-        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
-    if (rc == QUERY_OK)
-        rc = run(s, sql, &f, 0, text, cols, LEN(cols), 1, format, err, errlen);
-    free(r.text);
-    return end_snapshot(s, rc);
+    return per_object(s, id, sql, cols, LEN(cols), 1, format, err, errlen);
 }
 
 int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
@@ -561,23 +570,7 @@ int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
         "LEFT JOIN (SELECT c.ecm_version AS version, count(*) AS n " FROM_RANGES
         "WHERE c.object_id = :object GROUP BY c.ecm_version) k ON k.version = v.version "
         "WHERE v.object_id = :object ORDER BY v.version";
-    query_filter f = {.has_object = 1, .object = id};
-    int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
-        return rc;
-    int64_t unused;
-    rc = resolve(s, &f, &unused, err, errlen);
-    ranges r;
-    ranges_init(&r);
-    if (rc == QUERY_OK)
-        rc = object_ranges(s, &f, &r, err, errlen);
-    const char *text = ranges_end(&r);
-    if (rc == QUERY_OK && !text)
-        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
-    if (rc == QUERY_OK)
-        rc = run(s, sql, &f, 0, text, cols, LEN(cols), 0, format, err, errlen);
-    free(r.text);
-    return end_snapshot(s, rc);
+    return per_object(s, id, sql, cols, LEN(cols), 0, format, err, errlen);
 }
 
 int query_totals(sqlite3 *s, int format, char *err, size_t errlen)
