@@ -17,7 +17,7 @@ typedef struct object {
 } object;
 
 struct scene {
-    object **objects; /* dense, unordered */
+    object **objects; /* sorted by id: collisions look objects up every tick */
     uint32_t n, cap;
     bp *bp;
     /* Every world box by broadphase handle; free handles are chained
@@ -131,15 +131,21 @@ void scene_box_to_world(const proto_transform *at, const scene_box *b, scene_box
     }
 }
 
+/* Binary search: the object with this id (and its index), or NULL and in
+ * *index the position where it would go. */
 static object *find(const scene *s, uint32_t id, uint32_t *index)
 {
-    for (uint32_t i = 0; i < s->n; i++)
-        if (s->objects[i]->pub.id == id) {
-            if (index)
-                *index = i;
-            return s->objects[i];
-        }
-    return NULL;
+    uint32_t lo = 0, hi = s->n;
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (s->objects[mid]->pub.id < id)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (index)
+        *index = lo;
+    return lo < s->n && s->objects[lo]->pub.id == id ? s->objects[lo] : NULL;
 }
 
 /* Sets o's transform and its world boxes, in the box table and in the
@@ -229,7 +235,11 @@ int scene_add(scene *s, const scene_object_def *d)
         object_free(o);
         return rc;
     }
-    s->objects[s->n++] = o;
+    uint32_t at;
+    find(s, o->pub.id, &at);
+    memmove(s->objects + at + 1, s->objects + at, (s->n - at) * sizeof *s->objects);
+    s->objects[at] = o;
+    s->n++;
     return 0;
 }
 
@@ -241,7 +251,7 @@ int scene_remove(scene *s, uint32_t id)
         return -ENOENT;
     unfile_boxes(s, o);
     object_free(o);
-    s->objects[i] = s->objects[--s->n];
+    memmove(s->objects + i, s->objects + i + 1, (--s->n - i) * sizeof *s->objects);
     return 0;
 }
 

@@ -71,7 +71,7 @@ int scene_place(scene *s, uint32_t id, const proto_transform *at);
 /* The object, or NULL. Valid until the next change to the scene. */
 const scene_object *scene_get(const scene *s, uint32_t id);
 uint32_t scene_count(const scene *s);
-/* Object i in 0..scene_count()-1, in no particular order. */
+/* Object i in 0..scene_count()-1, in id order. */
 const scene_object *scene_at(const scene *s, uint32_t i);
 
 /* Writes to out (room for out_max) the handles of the world boxes that overlap
