@@ -1,0 +1,412 @@
+/*
+ * cvre-cluster: the offline clustering job. For each object in the world it
+ * reads the collisions against the object's current ECM version, in
+ * object-local coordinates, clusters them with DBSCAN (dbscan.h) and writes
+ * a run record and one row per cluster, each naming the ECM box the cluster
+ * presses on (the problem box). Safe beside a running server: it reads in
+ * one snapshot (WAL) and writes its results in one short transaction.
+ */
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "alloc.h"
+#include "db.h"
+#include "dbscan.h"
+
+enum { EXIT_OK = 0, EXIT_USAGE = 2, EXIT_DB = 3, EXIT_INTERNAL = 4 };
+
+/* Objects one run may name with --object. */
+#define MAX_OBJECT_FLAGS 256
+
+static const char usage[] =
+    "usage: cvre-cluster [options]\n"
+    "\n"
+    "Finds where users keep colliding with each object (DBSCAN over the collision\n"
+    "log of the object's current collision map, in object-local coordinates) and\n"
+    "records the clusters and the boxes they press on.\n"
+    "\n"
+    "  --db FILE          the database (default cvre.db)\n"
+    "  --eps M            neighbourhood radius in metres, > 0 (default 0.5)\n"
+    "  --min-points N     collisions within eps to make a core point, >= 1 (default 10)\n"
+    "  --min-users N      distinct users a cluster needs, >= 1 (default 3)\n"
+    "  --object ID        only this object (repeatable)\n"
+    "  --since T, --until T  only collisions in this window (Unix seconds or\n"
+    "                     YYYY-MM-DDTHH:MM:SS, UTC)\n"
+    "  --json             print the result as one JSON object\n"
+    "  --help, --version\n"
+    "\n"
+    "Exit codes: 0 done (clusters or not: see the summary), 2 bad arguments,\n"
+    "3 database missing, of another schema version or unusable, 4 internal error.\n";
+
+typedef struct object_row {
+    int64_t id;
+    uint32_t version;
+    float (*boxes)[6];
+    uint32_t nboxes;
+} object_row;
+
+typedef struct found_cluster {
+    size_t object; /* index in the objects read */
+    uint32_t cluster_id, box;
+    dbscan_cluster c;
+} found_cluster;
+
+typedef struct points {
+    float *xyz;
+    uint32_t *users;
+    size_t n, cap;
+} points;
+
+static int fail_usage(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+static int fail_usage(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(stderr, "cvre-cluster: ");
+    vfprintf(stderr, fmt, ap);
+    fprintf(stderr, "; try --help\n");
+    va_end(ap);
+    return EXIT_USAGE;
+}
+
+/* Unix seconds from "1700000000.5" or "2026-11-22T10:00:00" (UTC). */
+static int parse_time(const char *s, double *out)
+{
+    char *end;
+    double v = strtod(s, &end);
+    if (end != s && *end == 0 && isfinite(v)) {
+        *out = v;
+        return 0;
+    }
+    struct tm tm = {0};
+    char tail;
+    if (sscanf(s, "%d-%d-%dT%d:%d:%d%c", &tm.tm_year, &tm.tm_mon, &tm.tm_mday, &tm.tm_hour, &tm.tm_min,
+               &tm.tm_sec, &tail) != 6)
+        return -1;
+    tm.tm_year -= 1900;
+    tm.tm_mon -= 1;
+    *out = (double)timegm(&tm);
+    return 0;
+}
+
+/* The ECM box of o that contains p, or else the nearest one. */
+static uint32_t problem_box(const object_row *o, const float p[3])
+{
+    uint32_t best = 0;
+    double best_d = INFINITY;
+    for (uint32_t i = 0; i < o->nboxes; i++) {
+        double d = 0;
+        for (int k = 0; k < 3; k++) {
+            double lo = o->boxes[i][k], hi = o->boxes[i][3 + k];
+            double e = p[k] < lo ? lo - p[k] : p[k] > hi ? p[k] - hi : 0;
+            d += e * e;
+        }
+        if (d < best_d) {
+            best_d = d;
+            best = i;
+        }
+    }
+    return best;
+}
+
+static void push_point(points *pt, const float xyz[3], uint32_t user)
+{
+    if (pt->n == pt->cap) {
+        pt->cap = pt->cap ? pt->cap * 2 : 1024;
+        pt->xyz = xrealloc(pt->xyz, pt->cap * 3 * sizeof *pt->xyz);
+        pt->users = xrealloc(pt->users, pt->cap * sizeof *pt->users);
+    }
+    memcpy(pt->xyz + 3 * pt->n, xyz, 3 * sizeof *xyz);
+    pt->users[pt->n++] = user;
+}
+
+int main(int argc, char **argv)
+{
+    enum { O_DB = 256, O_EPS, O_MINP, O_MINU, O_OBJ, O_SINCE, O_UNTIL, O_JSON, O_HELP, O_VERSION };
+    static const struct option opts[] = {
+        {"db", required_argument, 0, O_DB},         {"eps", required_argument, 0, O_EPS},
+        {"min-points", required_argument, 0, O_MINP}, {"min-users", required_argument, 0, O_MINU},
+        {"object", required_argument, 0, O_OBJ},    {"since", required_argument, 0, O_SINCE},
+        {"until", required_argument, 0, O_UNTIL},   {"json", no_argument, 0, O_JSON},
+        {"help", no_argument, 0, O_HELP},           {"version", no_argument, 0, O_VERSION},
+        {0, 0, 0, 0}};
+    const char *path = "cvre.db";
+    dbscan_params prm = {.eps = 0.5, .min_points = 10, .min_users = 3, .threads = 0};
+    double since = -INFINITY, until = INFINITY;
+    int json = 0, has_since = 0, has_until = 0, o;
+    int64_t only[MAX_OBJECT_FLAGS];
+    int nonly = 0;
+    char *end;
+    while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
+        switch (o) {
+        case O_DB: path = optarg; break;
+        case O_EPS:
+            prm.eps = strtod(optarg, &end);
+            if (end == optarg || *end || !(prm.eps > 0) || !(prm.eps < 1e6))
+                return fail_usage("--eps wants a distance in metres above 0, not \"%s\"", optarg);
+            break;
+        case O_MINP:
+        case O_MINU: {
+            long v = strtol(optarg, &end, 10);
+            if (end == optarg || *end || v < 1 || v > 1000000)
+                return fail_usage("--%s wants a whole number from 1, not \"%s\"",
+                                  o == O_MINP ? "min-points" : "min-users", optarg);
+            *(o == O_MINP ? &prm.min_points : &prm.min_users) = (uint32_t)v;
+            break;
+        }
+        case O_OBJ: {
+            long long v = strtoll(optarg, &end, 10);
+            if (end == optarg || *end || v < 1)
+                return fail_usage("--object wants an object id, not \"%s\"", optarg);
+            if (nonly == MAX_OBJECT_FLAGS)
+                return fail_usage("too many --object flags (%s)", "256 at most");
+            only[nonly++] = v;
+            break;
+        }
+        case O_SINCE:
+        case O_UNTIL:
+            if (parse_time(optarg, o == O_SINCE ? &since : &until) < 0)
+                return fail_usage("a time is Unix seconds or YYYY-MM-DDTHH:MM:SS, not \"%s\"", optarg);
+            *(o == O_SINCE ? &has_since : &has_until) = 1;
+            break;
+        case O_JSON: json = 1; break;
+        case O_HELP: fputs(usage, stdout); return EXIT_OK;
+        case O_VERSION: printf("cvre-cluster %s\n", CVRE_VERSION); return EXIT_OK;
+        default: fputs("cvre-cluster: try --help\n", stderr); return EXIT_USAGE;
+        }
+    }
+    if (optind < argc)
+        return fail_usage("unexpected argument \"%s\"", argv[optind]);
+    if (access(path, F_OK) != 0) {
+        fprintf(stderr, "cvre-cluster: %s: %s\n", path, strerror(errno));
+        return EXIT_DB;
+    }
+    char err[512];
+    /* The read-only open checks the schema version exactly; the job never
+     * migrates a database (the server does). */
+    db *check = db_open(path, DB_READONLY, err, sizeof err);
+    if (!check) {
+        fprintf(stderr, "cvre-cluster: %s\n", err);
+        return EXIT_DB;
+    }
+    db_close(check);
+    db *d = db_open(path, DB_READWRITE, err, sizeof err);
+    if (!d) {
+        fprintf(stderr, "cvre-cluster: %s\n", err);
+        return EXIT_DB;
+    }
+    sqlite3 *sql = db_sqlite(d);
+    double started = db_now();
+    int rc = EXIT_INTERNAL;
+    object_row *objs = NULL;
+    size_t nobjs = 0;
+    sqlite3_stmt *st = NULL;
+    points pt = {0};
+    int32_t *labels = NULL;
+    uint64_t total_points = 0, total_clusters = 0, problem_boxes = 0;
+    int64_t run_id = 0;
+    found_cluster *found = NULL;
+    size_t nfound = 0;
+
+    /* One read snapshot for everything read. */
+    if (sqlite3_exec(sql, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
+        goto db_fail;
+    if (sqlite3_prepare_v2(sql,
+                           "SELECT o.id, o.ecm_version, b.min_x, b.min_y, b.min_z, b.max_x, b.max_y, b.max_z "
+                           "FROM objects o JOIN ecm_boxes b ON b.object_id = o.id AND b.version = o.ecm_version "
+                           "WHERE o.removed_at IS NULL ORDER BY o.id, b.box_index",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto db_fail;
+    while ((o = sqlite3_step(st)) == SQLITE_ROW) {
+        int64_t id = sqlite3_column_int64(st, 0);
+        int wanted = nonly == 0;
+        for (int i = 0; i < nonly; i++)
+            wanted |= only[i] == id;
+        if (!wanted)
+            continue;
+        if (!nobjs || objs[nobjs - 1].id != id) {
+            objs = xrealloc(objs, (nobjs + 1) * sizeof *objs);
+            objs[nobjs++] = (object_row){.id = id, .version = (uint32_t)sqlite3_column_int64(st, 1)};
+        }
+        object_row *r = &objs[nobjs - 1];
+        r->boxes = xrealloc(r->boxes, (r->nboxes + 1) * sizeof *r->boxes);
+        for (int k = 0; k < 6; k++)
+            r->boxes[r->nboxes][k] = (float)sqlite3_column_double(st, 2 + k);
+        r->nboxes++;
+    }
+    if (o != SQLITE_DONE)
+        goto db_fail;
+    sqlite3_finalize(st);
+    st = NULL;
+    for (int i = 0; i < nonly; i++) {
+        int present = 0;
+        for (size_t k = 0; k < nobjs; k++)
+            present |= objs[k].id == only[i];
+        if (!present)
+            fprintf(stderr, "cvre-cluster: no object %lld in the world; skipped\n", (long long)only[i]);
+    }
+
+    /* The collision rows of each object's current version, read in id order.
+     * Results are written after the read snapshot ends. */
+    if (sqlite3_prepare_v2(sql,
+                           "SELECT local_x, local_y, local_z, coalesce(user_id, -session_id) FROM collisions "
+                           "WHERE object_id = ?1 AND ecm_version = ?2 AND at >= ?3 AND at <= ?4 ORDER BY id",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto db_fail;
+    int tty = isatty(STDERR_FILENO) && !json;
+    for (size_t i = 0; i < nobjs; i++) {
+        pt.n = 0;
+        sqlite3_bind_int64(st, 1, objs[i].id);
+        sqlite3_bind_int64(st, 2, objs[i].version);
+        sqlite3_bind_double(st, 3, has_since ? since : -1e300);
+        sqlite3_bind_double(st, 4, has_until ? until : 1e300);
+        while ((o = sqlite3_step(st)) == SQLITE_ROW) {
+            float xyz[3] = {(float)sqlite3_column_double(st, 0), (float)sqlite3_column_double(st, 1),
+                            (float)sqlite3_column_double(st, 2)};
+            push_point(&pt, xyz, (uint32_t)sqlite3_column_int64(st, 3));
+        }
+        sqlite3_reset(st);
+        if (o != SQLITE_DONE)
+            goto db_fail;
+        total_points += pt.n;
+        labels = xrealloc(labels, (pt.n ? pt.n : 1) * sizeof *labels);
+        dbscan_result *res = NULL;
+        int drc = dbscan_run(pt.xyz, pt.users, pt.n, &prm, labels, &res);
+        if (drc < 0) {
+            fprintf(stderr, "cvre-cluster: object %lld: clustering failed: %s\n", (long long)objs[i].id,
+                    strerror(-drc));
+            goto done;
+        }
+        for (size_t k = 0; k < dbscan_result_count(res); k++) {
+            found = xrealloc(found, (nfound + 1) * sizeof *found);
+            found[nfound] = (found_cluster){.object = i, .cluster_id = (uint32_t)k,
+                                            .c = *dbscan_result_cluster(res, k)};
+            found[nfound].box = problem_box(&objs[i], found[nfound].c.centroid);
+            nfound++;
+        }
+        dbscan_result_free(res);
+        if (tty)
+            fprintf(stderr, "\rcvre-cluster: %zu/%zu objects, %llu collisions, %zu clusters", i + 1, nobjs,
+                    (unsigned long long)total_points, nfound);
+    }
+    if (tty)
+        fputc('\n', stderr);
+    sqlite3_finalize(st);
+    st = NULL;
+    if (sqlite3_exec(sql, "COMMIT", NULL, NULL, NULL) != SQLITE_OK)
+        goto db_fail;
+    total_clusters = nfound;
+    for (size_t k = 0; k < nfound; k++) {
+        int dup = 0;
+        for (size_t j = 0; j < k; j++)
+            dup |= found[j].object == found[k].object && found[j].box == found[k].box;
+        problem_boxes += !dup;
+    }
+
+    /* Results in one short write transaction. */
+    if (db_begin(d) < 0 ||
+        sqlite3_prepare_v2(sql,
+                           "INSERT INTO cluster_runs(started_at, finished_at, eps, min_points, min_users, since, "
+                           "until, objects, points, clusters, problem_boxes) "
+                           "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto db_fail;
+    sqlite3_bind_double(st, 1, started);
+    sqlite3_bind_double(st, 2, db_now());
+    sqlite3_bind_double(st, 3, prm.eps);
+    sqlite3_bind_int64(st, 4, prm.min_points);
+    sqlite3_bind_int64(st, 5, prm.min_users);
+    if (has_since)
+        sqlite3_bind_double(st, 6, since);
+    if (has_until)
+        sqlite3_bind_double(st, 7, until);
+    sqlite3_bind_int64(st, 8, (sqlite3_int64)nobjs);
+    sqlite3_bind_int64(st, 9, (sqlite3_int64)total_points);
+    sqlite3_bind_int64(st, 10, (sqlite3_int64)total_clusters);
+    sqlite3_bind_int64(st, 11, (sqlite3_int64)problem_boxes);
+    if (sqlite3_step(st) != SQLITE_DONE)
+        goto db_fail;
+    run_id = sqlite3_last_insert_rowid(sql);
+    sqlite3_finalize(st);
+    st = NULL;
+    if (sqlite3_prepare_v2(sql,
+                           "INSERT INTO clusters(run_id, object_id, ecm_version, cluster_id, points, users, "
+                           "centroid_x, centroid_y, centroid_z, min_x, min_y, min_z, max_x, max_y, max_z, "
+                           "box_index) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, "
+                           "?16)",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto db_fail;
+    for (size_t k = 0; k < nfound; k++) {
+        const found_cluster *f = &found[k];
+        sqlite3_bind_int64(st, 1, run_id);
+        sqlite3_bind_int64(st, 2, objs[f->object].id);
+        sqlite3_bind_int64(st, 3, objs[f->object].version);
+        sqlite3_bind_int64(st, 4, f->cluster_id);
+        sqlite3_bind_int64(st, 5, f->c.points);
+        sqlite3_bind_int64(st, 6, f->c.users);
+        for (int j = 0; j < 3; j++) {
+            sqlite3_bind_double(st, 7 + j, (double)f->c.centroid[j]);
+            sqlite3_bind_double(st, 10 + j, (double)f->c.min[j]);
+            sqlite3_bind_double(st, 13 + j, (double)f->c.max[j]);
+        }
+        sqlite3_bind_int64(st, 16, f->box);
+        if (sqlite3_step(st) != SQLITE_DONE)
+            goto db_fail;
+        sqlite3_reset(st);
+    }
+    sqlite3_finalize(st);
+    st = NULL;
+    if (db_commit(d) < 0)
+        goto db_fail;
+
+    if (json) {
+        printf("{\"run\":%lld,\"objects\":%zu,\"points\":%llu,\"clusters\":[", (long long)run_id, nobjs,
+               (unsigned long long)total_points);
+        for (size_t k = 0; k < nfound; k++) {
+            const found_cluster *f = &found[k];
+            printf("%s{\"object\":%lld,\"ecm_version\":%u,\"cluster\":%u,\"points\":%u,\"users\":%u,"
+                   "\"centroid\":[%.4f,%.4f,%.4f],\"min\":[%.4f,%.4f,%.4f],\"max\":[%.4f,%.4f,%.4f],\"box\":%u}",
+                   k ? "," : "", (long long)objs[f->object].id, objs[f->object].version, f->cluster_id,
+                   f->c.points, f->c.users, (double)f->c.centroid[0], (double)f->c.centroid[1],
+                   (double)f->c.centroid[2], (double)f->c.min[0], (double)f->c.min[1], (double)f->c.min[2],
+                   (double)f->c.max[0], (double)f->c.max[1], (double)f->c.max[2], f->box);
+        }
+        printf("],\"problem_boxes\":%llu}\n", (unsigned long long)problem_boxes);
+    } else {
+        printf("run %lld: %zu objects, %llu collisions, %llu clusters, %llu problem boxes "
+               "(eps %g m, min points %u, min users %u)\n",
+               (long long)run_id, nobjs, (unsigned long long)total_points, (unsigned long long)total_clusters,
+               (unsigned long long)problem_boxes, prm.eps, prm.min_points, prm.min_users);
+        for (size_t k = 0; k < nfound; k++) {
+            const found_cluster *f = &found[k];
+            printf("  object %lld v%u cluster %u: %u collisions by %u users around (%.2f, %.2f, %.2f) -> box %u\n",
+                   (long long)objs[f->object].id, objs[f->object].version, f->cluster_id, f->c.points,
+                   f->c.users, (double)f->c.centroid[0], (double)f->c.centroid[1], (double)f->c.centroid[2],
+                   f->box);
+        }
+    }
+    rc = EXIT_OK;
+    goto done;
+db_fail:
+    fprintf(stderr, "cvre-cluster: %s: %s\n", path, sqlite3_errmsg(sql));
+    rc = EXIT_DB;
+done:
+    sqlite3_finalize(st);
+    db_rollback(d);
+    db_close(d);
+    for (size_t i = 0; i < nobjs; i++)
+        free(objs[i].boxes);
+    free(objs);
+    free(pt.xyz);
+    free(pt.users);
+    free(labels);
+    free(found);
+    return rc;
+}
