@@ -37,6 +37,7 @@ static const char usage[] =
     "  object ID                 one object: owner, placement, geometry, ECM, collisions\n"
     "  versions ID               the ECM versions of an object, with box counts and reasons\n"
     "  sessions                  who was connected when (--user, --since, --until, --limit)\n"
+    "  clusters                  the latest clustering run's clusters (--object, --limit)\n"
     "  totals                    users, sessions, objects, collisions and the time span\n"
     "  help [COMMAND]            this text, or a command's (same as COMMAND --help)\n"
     "\n"
@@ -132,6 +133,13 @@ static const struct command commands[] = {
      "Columns: session, user, peer (address:port), avatar*, started, joined*,\n"
      "ended, reason, duration (h:mm:ss in a table, seconds otherwise).\n"
      "* only with --csv and --json.\n"},
+    {"clusters", OPT_OBJECT | OPT_LIMIT, 0,
+     "usage: cvre-admin clusters [--object ID] [--limit N]\n"
+     "\n"
+     "The clusters the latest cvre-cluster run found, largest first: run,\n"
+     "finished, object, version (ECM), cluster, points, users, box (the ECM box\n"
+     "it presses on: the problem box) and the centroid in object-local\n"
+     "coordinates. Nothing if the job never ran.\n"},
     {"totals", 0, 0,
      "usage: cvre-admin totals\n"
      "\n"
@@ -372,6 +380,8 @@ static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, in
         rc = query_versions(s, id, a->format, err, sizeof err);
     else if (strcmp(cmd->name, "sessions") == 0)
         rc = query_sessions(s, &a->f, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "clusters") == 0)
+        rc = query_clusters(s, &a->f, a->format, err, sizeof err);
     else
         rc = query_totals(s, a->format, err, sizeof err);
     if (rc == QUERY_OK)

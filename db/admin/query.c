@@ -600,6 +600,25 @@ int query_totals(sqlite3 *s, int format, char *err, size_t errlen)
     return end_snapshot(s, rc);
 }
 
+int query_clusters(sqlite3 *s, const query_filter *f, int format, char *err, size_t errlen)
+{
+    static const out_column cols[] = {
+        {"run", OUT_INT, 0},        {"finished", OUT_TIME, 0}, {"object", OUT_INT, 0},
+        {"version", OUT_INT, 0},    {"cluster", OUT_INT, 0},   {"points", OUT_INT, 0},
+        {"users", OUT_INT, 0},      {"box", OUT_INT, 0},       {"centroid_x", OUT_REAL, 0},
+        {"centroid_y", OUT_REAL, 0}, {"centroid_z", OUT_REAL, 0},
+    };
+    static const char sql[] =
+        "SELECT c.run_id, r.finished_at, c.object_id, c.ecm_version, c.cluster_id, c.points, c.users, c.box_index, "
+        "c.centroid_x, c.centroid_y, c.centroid_z FROM clusters c JOIN cluster_runs r ON r.id = c.run_id "
+        "WHERE c.run_id = (SELECT max(id) FROM cluster_runs) AND (:object IS NULL OR c.object_id = :object) "
+        "ORDER BY c.points DESC, c.object_id, c.cluster_id LIMIT :limit";
+    int rc = begin_snapshot(s, err, errlen);
+    if (rc == QUERY_OK)
+        rc = run(s, sql, f, 0, NULL, cols, LEN(cols), 0, format, err, errlen);
+    return end_snapshot(s, rc);
+}
+
 int query_sessions(sqlite3 *s, const query_filter *f, int format, char *err, size_t errlen)
 {
     static const out_column cols[] = {

@@ -41,6 +41,8 @@ int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen);
 int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen);
 /* Counts of everything, and the time span the store covers. */
 int query_totals(sqlite3 *s, int format, char *err, size_t errlen);
+/* The clusters of the latest cvre-cluster run (f: object, limit). */
+int query_clusters(sqlite3 *s, const query_filter *f, int format, char *err, size_t errlen);
 /* Sessions connected at some moment in [since, until), newest first. */
 int query_sessions(sqlite3 *s, const query_filter *f, int format, char *err, size_t errlen);
 

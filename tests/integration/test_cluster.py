@@ -63,6 +63,11 @@ def test_cluster_of_many_users_not_of_few():
     assert runs[0] == 4 and runs[1] == 3, runs
     row = db.execute("SELECT object_id, box_index, users FROM clusters WHERE run_id = ?", (a["run"],)).fetchone()
     assert row == (c["object"], 0, 4), row
+    shown = subprocess.run([os.path.join(A.bin, "cvre-admin"), "--db", srv.db, "--json", "clusters"],
+                           capture_output=True, text=True, timeout=30)
+    assert shown.returncode == 0, shown.stderr
+    rows = json.loads(shown.stdout)
+    assert len(rows) == 1 and rows[0]["run"] == b["run"] and rows[0]["box"] == 0 and rows[0]["users"] == 4, rows
 
 
 def test_bad_parameters_and_databases():
