@@ -180,11 +180,42 @@ def blobs(rng, centers, per, sigma, noise, cube):
     return np.concatenate(pts).astype(np.float32)
 
 
+def real_log(build):
+    """Collision points from a real log: the demo world (real models), a
+    100-bot swarm walking around the spawn point for 4 s, the server stopped
+    with SIGTERM. Returns {object: (object-local xyz, users)} for the objects
+    hit at least 50 times, in the current ECM version."""
+    import signal
+    import sqlite3
+    here = os.path.dirname(os.path.abspath(__file__))
+    db = os.path.join(tempfile.mkdtemp(prefix="cvre-reallog-"), "log.db")
+    srv = subprocess.Popen([os.path.join(build, "cvre-server"), "--port", "0", "--db", db, "--world",
+                            os.path.join(here, "..", "..", "server", "worlds", "demo.world"), "--spawn-radius",
+                            "25", "--log-level", "warn"], stdout=subprocess.PIPE, text=True)
+    port = srv.stdout.readline().rsplit(":", 1)[1].strip()
+    subprocess.run([os.path.join(build, "cvre-client"), "--port", port, "--bots", "100", "--rate", "20",
+                    "--duration", "4"], stdout=subprocess.DEVNULL, timeout=60)
+    srv.send_signal(signal.SIGTERM)
+    srv.wait(30)
+    con = sqlite3.connect(db)
+    rows = con.execute("SELECT c.object_id, c.local_x, c.local_y, c.local_z, coalesce(c.user_id, 1000000 + c.session_id) "
+                       "FROM collisions c JOIN objects o ON o.id = c.object_id AND o.ecm_version = c.ecm_version "
+                       "ORDER BY c.id").fetchall()
+    con.close()
+    by = {}
+    for oid, x, y, z, u in rows:
+        by.setdefault(oid, ([], []))
+        by[oid][0].append((x, y, z))
+        by[oid][1].append(u)
+    return {oid: (np.array(p, dtype=np.float32), np.array(u)) for oid, (p, u) in by.items() if len(p) >= 50}
+
+
 def main():
     global CLI
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", required=True, help="build directory holding dbscan_cli")
-    CLI = find_cli(ap.parse_args().bin)
+    build = ap.parse_args().bin
+    CLI = find_cli(build)
     rng = np.random.default_rng(20240611)
 
     # Blobs plus uniform noise, collision-like scale, single and several threads.
@@ -245,6 +276,14 @@ def main():
     for mu in (2, 3, 4, 10):
         check_points(f"min_users={mu}", x, users, 0.5, 8, min_users=mu)
     check_points("min_users=4, every point its own user", x, np.arange(len(x)), 0.5, 8, min_users=4)
+
+    # Points from a real collision log, one object at a time.
+    real = real_log(build)
+    if not real:
+        RESULTS.append((False, "FAIL real collision log: no object was hit 50 times"))
+    for oid, (x, users) in sorted(real.items()):
+        check_points(f"real collision log, object {oid} ({len(x)} points)", x, users, 0.3, 5)
+        check_points(f"real collision log, object {oid}, min_users=3", x, users, 0.3, 5, min_users=3)
 
     for ok, line in RESULTS:
         print(line)
