@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "alloc.h"
+#include "dbInt.h"
 #include "migrations.h"
 
 /* A writer waits this long for a lock held by another connection (the admin
@@ -79,6 +80,15 @@ static int fail(db *d, const char *fmt, ...)
 }
 
 const char *db_error(const db *d) { return d->err; }
+
+int db__fail(db *d, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(d->err, sizeof d->err, fmt, ap);
+    va_end(ap);
+    return -1;
+}
 
 sqlite3 *db_sqlite(db *d) { return d->sql; }
 

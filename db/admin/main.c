@@ -1,6 +1,7 @@
 /* cvre-admin: read-only questions to a cvre database, safe while the server
- * runs. Flags, help texts and exit codes live here; the SQL is in query.c,
- * the output forms in out.c. */
+ * runs, and one change: rolling a collision map back, which reopens the
+ * database read-write for that command only. Flags, help texts and exit
+ * codes live here; the SQL is in query.c, the output forms in out.c. */
 #include <errno.h>
 #include <getopt.h>
 #include <math.h>
@@ -15,7 +16,7 @@
 #include "out.h"
 #include "query.h"
 
-enum { EXIT_NOT_FOUND = 1, EXIT_USAGE = 2, EXIT_DB = 3 };
+enum { EXIT_NOT_FOUND = 1, EXIT_USAGE = 2, EXIT_DB = 3, EXIT_REFUSED = 4 };
 
 /* --limit can ask for at most this many rows: a table holds them all in
  * memory to size its columns (0 means no limit and is meant for --csv and
@@ -28,14 +29,17 @@ static const char usage[] =
     "\n"
     "Answers questions about a cvre database: the collision log, objects and\n"
     "their collision maps (ECM), users and sessions. It opens the file read-only\n"
-    "and can run while the server writes to it.\n"
+    "and can run while the server writes to it; only rollback writes.\n"
     "\n"
     "Commands:\n"
     "  collisions [filters]      collisions, newest first (--object, --user, --since,\n"
     "                            --until, --region, --limit)\n"
     "  top-objects               objects by number of collisions (--since, --until, --limit)\n"
     "  object ID                 one object: owner, placement, geometry, ECM, collisions\n"
-    "  versions ID               the ECM versions of an object, with box counts and reasons\n"
+    "  versions ID               the ECM versions of an object and their history\n"
+    "  diff ID A B               the boxes that differ between versions A and B of an object\n"
+    "  rollback ID K             make version K's boxes the object's collision map again\n"
+    "                            (as a new version; the only command that writes)\n"
     "  sessions                  who was connected when (--user, --since, --until, --limit)\n"
     "  clusters                  the latest clustering run's clusters (--object, --limit)\n"
     "  totals                    users, sessions, objects, collisions and the time span\n"
@@ -60,17 +64,23 @@ static const char usage[] =
     "\n"
     "Exit status:\n"
     "  0  success (also when no rows match)\n"
-    "  1  the object or user asked about does not exist\n"
+    "  1  the object, version or user asked about does not exist\n"
     "  2  bad arguments\n"
     "  3  the database cannot be used: missing or unreadable file, not a cvre\n"
-    "     database, a schema version this build does not know, or a failed query\n";
+    "     database, a schema version this build does not know, or a failed query\n"
+    "     or write\n"
+    "  4  rollback refused, nothing written: the object was removed, the version\n"
+    "     is already in force, or another writer changed the object meanwhile\n";
 
 struct command {
     const char *name;
     unsigned opts; /* OPT_* accepted besides the common ones */
-    int wants_id;  /* takes one positional object id */
+    int npos;      /* positional arguments: an object id, then versions */
     const char *help;
 };
+
+/* Most positional arguments of a command (diff: ID A B). */
+#define ADMIN_POS_MAX 3
 
 enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32 };
 
@@ -117,9 +127,48 @@ static const struct command commands[] = {
     {"versions", 0, 1,
      "usage: cvre-admin versions ID\n"
      "\n"
-     "The ECM versions of an object, oldest first: version, created, reason\n"
-     "(import, refine, rollback), boxes, collisions logged against it, and\n"
-     "whether it is the one in force. Exit 1 if there is no such object.\n"},
+     "The ECM versions of an object, oldest first, and why each was made.\n"
+     "\n"
+     "Columns: version, created, reason (import, refine, rollback), parent (the\n"
+     "version in force it replaced), run (the cvre-cluster run that caused it),\n"
+     "clusters (that run's clusters it answers, e.g. 3,4), restores (for a\n"
+     "rollback: the version whose boxes it copies), boxes, collisions logged\n"
+     "against it, current (yes: the version in force), detail (free text).\n"
+     "Empty history fields (\"-\") for imports. Exit 1 if there is no such object.\n"},
+    {"diff", 0, 3,
+     "usage: cvre-admin diff ID A B\n"
+     "\n"
+     "What changed from version A to version B of object ID's collision map: a\n"
+     "summary, then every box only in A, only in B, or in both. A box is in both\n"
+     "when its six coordinates are exactly equal (a box listed twice in A must be\n"
+     "listed twice in B).\n"
+     "\n"
+     "Summary: object, a, b, boxes_a, boxes_b, only_a, only_b, both, volume_a,\n"
+     "volume_b (sums of box volumes in m^3 of object coordinates; overlaps count\n"
+     "twice). Boxes: change (only_a, only_b, both), box_a, box_b (its index in\n"
+     "each version), min_x/y/z, max_x/y/z (object coordinates), volume; the\n"
+     "changes first. A table rounds to 3 decimals: --json and --csv give the\n"
+     "exact values. --json prints one object, {\"summary\": {...}, \"boxes\": [...]};\n"
+     "--csv prints the boxes only (the summary adds them up).\n"
+     "\n"
+     "Exit 1 if there is no such object or version.\n"},
+    {"rollback", 0, 2,
+     "usage: cvre-admin rollback ID K\n"
+     "\n"
+     "Puts version K's boxes back in force for object ID. Versions only grow:\n"
+     "this writes a new version N+1 (reason rollback, restores K, parent the\n"
+     "version in force) through the same path as a refinement, so a running\n"
+     "server publishes it to its clients like any other change. Prints the new\n"
+     "version: object, version, parent, restores, reason, boxes, created, detail.\n"
+     "\n"
+     "The one command that writes: after the usual read-only open has checked\n"
+     "the schema version, it opens the database read-write (it never migrates\n"
+     "one). Safe while the server runs.\n"
+     "\n"
+     "Exit 1 if there is no such object or version K; 4, with nothing written,\n"
+     "if the object was removed, if K is in force or the version in force has\n"
+     "K's boxes already (nothing to do), or if another writer changed the object\n"
+     "meanwhile (look again and retry); 3 if the write failed.\n"},
     {"sessions", OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_LIMIT, 0,
      "usage: cvre-admin sessions [--user NAME] [--since T] [--until T] [--limit N]\n"
      "\n"
@@ -366,10 +415,41 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
     return 0;
 }
 
-static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, int64_t id)
+static int exit_status(int rc, const char *err)
+{
+    if (rc == QUERY_OK)
+        return 0;
+    fprintf(stderr, "%s: %s\n", prog, err);
+    return rc == QUERY_NOT_FOUND ? EXIT_NOT_FOUND : rc == QUERY_REFUSED ? EXIT_REFUSED : EXIT_DB;
+}
+
+/* The one write. The read-only handle ro (whose open checked the schema
+ * version) checks the request and is closed; only then is the file opened
+ * read-write, so that a database of another version is never migrated and
+ * a refused request never opens it for writing. */
+static int rollback(db *ro, const char *path, int format, int64_t id, uint32_t k)
+{
+    char err[512] = "";
+    uint32_t in_force = 0;
+    int rc = query_rollback_check(db_sqlite(ro), id, k, &in_force, err, sizeof err);
+    db_close(ro);
+    if (rc != QUERY_OK)
+        return exit_status(rc, err);
+    db *d = db_open(path, DB_READWRITE, err, sizeof err);
+    if (!d) {
+        fprintf(stderr, "%s: cannot open for writing: %s\n", prog, err);
+        return EXIT_DB;
+    }
+    rc = query_rollback(d, id, k, in_force, format, err, sizeof err);
+    db_close(d);
+    return exit_status(rc, err);
+}
+
+static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, const int64_t *pos)
 {
     char err[512] = "";
     int rc;
+    int64_t id = pos[0];
     if (strcmp(cmd->name, "collisions") == 0)
         rc = query_collisions(s, &a->f, a->format, err, sizeof err);
     else if (strcmp(cmd->name, "top-objects") == 0)
@@ -378,16 +458,15 @@ static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, in
         rc = query_object(s, id, a->format, err, sizeof err);
     else if (strcmp(cmd->name, "versions") == 0)
         rc = query_versions(s, id, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "diff") == 0)
+        rc = query_diff(s, id, (uint32_t)pos[1], (uint32_t)pos[2], a->format, err, sizeof err);
     else if (strcmp(cmd->name, "sessions") == 0)
         rc = query_sessions(s, &a->f, a->format, err, sizeof err);
     else if (strcmp(cmd->name, "clusters") == 0)
         rc = query_clusters(s, &a->f, a->format, err, sizeof err);
     else
         rc = query_totals(s, a->format, err, sizeof err);
-    if (rc == QUERY_OK)
-        return 0;
-    fprintf(stderr, "%s: %s\n", prog, err);
-    return rc == QUERY_NOT_FOUND ? EXIT_NOT_FOUND : EXIT_DB;
+    return exit_status(rc, err);
 }
 
 int main(int argc, char **argv)
@@ -426,14 +505,23 @@ int main(int argc, char **argv)
         fputs(cmd->help, stdout);
         return 0;
     }
-    long long id = 0;
+    int64_t pos[ADMIN_POS_MAX] = {0};
     int positional = sub_argc - optind;
-    if (positional > cmd->wants_id)
-        return usage_error(cmd->name, "unexpected argument \"%s\"", sub_argv[optind + cmd->wants_id]);
-    if (positional < cmd->wants_id)
-        return usage_error(cmd->name, "%s", "wants an object id");
-    if (cmd->wants_id && parse_int(sub_argv[optind], 1, INT64_MAX, &id) < 0)
-        return usage_error(cmd->name, "wants a positive whole number as the object id, not \"%s\"", sub_argv[optind]);
+    if (positional > cmd->npos)
+        return usage_error(cmd->name, "unexpected argument \"%s\"", sub_argv[optind + cmd->npos]);
+    if (positional < cmd->npos)
+        return usage_error(cmd->name, "%s",
+                           cmd->npos == 1 ? "wants an object id"
+                                          : cmd->npos == 2 ? "wants an object id and a version" : "wants an object id and two versions");
+    for (int i = 0; i < cmd->npos; i++) {
+        long long n;
+        const char *text = sub_argv[optind + i];
+        if (i == 0 && parse_int(text, 1, INT64_MAX, &n) < 0)
+            return usage_error(cmd->name, "wants a positive whole number as the object id, not \"%s\"", text);
+        if (i > 0 && parse_int(text, 1, UINT32_MAX, &n) < 0)
+            return usage_error(cmd->name, "wants a version number from 1 to %u, not \"%s\"", UINT32_MAX, text);
+        pos[i] = n;
+    }
     if (a.format == OUT_TABLE && a.f.limit == 0)
         a.f.limit = ADMIN_LIMIT_MAX; /* a table is held in memory */
 
@@ -454,7 +542,9 @@ int main(int argc, char **argv)
         db_close(d);
         return EXIT_DB;
     }
-    rc = run_command(cmd, s, &a, (int64_t)id);
+    if (strcmp(cmd->name, "rollback") == 0)
+        return rollback(d, a.db, a.format, pos[0], (uint32_t)pos[1]);
+    rc = run_command(cmd, s, &a, pos);
     db_close(d);
     return rc;
 }

@@ -38,7 +38,7 @@ out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int verti
             fprintf(f, "%s%s", i ? "," : "", cols[i].name); /* names never need quoting */
     if (format == OUT_CSV)
         fputs("\r\n", f);
-    if (format == OUT_JSON)
+    if (format == OUT_JSON && vertical != OUT_RECORD_BARE)
         fputc('[', f);
     return o;
 }
@@ -203,7 +203,9 @@ void out_row(out *o, sqlite3_stmt *st)
         }
         fputs("\r\n", o->f);
     } else {
-        fputs(o->rows ? ",\n{" : "\n{", o->f);
+        if (o->vertical == OUT_RECORD_BARE && o->rows)
+            abort(); /* a programming error: a bare record is one row */
+        fputs(o->vertical == OUT_RECORD_BARE ? "{" : o->rows ? ",\n{" : "\n{", o->f);
         for (int i = 0; i < o->ncols; i++) {
             fprintf(o->f, "%s\"%s\": ", i ? ", " : "", o->cols[i].name);
             stream_cell(o, st, i);
@@ -286,6 +288,8 @@ long out_end(out *o)
 {
     if (o->format == OUT_TABLE)
         print_table(o);
+    else if (o->format == OUT_JSON && o->vertical == OUT_RECORD_BARE)
+        fputs(o->rows ? "" : "null", o->f);
     else if (o->format == OUT_JSON)
         fputs(o->rows ? "\n]\n" : "]\n", o->f);
     long rows = o->rows;

@@ -37,9 +37,17 @@ typedef struct out_column {
 
 typedef struct out out;
 
+/* out_begin's vertical argument. */
+enum out_shape {
+    OUT_ROWS = 0,        /* rows: a table, CSV lines, a JSON array */
+    OUT_RECORD = 1,      /* a single record: field/value lines in a table */
+    OUT_RECORD_BARE = 2  /* as OUT_RECORD, but JSON gets the one object (or null
+                          * without a row) instead of an array: a part of a
+                          * larger JSON document the caller prints around it */
+};
+
 /* Starts a result set with these columns, printed to f. The columns array
- * must outlive the out. vertical: a single record, shown as field/value
- * lines in the table form. */
+ * must outlive the out. vertical: enum out_shape. */
 out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int vertical);
 
 /* Adds the current row of st: column i of st is cols[i]. */

@@ -7,6 +7,7 @@
 
 #include "db.h"
 #include "dblog.h"
+#include "ecm.h"
 #include "out.h"
 
 /* Longest SQL text assembled here (the collisions query with every filter
@@ -561,16 +562,224 @@ int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
 int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
 {
     static const out_column cols[] = {
-        {"version", OUT_INT, 0}, {"created", OUT_TIME, 0},    {"reason", OUT_TEXT, 0},
-        {"boxes", OUT_INT, 0},   {"collisions", OUT_INT, 0},  {"current", OUT_BOOL, 0},
+        {"version", OUT_INT, 0},  {"created", OUT_TIME, 0},    {"reason", OUT_TEXT, 0},
+        {"parent", OUT_INT, 0},   {"run", OUT_INT, 0},         {"clusters", OUT_TEXT, 0},
+        {"restores", OUT_INT, 0}, {"boxes", OUT_INT, 0},       {"collisions", OUT_INT, 0},
+        {"current", OUT_BOOL, 0}, {"detail", OUT_TEXT, 0},
     };
     static const char sql[] =
-        "SELECT v.version, v.created_at, v.reason, v.box_count, coalesce(k.n, 0), v.version = o.ecm_version "
+        "SELECT v.version, v.created_at, v.reason, v.parent_version, v.run_id, "
+        "(SELECT group_concat(t.cluster_id, ',') FROM (SELECT cluster_id FROM ecm_version_clusters t "
+        "WHERE t.object_id = v.object_id AND t.version = v.version ORDER BY t.run_id, t.cluster_id) t), "
+        "v.restores, v.box_count, coalesce(k.n, 0), v.version = o.ecm_version, v.detail "
         "FROM ecm_versions v JOIN objects o ON o.id = v.object_id "
         "LEFT JOIN (SELECT c.ecm_version AS version, count(*) AS n " FROM_RANGES
         "WHERE c.object_id = :object GROUP BY c.ecm_version) k ON k.version = v.version "
         "WHERE v.object_id = :object ORDER BY v.version";
     return per_object(s, id, sql, cols, LEN(cols), 0, format, err, errlen);
+}
+
+/* ---- ECM versions: diff and rollback ---- */
+
+/* Runs sql, binding :object, :a and :b, and prints its rows as cols. */
+static int run_ids(sqlite3 *s, const char *sql, int64_t object, int64_t a, int64_t b, const out_column *cols,
+                   int ncols, int vertical, int format, char *err, size_t errlen)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
+        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    bind_int(st, ":object", object);
+    bind_int(st, ":a", a);
+    bind_int(st, ":b", b);
+    out *o = out_begin(format, stdout, cols, ncols, vertical);
+    int rc;
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW)
+        out_row(o, st);
+    long rows = out_end(o);
+    if (rc != SQLITE_DONE)
+        fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    sqlite3_finalize(st);
+    if (rc != SQLITE_DONE)
+        return QUERY_ERROR;
+    if (rows < 0)
+        return fail(err, errlen, QUERY_ERROR, "cannot write the output");
+    return QUERY_OK;
+}
+
+/* One integer (NULL as 0) from sql, which has parameter ?1 and maybe ?2
+ * and always returns a row. */
+static int scalar2(sqlite3 *s, const char *sql, int64_t p1, int64_t p2, int64_t *v, char *err, size_t errlen)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
+        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    sqlite3_bind_int64(st, 1, p1);
+    if (sqlite3_bind_parameter_count(st) >= 2)
+        sqlite3_bind_int64(st, 2, p2);
+    int rc = sqlite3_step(st);
+    *v = rc == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
+    if (rc != SQLITE_ROW)
+        fail(err, errlen, QUERY_ERROR, "query failed: %s", rc == SQLITE_DONE ? "no row" : sqlite3_errmsg(s));
+    sqlite3_finalize(st);
+    return rc == SQLITE_ROW ? QUERY_OK : QUERY_ERROR;
+}
+
+/* QUERY_NOT_FOUND (with a message listing the versions there are) if the
+ * object has no version v. */
+static int has_version(sqlite3 *s, int64_t id, uint32_t v, char *err, size_t errlen)
+{
+    int64_t n, last;
+    int rc = scalar2(s, "SELECT count(*) FROM ecm_versions WHERE object_id = ?1 AND version = ?2", id, v, &n, err,
+                     errlen);
+    if (rc != QUERY_OK || n)
+        return rc;
+    rc = scalar2(s, "SELECT coalesce(max(version), 0) FROM ecm_versions WHERE object_id = ?1", id, 0, &last, err,
+                 errlen);
+    if (rc != QUERY_OK)
+        return rc;
+    return fail(err, errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
+                (long long)id, v, (long long)last);
+}
+
+/* The boxes of versions :a and :b numbered within each run of equal boxes
+ * (k), and matched on their six coordinates and k: a box that occurs twice
+ * in a matches two in b. m: change ('only_a', 'only_b', 'both'), the box's
+ * index in a and in b, its coordinates and volume. */
+#define DIFF_SIDE(v)                                                                                      \
+    "SELECT box_index, min_x, min_y, min_z, max_x, max_y, max_z, "                                        \
+    "(max_x - min_x) * (max_y - min_y) * (max_z - min_z) AS volume, "                                     \
+    "row_number() OVER (PARTITION BY min_x, min_y, min_z, max_x, max_y, max_z ORDER BY box_index) AS k " \
+    "FROM ecm_boxes WHERE object_id = :object AND version = " v
+#define DIFF_SAME(x, y)                                                                                      \
+    x ".min_x = " y ".min_x AND " x ".min_y = " y ".min_y AND " x ".min_z = " y ".min_z AND " x ".max_x = " y \
+    ".max_x AND " x ".max_y = " y ".max_y AND " x ".max_z = " y ".max_z AND " x ".k = " y ".k"
+#define DIFF_CTE                                                                                                 \
+    "WITH a AS (" DIFF_SIDE(":a") "), b AS (" DIFF_SIDE(":b") "), "                                              \
+    "m AS (SELECT 'both' AS change, a.box_index AS box_a, b.box_index AS box_b, a.min_x, a.min_y, a.min_z, "     \
+    "a.max_x, a.max_y, a.max_z, a.volume FROM a JOIN b ON " DIFF_SAME("a", "b") " "                              \
+    "UNION ALL SELECT 'only_a', a.box_index, NULL, a.min_x, a.min_y, a.min_z, a.max_x, a.max_y, a.max_z, "       \
+    "a.volume FROM a WHERE NOT EXISTS (SELECT 1 FROM b WHERE " DIFF_SAME("a", "b") ") "                          \
+    "UNION ALL SELECT 'only_b', NULL, b.box_index, b.min_x, b.min_y, b.min_z, b.max_x, b.max_y, b.max_z, "       \
+    "b.volume FROM b WHERE NOT EXISTS (SELECT 1 FROM a WHERE " DIFF_SAME("a", "b") ")) "
+
+int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char *err, size_t errlen)
+{
+    static const out_column summary[] = {
+        {"object", OUT_INT, 0},   {"a", OUT_INT, 0},        {"b", OUT_INT, 0},
+        {"boxes_a", OUT_INT, 0},  {"boxes_b", OUT_INT, 0},  {"only_a", OUT_INT, 0},
+        {"only_b", OUT_INT, 0},   {"both", OUT_INT, 0},     {"volume_a", OUT_REAL, 0},
+        {"volume_b", OUT_REAL, 0},
+    };
+    static const out_column boxes[] = {
+        {"change", OUT_TEXT, 0}, {"box_a", OUT_INT, 0}, {"box_b", OUT_INT, 0},
+        {"min_x", OUT_REAL, 0},  {"min_y", OUT_REAL, 0}, {"min_z", OUT_REAL, 0},
+        {"max_x", OUT_REAL, 0},  {"max_y", OUT_REAL, 0}, {"max_z", OUT_REAL, 0},
+        {"volume", OUT_REAL, 0},
+    };
+    /* Volumes are sums over boxes: where boxes overlap, counted twice. */
+    static const char summary_sql[] = DIFF_CTE
+        "SELECT :object, :a, :b, (SELECT count(*) FROM a), (SELECT count(*) FROM b), "
+        "(SELECT count(*) FROM m WHERE change = 'only_a'), (SELECT count(*) FROM m WHERE change = 'only_b'), "
+        "(SELECT count(*) FROM m WHERE change = 'both'), (SELECT total(volume) FROM a), "
+        "(SELECT total(volume) FROM b)";
+    static const char boxes_sql[] = DIFF_CTE
+        "SELECT change, box_a, box_b, min_x, min_y, min_z, max_x, max_y, max_z, volume FROM m "
+        "ORDER BY CASE change WHEN 'only_a' THEN 0 WHEN 'only_b' THEN 1 ELSE 2 END, coalesce(box_a, box_b)";
+    query_filter f = {.has_object = 1, .object = id};
+    int64_t unused;
+    int rc = begin_snapshot(s, err, errlen);
+    if (rc == QUERY_OK)
+        rc = resolve(s, &f, &unused, err, errlen);
+    if (rc == QUERY_OK)
+        rc = has_version(s, id, a, err, errlen);
+    if (rc == QUERY_OK)
+        rc = has_version(s, id, b, err, errlen);
+    if (rc != QUERY_OK)
+        return end_snapshot(s, rc);
+    /* JSON: one document, {"summary": {...}, "boxes": [...]}; CSV: the boxes
+     * only (one table; the summary adds them up); table: both, a blank line
+     * between. */
+    if (format == OUT_JSON)
+        fputs("{\"summary\": ", stdout);
+    if (format != OUT_CSV)
+        rc = run_ids(s, summary_sql, id, a, b, summary, LEN(summary), OUT_RECORD_BARE, format, err, errlen);
+    if (rc == QUERY_OK)
+        fputs(format == OUT_JSON ? ",\n\"boxes\": " : format == OUT_TABLE ? "\n" : "", stdout);
+    if (rc == QUERY_OK)
+        rc = run_ids(s, boxes_sql, id, a, b, boxes, LEN(boxes), OUT_ROWS, format, err, errlen);
+    if (rc == QUERY_OK && format == OUT_JSON && (fputs("}\n", stdout) < 0 || fflush(stdout) != 0))
+        rc = fail(err, errlen, QUERY_ERROR, "cannot write the output");
+    return end_snapshot(s, rc);
+}
+
+int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force, char *err, size_t errlen)
+{
+    long long oid = (long long)id;
+    int64_t v, removed, same;
+    int rc = begin_snapshot(s, err, errlen);
+    if (rc != QUERY_OK)
+        return rc;
+    /* -1: no such object; 0: in the world; 1: removed. */
+    rc = scalar2(s, "SELECT coalesce((SELECT removed_at IS NOT NULL FROM objects WHERE id = ?1), -1)", id, 0, &removed,
+                 err, errlen);
+    if (rc == QUERY_OK && removed < 0)
+        rc = fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", oid);
+    if (rc == QUERY_OK && removed > 0)
+        rc = fail(err, errlen, QUERY_REFUSED, "object %lld was removed from the world: its collision map is not in use",
+                  oid);
+    if (rc == QUERY_OK)
+        rc = has_version(s, id, k, err, errlen);
+    if (rc == QUERY_OK)
+        rc = scalar2(s, "SELECT ecm_version FROM objects WHERE id = ?1", id, 0, &v, err, errlen);
+    if (rc == QUERY_OK && (v < 1 || v > UINT32_MAX))
+        rc = fail(err, errlen, QUERY_ERROR, "object %lld: version in force %lld out of range", oid, (long long)v);
+    if (rc == QUERY_OK && v == k)
+        rc = fail(err, errlen, QUERY_REFUSED, "version %u is already in force for object %lld: nothing to do", k, oid);
+    /* The same boxes in the same order (a rollback to k is in force, say). */
+    if (rc == QUERY_OK)
+        rc = scalar2(s,
+                     "SELECT (SELECT box_count FROM ecm_versions WHERE object_id = ?1 AND version = ?2) = "
+                     "(SELECT box_count FROM ecm_versions WHERE object_id = ?1 "
+                     "AND version = (SELECT ecm_version FROM objects WHERE id = ?1)) "
+                     "AND NOT EXISTS (SELECT 1 FROM ecm_boxes x LEFT JOIN ecm_boxes y ON y.object_id = x.object_id "
+                     "AND y.version = (SELECT ecm_version FROM objects WHERE id = ?1) AND y.box_index = x.box_index "
+                     "WHERE x.object_id = ?1 AND x.version = ?2 AND (y.box_index IS NULL OR y.min_x != x.min_x "
+                     "OR y.min_y != x.min_y OR y.min_z != x.min_z OR y.max_x != x.max_x OR y.max_y != x.max_y "
+                     "OR y.max_z != x.max_z))",
+                     id, k, &same, err, errlen);
+    if (rc == QUERY_OK && same)
+        rc = fail(err, errlen, QUERY_REFUSED,
+                  "version %lld in force for object %lld already has version %u's boxes: nothing to do", (long long)v,
+                  oid, k);
+    if (rc == QUERY_OK)
+        *in_force = (uint32_t)v;
+    return end_snapshot(s, rc);
+}
+
+int query_rollback(db *d, int64_t id, uint32_t k, uint32_t in_force, int format, char *err, size_t errlen)
+{
+    static const out_column cols[] = {
+        {"object", OUT_INT, 0},   {"version", OUT_INT, 0}, {"parent", OUT_INT, 0},  {"restores", OUT_INT, 0},
+        {"reason", OUT_TEXT, 0},  {"boxes", OUT_INT, 0},   {"created", OUT_TIME, 0}, {"detail", OUT_TEXT, 0},
+    };
+    float(*boxes)[6];
+    uint32_t n, version;
+    if (db_ecm_boxes(d, id, k, &boxes, &n) < 0)
+        return fail(err, errlen, QUERY_ERROR, "cannot read version %u: %s", k, db_error(d));
+    db_ecm_change c = {.object_id = id, .parent_version = in_force, .reason = "rollback", .restores = k,
+                       .detail = "cvre-admin rollback", .box_count = n, .boxes = (const float(*)[6])boxes};
+    int rc = db_ecm_write(d, &c, db_now(), &version);
+    free(boxes);
+    if (rc == DB_ECM_STALE)
+        return fail(err, errlen, QUERY_REFUSED, "object %lld changed meanwhile (%s); nothing written: look again",
+                    (long long)id, db_error(d));
+    if (rc < 0)
+        return fail(err, errlen, QUERY_ERROR, "rollback failed, nothing written: %s%s", db_error(d),
+                    db_busy(d) ? " (another process held the write lock)" : "");
+    return run_ids(db_sqlite(d),
+                   "SELECT object_id, version, parent_version, restores, reason, box_count, created_at, detail "
+                   "FROM ecm_versions WHERE object_id = :object AND version = :a",
+                   id, version, 0, cols, LEN(cols), OUT_RECORD, format, err, errlen);
 }
 
 int query_totals(sqlite3 *s, int format, char *err, size_t errlen)

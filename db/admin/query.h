@@ -6,9 +6,13 @@
  * Every SQL text is assembled from constant fragments only; user values
  * (ids, names, times, regions, limits) are always bound as parameters.
  *
- * Return value: QUERY_OK; QUERY_NOT_FOUND when the object or user asked
- * about does not exist; QUERY_ERROR when the database failed or the output
- * could not be written. Both failures leave a message in err.
+ * Return value: QUERY_OK; QUERY_NOT_FOUND when the object, version or user
+ * asked about does not exist; QUERY_REFUSED when a rollback has nothing to
+ * do or may not be done; QUERY_ERROR when the database failed or the output
+ * could not be written. Every failure leaves a message in err.
+ *
+ * Only query_rollback writes, through db_ecm_write (db/ecm.h) on a handle
+ * the caller opened read-write for it.
  */
 #ifndef CVRE_ADMIN_QUERY_H
 #define CVRE_ADMIN_QUERY_H
@@ -17,7 +21,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-enum { QUERY_OK = 0, QUERY_NOT_FOUND = 1, QUERY_ERROR = -1 };
+#include "db.h"
+
+enum { QUERY_OK = 0, QUERY_NOT_FOUND = 1, QUERY_REFUSED = 2, QUERY_ERROR = -1 };
 
 /* Filters; a subcommand uses the ones that make sense for it. */
 typedef struct query_filter {
@@ -37,8 +43,23 @@ int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, s
 int query_top_objects(sqlite3 *s, const query_filter *f, int format, char *err, size_t errlen);
 /* One object: placement, geometry, collision map and collision summary. */
 int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen);
-/* The ECM versions of one object, oldest first. */
+/* The ECM versions of one object, oldest first, with their history: parent,
+ * cause (run and clusters), the version a rollback restores, detail. */
 int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen);
+/* What changed from version a to version b of one object: a summary, then
+ * its boxes only in a, only in b, in both (the six coordinates equal; a box
+ * that occurs twice must occur twice in the other version to be in both). */
+int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char *err, size_t errlen);
+/* Whether object id can be rolled back to version k, on a read-only
+ * snapshot: QUERY_NOT_FOUND (no such object or version), QUERY_REFUSED (the
+ * object was removed, or the version in force is k or has k's boxes), or
+ * QUERY_OK with the version in force in *in_force. Prints nothing. */
+int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force, char *err, size_t errlen);
+/* Writes version k's boxes as a new version of object id whose parent is
+ * in_force (reason "rollback", restores k) and prints that version.
+ * QUERY_REFUSED if in_force is no longer in force (another writer came
+ * first: nothing written). */
+int query_rollback(db *d, int64_t id, uint32_t k, uint32_t in_force, int format, char *err, size_t errlen);
 /* Counts of everything, and the time span the store covers. */
 int query_totals(sqlite3 *s, int format, char *err, size_t errlen);
 /* The clusters of the latest cvre-cluster run (f: object, limit). */
