@@ -75,14 +75,10 @@ static void bind_filter(sqlite3_stmt *st, const query_filter *f, int64_t user_id
     bind_double(st, ":now", db_now());
 }
 
-/* Runs sql with f's values and prints its rows as cols. */
-static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_id, const char *ranges,
-               const out_column *cols, int ncols, int vertical, int format, char *err, size_t errlen)
+/* Prints the rows of the prepared statement st as cols, then finalizes it. */
+static int print_rows(sqlite3 *s, sqlite3_stmt *st, const out_column *cols, int ncols, int vertical, int format,
+                      char *err, size_t errlen)
 {
-    sqlite3_stmt *st;
-    if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
-    bind_filter(st, f, user_id, ranges);
     out *o = out_begin(format, stdout, cols, ncols, vertical);
     int rc;
     while ((rc = sqlite3_step(st)) == SQLITE_ROW)
@@ -96,6 +92,17 @@ static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_
     if (rows < 0)
         return fail(err, errlen, QUERY_ERROR, "cannot write the output");
     return QUERY_OK;
+}
+
+/* Runs sql with f's values and prints its rows as cols. */
+static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_id, const char *ranges,
+               const out_column *cols, int ncols, int vertical, int format, char *err, size_t errlen)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
+        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    bind_filter(st, f, user_id, ranges);
+    return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
 }
 
 /* One integer from a statement with one parameter; *found tells whether a
@@ -591,19 +598,7 @@ static int run_ids(sqlite3 *s, const char *sql, int64_t object, int64_t a, int64
     bind_int(st, ":object", object);
     bind_int(st, ":a", a);
     bind_int(st, ":b", b);
-    out *o = out_begin(format, stdout, cols, ncols, vertical);
-    int rc;
-    while ((rc = sqlite3_step(st)) == SQLITE_ROW)
-        out_row(o, st);
-    long rows = out_end(o);
-    if (rc != SQLITE_DONE)
-        fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
-    sqlite3_finalize(st);
-    if (rc != SQLITE_DONE)
-        return QUERY_ERROR;
-    if (rows < 0)
-        return fail(err, errlen, QUERY_ERROR, "cannot write the output");
-    return QUERY_OK;
+    return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
 }
 
 /* One integer (NULL as 0) from sql, which has parameter ?1 and maybe ?2

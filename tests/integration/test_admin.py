@@ -335,18 +335,21 @@ def test_object_summary():
 def test_versions():
     _, out, _ = admin("versions", "1", "--json", db=DB)
     count = lambda v: len([c for c in COLLISIONS if c["object"] == 1 and c["version"] == v])
+    none = {"parent": None, "run": None, "clusters": None, "restores": None, "detail": None}  # history: test_versions.py
     assert json.loads(out) == [
         {"version": 1, "created": iso(T0 - 100), "reason": "import", "boxes": 1, "collisions": count(1),
-         "current": False},
+         "current": False, **none},
         {"version": 2, "created": iso(T0 + 150), "reason": "refine", "boxes": 3, "collisions": count(2),
-         "current": True}], out
+         "current": True, **none}], out
     _, out, _ = admin("versions", "1", db=DB)
     head, rows = table(out)
-    assert head == ["version", "created", "reason", "boxes", "collisions", "current"], head
-    assert rows == [["1", iso(T0 - 100, 3), "import", "1", str(count(1)), "no"],
-                    ["2", iso(T0 + 150, 3), "refine", "3", str(count(2)), "yes"]], rows
+    assert head == ["version", "created", "reason", "parent", "run", "clusters", "restores", "boxes", "collisions",
+                    "current", "detail"], head
+    assert rows == [["1", iso(T0 - 100, 3), "import", "-", "-", "-", "-", "1", str(count(1)), "no", "-"],
+                    ["2", iso(T0 + 150, 3), "refine", "-", "-", "-", "-", "3", str(count(2)), "yes", "-"]], rows
     _, out, _ = admin("versions", "2", "--csv", db=DB)
-    assert out == f"version,created,reason,boxes,collisions,current\r\n1,{iso(T0 - 90)},import,1,12,1\r\n", out
+    assert out == (f"version,created,reason,parent,run,clusters,restores,boxes,collisions,current,detail\r\n"
+                   f"1,{iso(T0 - 90)},import,,,,,1,12,1,\r\n"), out
 
 
 def test_totals():
