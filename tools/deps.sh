@@ -1,9 +1,17 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages cvre needs to build, test and run, if any
 # is missing. Needs root (apt-get). The same list is in docker/Dockerfile.
+# --bench also installs what only the benchmarks compare against: OpenVDB
+# (libopenvdb-dev, with TBB) for bench-voxel.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
           libflann-dev python3-sklearn time libassimp-dev)
+for arg in "$@"; do
+  case "$arg" in
+    --bench) packages+=(libopenvdb-dev) ;;
+    *) echo "usage: bash tools/deps.sh [--bench]" >&2; exit 2 ;;
+  esac
+done
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,0 +1,89 @@
+/*
+ * voxel.h: digitization of an object's geometry inside one of its boxes (the
+ * paper's "digitize the object"). A grid of n = 2^depth cells per axis spans
+ * the box; voxel_mark sets every cell that any triangle touches. Pure module:
+ * no I/O, no global state.
+ *
+ * Conservative by construction: cells are closed boxes (a triangle lying
+ * exactly on a face between two cells touches both), and the exact
+ * triangle-box overlap test (separating axes) runs in double on the float
+ * input with each cell grown by VOXEL_EPS_REL of the grid's extent, so that
+ * rounding can only add cells, never lose one. Thin, axis-aligned, sliver and
+ * degenerate triangles (a segment, a point) are handled by the same test.
+ * A box may be flat on an axis (min == max): its cells are then flat too
+ * (and all n of them along that axis are the same cell, set together). A box
+ * that is a single point scales eps by its distance from the origin, or 1.
+ * The margin holds for geometry within about 10^6 extents of the box.
+ *
+ * One grid per thread: calls on distinct grids may run in parallel.
+ */
+#ifndef CVRE_VOXEL_H
+#define CVRE_VOXEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* Grid depths accepted: 2^1 to 2^10 cells per axis. 2^10 = 1024^3 cells is
+ * a 128 MiB bit set, the most a refinement should ever hold in memory. */
+#define VOXEL_DEPTH_MIN 1u
+#define VOXEL_DEPTH_MAX 10u
+/* How much each cell grows, relative to the grid's largest extent, in the
+ * overlap test: far above double rounding on float input, far below anything
+ * a user could see (1e-9 of a 1 km object is a micrometre). */
+#define VOXEL_EPS_REL 1e-9
+
+typedef struct voxel_grid {
+    uint32_t depth;
+    uint32_t n;           /* cells per axis: 1 << depth */
+    double min[3], max[3];/* the box the grid spans */
+    double cell[3];       /* cell size per axis: (max - min) / n, may be 0 */
+    uint64_t *bits;       /* n^3 bits; cell (x, y, z) is bit x + n (y + n z) */
+    uint64_t occupied;    /* cells set */
+} voxel_grid;
+
+/* Prepares an empty grid over [min, max] (each min <= max, all finite); the
+ * grid owns its bits until voxel_grid_free. Returns 0, -EINVAL for a depth
+ * outside VOXEL_DEPTH_MIN..MAX or a bad box (g zeroed), or -ENOMEM (g
+ * zeroed). */
+int voxel_grid_init(voxel_grid *g, uint32_t depth, const float min[3], const float max[3]);
+/* Frees g's bits and zeroes it; a zeroed grid may be freed again. */
+void voxel_grid_free(voxel_grid *g);
+
+/* Sets every cell that one of the ntris triangles (9 floats each: three
+ * vertices, x y z) touches; triangles outside the box set nothing. Cells
+ * already set stay set, so a mesh may be marked in several calls; occupied
+ * counts the cells set. Allocates nothing. Returns 0, or -EINVAL if a
+ * coordinate is not finite or g has no bits (nothing is marked then). */
+int voxel_mark(voxel_grid *g, const float *tris, size_t ntris);
+
+static inline int voxel_get(const voxel_grid *g, uint32_t x, uint32_t y, uint32_t z)
+{
+    uint64_t i = (uint64_t)x + (uint64_t)g->n * ((uint64_t)y + (uint64_t)g->n * z);
+    return (int)((g->bits[i >> 6] >> (i & 63)) & 1u);
+}
+
+/* Most threads voxel_mark_threads uses: beyond the cores of any machine
+ * the server runs on, and a bound on its per-thread state (on the stack). */
+#ifndef VOXEL_MAX_THREADS
+#define VOXEL_MAX_THREADS 16u
+#endif
+/* Fewest triangles per extra thread: below that, starting a thread (tens
+ * of microseconds) costs more than the triangles (tens of nanoseconds each). */
+#ifndef VOXEL_MIN_TRIS_PER_THREAD
+#define VOXEL_MIN_TRIS_PER_THREAD 4096u
+#endif
+
+/* voxel_mark on up to `threads` threads (0: one per online CPU), each
+ * setting the cells of its own slab of z layers; it sets exactly the cells
+ * voxel_mark sets. Falls back to voxel_mark (this thread only) for a grid
+ * under 8 cells per axis or flat in z, or for few triangles; a thread that
+ * cannot be started leaves its slab to the calling thread. voxel_mark
+ * itself never starts threads: the server calls it on its own background
+ * thread. Same returns as voxel_mark. */
+int voxel_mark_threads(voxel_grid *g, const float *tris, size_t ntris, unsigned threads);
+
+/* The exact overlap test: 1 if the closed triangle t (9 doubles) and the
+ * closed box [min, max] share a point, else 0. */
+int voxel_tri_box_overlap(const double t[9], const double min[3], const double max[3]);
+
+#endif
