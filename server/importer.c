@@ -5,22 +5,16 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/eventfd.h>
-#include <unistd.h>
 
 #include "alloc.h"
 #include "db.h"
 #include "log.h"
+#include "mailbox.h"
 #include "scene/import.h"
 
 /* Jobs waiting at once. Each holds a whole file (up to --max-upload), so the
  * queue bounds the memory that uploads can pin while they wait. */
 #define IMPORTER_QUEUE_MAX 8
-
-typedef struct result_node {
-    import_result r;
-    struct result_node *next;
-} result_node;
 
 struct importer {
     pthread_t thread;
@@ -29,8 +23,7 @@ struct importer {
     int stop;
     import_job jobs[IMPORTER_QUEUE_MAX];
     unsigned head, count;
-    result_node *results, *results_tail;
-    int efd;
+    mailbox *results; /* import_result *, to the loop */
     db *db;
     uint32_t max_triangles;
 };
@@ -89,20 +82,13 @@ static void *worker(void *arg)
         import_job job = im->jobs[im->head];
         pthread_mutex_unlock(&im->lock);
 
-        result_node *n = xcalloc(1, sizeof *n);
-        run_job(im, &job, &n->r);
+        import_result *r = xcalloc(1, sizeof *r);
+        run_job(im, &job, r);
+        mailbox_put(im->results, r);
 
         pthread_mutex_lock(&im->lock);
         im->head = (im->head + 1) % IMPORTER_QUEUE_MAX;
         im->count--;
-        if (im->results_tail)
-            im->results_tail->next = n;
-        else
-            im->results = n;
-        im->results_tail = n;
-        uint64_t one = 1;
-        if (write(im->efd, &one, sizeof one) != (ssize_t)sizeof one)
-            log_error("importer: cannot signal the loop: %s", strerror(errno));
     }
     pthread_mutex_unlock(&im->lock);
     return NULL;
@@ -112,15 +98,15 @@ importer *importer_start(const char *db_path, uint32_t max_triangles, char *err,
 {
     importer *im = xcalloc(1, sizeof *im);
     im->max_triangles = max_triangles;
-    im->efd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-    if (im->efd < 0) {
+    im->results = mailbox_create();
+    if (!im->results) {
         snprintf(err, errlen, "eventfd: %s", strerror(errno));
         free(im);
         return NULL;
     }
     im->db = db_open(db_path, DB_READWRITE, err, errlen);
     if (!im->db) {
-        close(im->efd);
+        mailbox_destroy(im->results, NULL);
         free(im);
         return NULL;
     }
@@ -130,11 +116,17 @@ importer *importer_start(const char *db_path, uint32_t max_triangles, char *err,
     if (rc != 0) {
         snprintf(err, errlen, "cannot start the import thread: %s", strerror(rc));
         db_close(im->db);
-        close(im->efd);
+        mailbox_destroy(im->results, NULL);
         free(im);
         return NULL;
     }
     return im;
+}
+
+static void free_result(void *p)
+{
+    importer_result_free(p);
+    free(p);
 }
 
 void importer_stop(importer *im)
@@ -148,17 +140,14 @@ void importer_stop(importer *im)
     pthread_join(im->thread, NULL);
     for (; im->count; im->count--, im->head = (im->head + 1) % IMPORTER_QUEUE_MAX)
         free(im->jobs[im->head].data);
-    import_result r;
-    while (importer_take(im, &r) == 0)
-        importer_result_free(&r);
+    mailbox_destroy(im->results, free_result);
     pthread_mutex_destroy(&im->lock);
     pthread_cond_destroy(&im->wake);
     db_close(im->db);
-    close(im->efd);
     free(im);
 }
 
-int importer_fd(const importer *im) { return im->efd; }
+int importer_fd(const importer *im) { return mailbox_fd(im->results); }
 
 int importer_submit(importer *im, import_job *job)
 {
@@ -179,21 +168,11 @@ int importer_submit(importer *im, import_job *job)
 
 int importer_take(importer *im, import_result *out)
 {
-    uint64_t drained;
-    pthread_mutex_lock(&im->lock);
-    result_node *n = im->results;
-    if (n) {
-        im->results = n->next;
-        if (!im->results)
-            im->results_tail = NULL;
-    } else if (read(im->efd, &drained, sizeof drained) < 0 && errno != EAGAIN) {
-        log_warn("importer: eventfd: %s", strerror(errno));
-    }
-    pthread_mutex_unlock(&im->lock);
-    if (!n)
+    import_result *r = mailbox_take(im->results);
+    if (!r)
         return -EAGAIN;
-    *out = n->r;
-    free(n);
+    *out = *r;
+    free(r);
     return 0;
 }
 
