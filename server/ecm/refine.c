@@ -1,0 +1,760 @@
+/*
+ * refine.c: one refinement round; the steps are described in refine.h.
+ *
+ * Everything inside a problem box works on cell indices: a box of cells is
+ * [lo, hi) per axis. Counts over any such box (occupied cells, wanted cells)
+ * come from summed-volume tables in O(1), so shrinking a node, testing a
+ * merge or pricing a pair never walks cells.
+ */
+#include "refine.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "alloc.h"
+
+_Static_assert(ECM_DEPTH_MIN >= VOXEL_DEPTH_MIN && ECM_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
+/* Cell indices, and one past the last, fit 16 bits. */
+_Static_assert(ECM_DEPTH_MAX <= 15, "cell indices are uint16_t");
+/* Counts of a whole grid fit a summed-volume table's uint32_t. */
+_Static_assert(3 * ECM_DEPTH_MAX < 32, "cell counts fit uint32_t");
+
+/* A box of cells: [lo, hi) on each axis. */
+typedef struct ibox {
+    uint16_t lo[3], hi[3];
+} ibox;
+
+typedef struct ilist {
+    ibox *b;
+    uint32_t n, cap;
+} ilist;
+
+/* Summed-volume table over an n^3 grid: t[x + m (y + m z)], m = n + 1, holds
+ * the count over cells [0, x) x [0, y) x [0, z). */
+typedef struct svt {
+    uint32_t *t;
+    uint32_t m;
+} svt;
+
+/* One problem box being refined. */
+typedef struct work {
+    voxel_grid g;
+    uint32_t n;
+    svt occ, want;
+    uint8_t *wanted; /* n^3: 1 for a wanted cell */
+    ilist out;       /* its boxes so far: no more division for them */
+    double max_empty;
+    uint32_t budget; /* most boxes it may become */
+    uint32_t capped; /* boxes of out that still hold wanted cells */
+} work;
+
+void ecm_params_default(ecm_params *p)
+{
+    *p = (ecm_params){.depth = ECM_DEPTH_DEFAULT,
+                      .max_boxes = ECM_MAX_BOXES_DEFAULT,
+                      .max_empty = ECM_MAX_EMPTY_DEFAULT,
+                      .avatar = {0.6f, 1.8f, 0.6f}};
+}
+
+void ecm_result_free(ecm_result *r)
+{
+    free(r->boxes);
+    memset(r, 0, sizeof *r);
+}
+
+static int fail(char *err, size_t errlen, int rc, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
+static int fail(char *err, size_t errlen, int rc, const char *fmt, ...)
+{
+    if (errlen) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err, errlen, fmt, ap);
+        va_end(ap);
+    }
+    return rc;
+}
+
+static double ms_since(const struct timespec *t0)
+{
+    struct timespec t1;
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    return (double)(t1.tv_sec - t0->tv_sec) * 1e3 + (double)(t1.tv_nsec - t0->tv_nsec) / 1e6;
+}
+
+static uint64_t volume(const ibox *b)
+{
+    return (uint64_t)(b->hi[0] - b->lo[0]) * (uint64_t)(b->hi[1] - b->lo[1]) * (uint64_t)(b->hi[2] - b->lo[2]);
+}
+
+static ibox hull(const ibox *a, const ibox *b)
+{
+    ibox h;
+    for (int k = 0; k < 3; k++) {
+        h.lo[k] = a->lo[k] < b->lo[k] ? a->lo[k] : b->lo[k];
+        h.hi[k] = a->hi[k] > b->hi[k] ? a->hi[k] : b->hi[k];
+    }
+    return h;
+}
+
+static int push(ilist *l, const ibox *b)
+{
+    if (l->n == l->cap) {
+        uint32_t cap = l->cap ? l->cap * 2 : 64;
+        ibox *nb = cvre_realloc(l->b, cap * sizeof *nb);
+        if (!nb)
+            return -ENOMEM;
+        l->b = nb;
+        l->cap = cap;
+    }
+    l->b[l->n++] = *b;
+    return 0;
+}
+
+/* Builds the table of a 0/1 function of the cell, given as a byte array
+ * (bytes != NULL) or the grid's bits. Three prefix passes, one per axis. */
+static int svt_build(svt *s, const voxel_grid *g, const uint8_t *bytes)
+{
+    uint32_t n = g->n, m = n + 1;
+    s->m = m;
+    s->t = cvre_calloc((size_t)m * m * m, sizeof *s->t);
+    if (!s->t)
+        return -ENOMEM;
+    for (uint32_t z = 0; z < n; z++)
+        for (uint32_t y = 0; y < n; y++) {
+            uint32_t *row = s->t + 1 + (size_t)m * ((y + 1) + (size_t)m * (z + 1));
+            uint32_t acc = 0;
+            for (uint32_t x = 0; x < n; x++) {
+                acc += bytes ? bytes[x + (size_t)n * (y + (size_t)n * z)] : (uint32_t)voxel_get(g, x, y, z);
+                row[x] = acc;
+            }
+        }
+    for (uint32_t z = 1; z < m; z++)
+        for (uint32_t y = 2; y < m; y++) {
+            uint32_t *row = s->t + (size_t)m * (y + (size_t)m * z), *prev = row - m;
+            for (uint32_t x = 1; x < m; x++)
+                row[x] += prev[x];
+        }
+    size_t plane = (size_t)m * m;
+    for (uint32_t z = 2; z < m; z++) {
+        uint32_t *p = s->t + plane * z, *q = p - plane;
+        for (size_t i = 0; i < plane; i++)
+            p[i] += q[i];
+    }
+    return 0;
+}
+
+static uint32_t svt_sum(const svt *s, const ibox *b)
+{
+    size_t m = s->m;
+#define T(x, y, z) s->t[(size_t)(x) + m * ((size_t)(y) + m * (size_t)(z))]
+    int64_t v = (int64_t)T(b->hi[0], b->hi[1], b->hi[2]) - T(b->lo[0], b->hi[1], b->hi[2]) -
+                T(b->hi[0], b->lo[1], b->hi[2]) - T(b->hi[0], b->hi[1], b->lo[2]) + T(b->lo[0], b->lo[1], b->hi[2]) +
+                T(b->lo[0], b->hi[1], b->lo[2]) + T(b->hi[0], b->lo[1], b->lo[2]) - T(b->lo[0], b->lo[1], b->lo[2]);
+#undef T
+    return (uint32_t)v;
+}
+
+/* Shrinks b to the bounding box of its occupied cells; 0 if it has none. */
+static int shrink(const svt *occ, ibox *b)
+{
+    if (svt_sum(occ, b) == 0)
+        return 0;
+    for (int a = 0; a < 3; a++) {
+        /* Smallest hi with cells [lo, hi) occupied somewhere, then largest lo. */
+        uint16_t lo = b->lo[a], hi = b->hi[a];
+        ibox t = *b;
+        uint16_t l = (uint16_t)(lo + 1), h = hi;
+        while (l < h) {
+            uint16_t mid = (uint16_t)((l + h) / 2);
+            t.hi[a] = mid;
+            if (svt_sum(occ, &t) > 0)
+                h = mid;
+            else
+                l = (uint16_t)(mid + 1);
+        }
+        uint16_t first = (uint16_t)(l - 1); /* the first occupied layer */
+        t = *b;
+        l = lo;
+        h = (uint16_t)(hi - 1);
+        while (l < h) {
+            uint16_t mid = (uint16_t)((l + h + 1) / 2);
+            t.lo[a] = mid;
+            if (svt_sum(occ, &t) > 0)
+                l = mid;
+            else
+                h = (uint16_t)(mid - 1);
+        }
+        b->lo[a] = first;
+        b->hi[a] = (uint16_t)(l + 1);
+    }
+    return 1;
+}
+
+/* The price of merging a and b: wanted cells the hull adds, then empty cells
+ * it adds (the boxes are disjoint cell sets, or nearly: see merge_all). */
+typedef struct price {
+    uint64_t wanted, empty, vol;
+} price;
+
+static price price_of(const work *w, const ibox *a, const ibox *b)
+{
+    ibox h = hull(a, b);
+    price p;
+    p.vol = volume(&h);
+    uint64_t empty_h = p.vol - svt_sum(&w->occ, &h);
+    uint64_t empty_ab = (volume(a) - svt_sum(&w->occ, a)) + (volume(b) - svt_sum(&w->occ, b));
+    p.empty = empty_h > empty_ab ? empty_h - empty_ab : 0;
+    uint64_t want_h = svt_sum(&w->want, &h), want_ab = svt_sum(&w->want, a) + svt_sum(&w->want, b);
+    p.wanted = want_h > want_ab ? want_h - want_ab : 0;
+    return p;
+}
+
+static int cheaper(const price *a, const price *b)
+{
+    if (a->wanted != b->wanted)
+        return a->wanted < b->wanted;
+    return a->empty < b->empty;
+}
+
+/* A merge step 4 allows: no wanted cell, little new empty space. */
+static int allowed(const work *w, const price *p)
+{
+    return p->wanted == 0 && (double)p->empty <= w->max_empty * (double)p->vol;
+}
+
+/* Per box: its cheapest partner (ties: the lowest index) and the price. */
+typedef struct partner {
+    uint32_t j;
+    price p;
+    int has;
+} partner;
+
+static void find_best(const work *w, const ilist *l, uint32_t i, partner *out)
+{
+    out->has = 0;
+    for (uint32_t j = 0; j < l->n; j++) {
+        if (j == i)
+            continue;
+        price p = price_of(w, &l->b[i], &l->b[j]);
+        if (allowed(w, &p) && (!out->has || cheaper(&p, &out->p))) {
+            out->has = 1;
+            out->j = j;
+            out->p = p;
+        }
+    }
+}
+
+/*
+ * Step 4 on w->out: merges the cheapest allowed pair while there is one.
+ * Each box remembers its cheapest partner; a merge looks again only for the
+ * boxes that pointed at one of the pair. Returns 0 or -ENOMEM.
+ */
+static int merge_all(work *w)
+{
+    ilist *l = &w->out;
+    if (l->n < 2)
+        return 0;
+    partner *bs = cvre_malloc(l->n * sizeof *bs);
+    if (!bs)
+        return -ENOMEM;
+    for (uint32_t i = 0; i < l->n; i++)
+        find_best(w, l, i, &bs[i]);
+    for (;;) {
+        uint32_t bi = UINT32_MAX;
+        for (uint32_t k = 0; k < l->n; k++)
+            if (bs[k].has && (bi == UINT32_MAX || cheaper(&bs[k].p, &bs[bi].p)))
+                bi = k;
+        if (bi == UINT32_MAX)
+            break;
+        uint32_t i = bi < bs[bi].j ? bi : bs[bi].j, j = bi < bs[bi].j ? bs[bi].j : bi, last = l->n - 1;
+        l->b[i] = hull(&l->b[i], &l->b[j]);
+        /* Who pointed at one of the pair must look again (has = 2); j
+         * leaves, and the last box takes its place. */
+        for (uint32_t k = 0; k < l->n; k++) {
+            int stale = bs[k].has && (bs[k].j == i || bs[k].j == j);
+            if (bs[k].has && bs[k].j == last)
+                bs[k].j = j;
+            if (stale)
+                bs[k].has = 2;
+        }
+        l->b[j] = l->b[last];
+        bs[j] = bs[last];
+        l->n--;
+        for (uint32_t k = 0; k < l->n; k++) {
+            if (k == i)
+                continue;
+            if (bs[k].has == 2) {
+                find_best(w, l, k, &bs[k]);
+                continue;
+            }
+            price p = price_of(w, &l->b[k], &l->b[i]);
+            if (allowed(w, &p) && (!bs[k].has || cheaper(&p, &bs[k].p)))
+                bs[k] = (partner){.j = i, .p = p, .has = 1};
+        }
+        find_best(w, l, i, &bs[i]);
+    }
+    free(bs);
+    return 0;
+}
+
+/* A node waiting for division: the most wanted cells first, then the
+ * oldest (so the order, and the result, never depend on anything else). */
+typedef struct node {
+    ibox b;
+    uint32_t wanted;
+    uint32_t seq;
+} node;
+
+static int node_before(const node *a, const node *b)
+{
+    return a->wanted != b->wanted ? a->wanted > b->wanted : a->seq < b->seq;
+}
+
+typedef struct heap {
+    node *v;
+    uint32_t n, cap, seq;
+} heap;
+
+static int heap_push(heap *h, const ibox *b, uint32_t wanted)
+{
+    if (h->n == h->cap) {
+        uint32_t cap = h->cap ? h->cap * 2 : 64;
+        node *v = cvre_realloc(h->v, cap * sizeof *v);
+        if (!v)
+            return -ENOMEM;
+        h->v = v;
+        h->cap = cap;
+    }
+    uint32_t i = h->n++;
+    h->v[i] = (node){.b = *b, .wanted = wanted, .seq = h->seq++};
+    while (i && node_before(&h->v[i], &h->v[(i - 1) / 2])) {
+        node t = h->v[i];
+        h->v[i] = h->v[(i - 1) / 2];
+        h->v[(i - 1) / 2] = t;
+        i = (i - 1) / 2;
+    }
+    return 0;
+}
+
+static node heap_pop(heap *h)
+{
+    node top = h->v[0];
+    h->v[0] = h->v[--h->n];
+    for (uint32_t i = 0;;) {
+        uint32_t l = 2 * i + 1, r = l + 1, m = i;
+        if (l < h->n && node_before(&h->v[l], &h->v[m]))
+            m = l;
+        if (r < h->n && node_before(&h->v[r], &h->v[m]))
+            m = r;
+        if (m == i)
+            break;
+        node t = h->v[i];
+        h->v[i] = h->v[m];
+        h->v[m] = t;
+        i = m;
+    }
+    return top;
+}
+
+/* Files a shrunk, non-empty box: done if it holds no wanted cell, else
+ * waiting for division. */
+static int file_node(work *w, heap *h, const ibox *b)
+{
+    uint32_t wanted = svt_sum(&w->want, b);
+    return wanted ? heap_push(h, b, wanted) : push(&w->out, b);
+}
+
+/*
+ * Step 3, best first: the node holding the most wanted cells is halved
+ * along each axis longer than one cell (its children shrunk, the empty ones
+ * dropped), until no node holds a wanted cell or the next division would
+ * pass the budget even after merging what is done (step 4). Nodes left at
+ * the budget are kept whole, wanted cells and all (w->capped counts them).
+ * A node holding a wanted cell is never a single cell (wanted cells are
+ * empty and nodes are shrunk to occupied ones), so it always divides.
+ */
+static int divide(work *w)
+{
+    heap h = {0};
+    int rc = 0;
+    uint32_t n = w->n;
+    ibox root = {{0, 0, 0}, {(uint16_t)n, (uint16_t)n, (uint16_t)n}};
+    if (shrink(&w->occ, &root) && (rc = file_node(w, &h, &root)) < 0)
+        goto done;
+    while (h.n) {
+        node nd = heap_pop(&h);
+        ibox ch[8];
+        int nch = 0;
+        for (int c = 0; c < 8; c++) {
+            ibox b = nd.b;
+            int skip = 0;
+            for (int a = 0; a < 3; a++) {
+                int upper = (c >> a) & 1;
+                uint16_t mid = (uint16_t)((b.lo[a] + b.hi[a]) / 2);
+                if (b.hi[a] - b.lo[a] < 2)
+                    skip |= upper;
+                else if (upper)
+                    b.lo[a] = mid;
+                else
+                    b.hi[a] = mid;
+            }
+            if (!skip && shrink(&w->occ, &b))
+                ch[nch++] = b;
+        }
+        if (w->out.n + h.n + (uint32_t)nch > w->budget) {
+            if ((rc = merge_all(w)) < 0)
+                goto done;
+            if (w->out.n + h.n + (uint32_t)nch > w->budget) {
+                /* The budget is spent: what waits stays whole. */
+                if ((rc = push(&w->out, &nd.b)) < 0)
+                    goto done;
+                w->capped = 1 + h.n;
+                while (h.n) {
+                    node rest = heap_pop(&h);
+                    if ((rc = push(&w->out, &rest.b)) < 0)
+                        goto done;
+                }
+                break;
+            }
+        }
+        for (int c = 0; c < nch; c++)
+            if ((rc = file_node(w, &h, &ch[c])) < 0)
+                goto done;
+    }
+    rc = merge_all(w);
+done:
+    free(h.v);
+    return rc;
+}
+
+/*
+ * One pass of a sliding window along axis a over a dim[0] x dim[1] x dim[2]
+ * byte array of 0/1: erode (v[t] = 1 if v[t .. t+k-1] are all 1, the window
+ * inside the array) or dilate (v[t] = 1 if one of v[t-k+1 .. t] is 1).
+ * Along y and z it works on whole rows at once (the next 0 at or after t,
+ * the last 1 at or before t, kept per column in mark), so the inner loops
+ * run over contiguous memory; mark has room for dim[0] * dim[1] entries.
+ */
+static void slide(uint8_t *v, const uint32_t dim[3], int a, uint32_t k, int erode, uint16_t *mark)
+{
+    size_t row, rows_stride, groups, group_stride;
+    uint32_t len = dim[a];
+    if (a == 0) {
+        row = 1;
+        rows_stride = 1;
+        groups = (size_t)dim[1] * dim[2];
+        group_stride = dim[0];
+    } else if (a == 1) {
+        row = dim[0];
+        rows_stride = dim[0];
+        groups = dim[2];
+        group_stride = (size_t)dim[0] * dim[1];
+    } else {
+        row = (size_t)dim[0] * dim[1];
+        rows_stride = row;
+        groups = 1;
+        group_stride = 0;
+    }
+    for (size_t g = 0; g < groups; g++) {
+        uint8_t *base = v + g * group_stride;
+        if (erode) {
+            /* Backwards: mark = the next 0 at or after t (len if none). */
+            for (size_t x = 0; x < row; x++)
+                mark[x] = (uint16_t)len;
+            for (uint32_t t = len; t-- > 0;) {
+                uint8_t *r = base + t * rows_stride;
+                uint8_t ok = t + k <= len;
+                for (size_t x = 0; x < row; x++) {
+                    if (!r[x])
+                        mark[x] = (uint16_t)t;
+                    r[x] = (uint8_t)(ok & (mark[x] >= t + k));
+                }
+            }
+        } else {
+            /* Forwards: mark = 1 + the last 1 at or before t (0 if none). */
+            for (size_t x = 0; x < row; x++)
+                mark[x] = 0;
+            for (uint32_t t = 0; t < len; t++) {
+                uint8_t *r = base + t * rows_stride;
+                for (size_t x = 0; x < row; x++) {
+                    if (r[x])
+                        mark[x] = (uint16_t)(t + 1);
+                    r[x] = (uint8_t)(mark[x] && t + 1 - mark[x] < k);
+                }
+            }
+        }
+    }
+}
+
+/* Cell index of local coordinate v on axis a, rounded down or up, in 0..n. */
+static uint32_t cell_of(const voxel_grid *g, int a, double v, int up)
+{
+    if (!(g->cell[a] > 0))
+        return up ? g->n : 0;
+    double c = (v - g->min[a]) / g->cell[a];
+    c = up ? ceil(c) : floor(c);
+    return c <= 0 ? 0 : c >= g->n ? g->n : (uint32_t)c;
+}
+
+/*
+ * Step 2 for one cluster: marks in w->wanted the empty cells of its region
+ * that an avatar-sized box of free cells covers. The opening runs on the
+ * region grown by the kernel on each side, cells outside the grid free.
+ */
+static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3])
+{
+    const voxel_grid *g = &w->g;
+    uint32_t n = w->n;
+    /* Nearest face of the box: the axis users cross. */
+    int face = 0;
+    double best = INFINITY;
+    for (int a = 0; a < 3; a++) {
+        double d = fmin(fabs((double)cl->centroid[a] - g->min[a]), fabs(g->max[a] - (double)cl->centroid[a]));
+        if (d < best) {
+            best = d;
+            face = a;
+        }
+    }
+    /* Horizontal size: the smaller of x and z, so that any yaw is covered. */
+    double size[3] = {fmin(avatar[0], avatar[2]), avatar[1], fmin(avatar[0], avatar[2])};
+    uint32_t lo[3], hi[3], k[3], dim[3];
+    size_t total = 1;
+    for (int a = 0; a < 3; a++) {
+        if (a == face) {
+            lo[a] = 0;
+            hi[a] = n;
+        } else {
+            lo[a] = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
+            hi[a] = cell_of(g, a, (double)cl->max[a] + size[a] / 2, 1);
+        }
+        if (lo[a] >= hi[a])
+            return 0;
+        /* The avatar in cells, rounded down (a smaller kernel finds more
+         * space, never less), at most a quarter of the grid to bound the
+         * padded array (a tiny object's whole box is then wanted space). */
+        double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
+        uint32_t kmax = n / 4 ? n / 4 : 1;
+        k[a] = kc < 1 ? 1 : kc > kmax ? kmax : (uint32_t)kc;
+        dim[a] = hi[a] - lo[a] + 2 * k[a]; /* index i is cell lo - k + i */
+        total *= dim[a];
+    }
+    uint8_t *v = cvre_malloc(total);
+    uint16_t *mark = cvre_malloc((size_t)dim[0] * dim[1] * sizeof *mark);
+    if (!v || !mark) {
+        free(v);
+        free(mark);
+        return -ENOMEM;
+    }
+    /* 1 = free: empty cells, and every cell outside the grid. */
+    memset(v, 1, total);
+    for (uint32_t z = 0; z < dim[2]; z++) {
+        int64_t cz = (int64_t)lo[2] - k[2] + z;
+        for (uint32_t y = 0; y < dim[1] && cz >= 0 && cz < n; y++) {
+            int64_t cy = (int64_t)lo[1] - k[1] + y;
+            if (cy < 0 || cy >= n)
+                continue;
+            uint8_t *row = v + (size_t)dim[0] * (y + (size_t)dim[1] * z);
+            int64_t x0 = (int64_t)lo[0] - k[0];
+            for (int64_t cx = x0 < 0 ? 0 : x0; cx < n && cx - x0 < dim[0]; cx++)
+                row[cx - x0] = (uint8_t)!voxel_get(g, (uint32_t)cx, (uint32_t)cy, (uint32_t)cz);
+        }
+    }
+    for (int a = 0; a < 3; a++)
+        slide(v, dim, a, k[a], 1, mark);
+    for (int a = 0; a < 3; a++)
+        slide(v, dim, a, k[a], 0, mark);
+    for (uint32_t z = lo[2]; z < hi[2]; z++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++)
+            for (uint32_t x = lo[0]; x < hi[0]; x++)
+                if (v[(x - lo[0] + k[0]) + (size_t)dim[0] * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]))])
+                    w->wanted[x + (size_t)n * (y + (size_t)n * z)] = 1;
+    free(v);
+    free(mark);
+    return 0;
+}
+
+static void work_free(work *w)
+{
+    voxel_grid_free(&w->g);
+    free(w->occ.t);
+    free(w->want.t);
+    free(w->wanted);
+    free(w->out.b);
+    memset(w, 0, sizeof *w);
+}
+
+/* Steps 1 to 5 for one problem box, into at most budget boxes (w->out).
+ * Adds to the result's counts and times. */
+static int refine_box(work *w, const ecm_params *p, const float box[6], const float *tris, uint32_t ntris,
+                      const ecm_cluster *cl, uint32_t ncl, uint32_t box_index, uint32_t budget, ecm_result *r)
+{
+    struct timespec t0;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    memset(w, 0, sizeof *w);
+    w->max_empty = p->max_empty;
+    w->budget = budget;
+    int rc = voxel_grid_init(&w->g, p->depth, box, box + 3);
+    if (rc < 0)
+        return rc;
+    if ((rc = voxel_mark(&w->g, tris, ntris)) < 0)
+        return rc;
+    r->voxel_ms += ms_since(&t0);
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    uint32_t n = w->n = w->g.n;
+    size_t cells = (size_t)n * n * n;
+    w->wanted = cvre_calloc(cells, 1);
+    if (!w->wanted)
+        return -ENOMEM;
+    for (uint32_t i = 0; i < ncl; i++)
+        if (cl[i].box == box_index && (rc = mark_wanted(w, &cl[i], p->avatar)) < 0)
+            return rc;
+    if ((rc = svt_build(&w->occ, &w->g, NULL)) < 0 || (rc = svt_build(&w->want, &w->g, w->wanted)) < 0 ||
+        (rc = divide(w)) < 0)
+        return rc;
+    ibox all = {{0, 0, 0}, {(uint16_t)n, (uint16_t)n, (uint16_t)n}};
+    r->cells += cells;
+    r->occupied += w->g.occupied;
+    r->wanted += svt_sum(&w->want, &all);
+    r->capped += w->capped;
+    r->divide_ms += ms_since(&t0);
+    return 0;
+}
+
+/* Local float coordinates of a box of cells, rounded outwards and clamped
+ * to the problem box. */
+static void to_local(const voxel_grid *g, const float box[6], const ibox *b, float out[6])
+{
+    for (int a = 0; a < 3; a++) {
+        double lo = g->min[a] + g->cell[a] * b->lo[a], hi = g->min[a] + g->cell[a] * b->hi[a];
+        float flo = b->lo[a] == 0 ? box[a] : (float)lo, fhi = b->hi[a] == g->n ? box[3 + a] : (float)hi;
+        if ((double)flo > lo)
+            flo = nextafterf(flo, -INFINITY);
+        if ((double)fhi < hi)
+            fhi = nextafterf(fhi, INFINITY);
+        out[a] = flo < box[a] ? box[a] : flo;
+        out[3 + a] = fhi > box[3 + a] ? box[3 + a] : fhi;
+    }
+}
+
+/* A problem box's result in local coordinates. */
+typedef struct flist {
+    float (*b)[6];
+    uint32_t n;
+} flist;
+
+/* Moves w's boxes, as local coordinates, into *l. */
+static int take_boxes(const work *w, const float box[6], flist *l)
+{
+    l->n = 0;
+    l->b = cvre_malloc((w->out.n ? w->out.n : 1) * sizeof *l->b);
+    if (!l->b)
+        return -ENOMEM;
+    for (uint32_t j = 0; j < w->out.n; j++)
+        to_local(&w->g, box, &w->out.b[j], l->b[l->n++]);
+    return 0;
+}
+
+static int finite_all(const float *v, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return 0;
+    return 1;
+}
+
+int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
+               const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    if (p->depth < ECM_DEPTH_MIN || p->depth > ECM_DEPTH_MAX)
+        return fail(err, errlen, -EINVAL, "grid depth %u is outside %u..%u", p->depth, ECM_DEPTH_MIN, ECM_DEPTH_MAX);
+    if (p->max_boxes < 1 || p->max_boxes > ECM_MAX_BOXES_LIMIT)
+        return fail(err, errlen, -EINVAL, "max boxes %u is outside 1..%u", p->max_boxes, ECM_MAX_BOXES_LIMIT);
+    if (!(p->max_empty >= 0 && p->max_empty <= 1))
+        return fail(err, errlen, -EINVAL, "max empty share %g is outside 0..1", p->max_empty);
+    for (int a = 0; a < 3; a++)
+        if (!(p->avatar[a] > 0) || !isfinite(p->avatar[a]))
+            return fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
+    if (ntris == 0 || !tris)
+        return fail(err, errlen, -EINVAL, "the object has no triangles");
+    if (!finite_all(tris, (size_t)ntris * 9))
+        return fail(err, errlen, -EINVAL, "a triangle has a coordinate that is not finite");
+    if (nboxes == 0 || nboxes > ECM_MAX_BOXES_LIMIT || !boxes)
+        return fail(err, errlen, -EINVAL, "the object has %u boxes (1..%u)", nboxes, ECM_MAX_BOXES_LIMIT);
+    for (uint32_t i = 0; i < nboxes; i++) {
+        if (!finite_all(boxes[i], 6))
+            return fail(err, errlen, -EINVAL, "box %u has a coordinate that is not finite", i);
+        for (int a = 0; a < 3; a++)
+            if (boxes[i][a] > boxes[i][3 + a])
+                return fail(err, errlen, -EINVAL, "box %u is inside out", i);
+    }
+    for (uint32_t i = 0; i < nclusters; i++) {
+        if (clusters[i].box >= nboxes)
+            return fail(err, errlen, -EINVAL, "cluster %u names box %u of %u", i, clusters[i].box, nboxes);
+        if (!finite_all(clusters[i].min, 3) || !finite_all(clusters[i].max, 3) ||
+            !finite_all(clusters[i].centroid, 3))
+            return fail(err, errlen, -EINVAL, "cluster %u has a coordinate that is not finite", i);
+    }
+
+    int rc = -ENOMEM;
+    uint8_t *problem = cvre_calloc(nboxes, 1);
+    flist *lists = cvre_calloc(nboxes, sizeof *lists);
+    work w = {0};
+    if (!problem || !lists)
+        goto done;
+    uint32_t kept = nboxes, nproblem = 0;
+    for (uint32_t i = 0; i < nclusters; i++)
+        if (!problem[clusters[i].box]) {
+            problem[clusters[i].box] = 1;
+            kept--;
+            nproblem++;
+        }
+    /* Each problem box may become an equal share of what the kept boxes
+     * leave of max_boxes (the first ones get the remainder), at least one. */
+    uint32_t room = p->max_boxes > kept ? p->max_boxes - kept : 0, given = 0;
+    for (uint32_t i = 0; i < nboxes; i++) {
+        if (!problem[i])
+            continue;
+        uint32_t budget = room / nproblem + (given < room % nproblem);
+        given++;
+        if ((rc = refine_box(&w, p, boxes[i], tris, ntris, clusters, nclusters, i, budget ? budget : 1, out)) < 0 ||
+            (rc = take_boxes(&w, boxes[i], &lists[i])) < 0)
+            goto done;
+        work_free(&w);
+    }
+    uint64_t total = kept;
+    for (uint32_t i = 0; i < nboxes; i++)
+        total += problem[i] ? lists[i].n : 0;
+    out->boxes = cvre_malloc((size_t)total * sizeof *out->boxes);
+    if (!out->boxes)
+        goto done;
+    for (uint32_t i = 0; i < nboxes; i++)
+        if (!problem[i])
+            memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
+    for (uint32_t i = 0; i < nboxes; i++)
+        if (problem[i]) {
+            memcpy(out->boxes + out->count, lists[i].b, lists[i].n * sizeof *lists[i].b);
+            out->count += lists[i].n;
+        }
+    out->problem_boxes = nproblem;
+    rc = 0;
+done:
+    if (rc == -ENOMEM)
+        fail(err, errlen, rc, "out of memory");
+    else if (rc < 0)
+        fail(err, errlen, rc, "digitization failed: %s", strerror(-rc));
+    work_free(&w);
+    if (lists)
+        for (uint32_t i = 0; i < nboxes; i++)
+            free(lists[i].b);
+    free(lists);
+    free(problem);
+    if (rc < 0)
+        ecm_result_free(out);
+    return rc;
+}
