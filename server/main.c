@@ -7,8 +7,9 @@
 #include <string.h>
 #include <sys/resource.h>
 
-#include "srv_limits.h"
 #include "log.h"
+#include "refine.h"
+#include "srv_limits.h"
 #include "server.h"
 
 static const char usage[] =
@@ -32,6 +33,14 @@ static const char usage[] =
     "  --world FILE              preload the objects a world file lists (see server/worlds/)\n"
     "  --max-upload BYTES        largest model file a client may upload (default 16777216)\n"
     "  --max-triangles N         most triangles in one model (default 4000000)\n"
+    "  --refine-interval S       seconds between looks at new collisions for clusters\n"
+    "                            and refinements; 0 turns the online loop off (default 10)\n"
+    "  --refine-eps M            cluster radius in metres (default 0.5)\n"
+    "  --refine-min-points N     collisions within eps to make a cluster core (default 10)\n"
+    "  --refine-min-users N      distinct users a cluster needs (default 3)\n"
+    "  --refine-depth D          refinement grid: 2^D cells per axis of a box, 2..8 (default 7)\n"
+    "  --refine-max-boxes N      most boxes per object, 1..1024 (default 64)\n"
+    "  --refine-max-empty F      share of a merged box that may be empty space, 0..1 (default 0.25)\n"
     "  --stats-file FILE         append per-interval figures as JSON lines\n"
     "  --stats-interval S        seconds between stats lines (default 10)\n"
     "  --log-level LEVEL         debug, info, warn or error (default info)\n"
@@ -80,7 +89,8 @@ static void raise_fd_limit(uint32_t max_clients)
 int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
-           O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS };
+           O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -92,7 +102,10 @@ int main(int argc, char **argv)
         {"log-level", required_argument, 0, O_LOG}, {"help", no_argument, 0, O_HELP},
         {"version", no_argument, 0, O_VERSION}, {"world", required_argument, 0, O_WORLD_FILE},
         {"max-upload", required_argument, 0, O_MAX_UPLOAD}, {"max-triangles", required_argument, 0, O_MAX_TRIS},
-        {0, 0, 0, 0}};
+        {"refine-interval", required_argument, 0, O_R_INT}, {"refine-eps", required_argument, 0, O_R_EPS},
+        {"refine-min-points", required_argument, 0, O_R_MINP}, {"refine-min-users", required_argument, 0, O_R_MINU},
+        {"refine-depth", required_argument, 0, O_R_DEPTH}, {"refine-max-boxes", required_argument, 0, O_R_BOXES},
+        {"refine-max-empty", required_argument, 0, O_R_EMPTY}, {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
     int o;
@@ -114,6 +127,17 @@ int main(int argc, char **argv)
         case O_WORLD_FILE: cfg.world_file = optarg; break;
         case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, 1024.0 * 1024 * 1024); break;
         case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, 100000000); break;
+        case O_R_INT: cfg.refine_interval_s = number("refine-interval", optarg, 0, 86400); break;
+        case O_R_EPS: cfg.refine_eps = number("refine-eps", optarg, 0.001, 1000); break;
+        case O_R_MINP: cfg.refine_min_points = (uint32_t)integer("refine-min-points", optarg, 1, 1000000); break;
+        case O_R_MINU: cfg.refine_min_users = (uint32_t)integer("refine-min-users", optarg, 1, 1000000); break;
+        case O_R_DEPTH:
+            cfg.refine_depth = (uint32_t)integer("refine-depth", optarg, ECM_DEPTH_MIN, ECM_DEPTH_MAX);
+            break;
+        case O_R_BOXES:
+            cfg.refine_max_boxes = (uint32_t)integer("refine-max-boxes", optarg, 1, ECM_MAX_BOXES_LIMIT);
+            break;
+        case O_R_EMPTY: cfg.refine_max_empty = number("refine-max-empty", optarg, 0, 1); break;
         case O_STATS_INT: cfg.stats_interval_ms = (uint32_t)(number("stats-interval", optarg, 0.1, 86400) * 1000); break;
         case O_LOG: {
             int level = log_parse_level(optarg);

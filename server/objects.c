@@ -1,8 +1,8 @@
 /*
  * objects.c: the server's side of objects: uploads in chunks, imports on the
  * importer thread, placement and removal by their owners, the scene restored
- * from the database and preloaded from a world file, and OBJECT_INFO for
- * every client.
+ * from the database and preloaded from a world file, new collision maps from
+ * the refiner thread, and OBJECT_INFO for every client.
  */
 #include <errno.h>
 #include <libgen.h>
@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "alloc.h"
+#include "ecm.h"
 #include "log.h"
 #include "scene/import.h"
 #include "serverInt.h"
@@ -198,6 +199,37 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
         const scene_object *o = scene_get(s->scene, r.object_id);
         log_info("object %u \"%s\" of %s imported: %u triangles", o->id, o->name, o->owner, o->tri_count);
         broadcast_info(s, o, c, r.upload_id);
+    }
+}
+
+/* Takes the refiner's new collision maps: each replaces its object's boxes
+ * between two ticks, and every client hears of it. An avatar that the new
+ * boxes enclose is not trapped (move.h's inside policy). */
+static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)loop;
+    (void)fd;
+    (void)events;
+    server *s = data;
+    refiner_update u;
+    while (refiner_take(s->refiner, &u) == 0) {
+        const scene_object *o = scene_get(s->scene, u.object_id);
+        if (!o || u.version <= o->ecm_version) {
+            refiner_update_free(&u);
+            continue; /* removed, or already in force */
+        }
+        uint32_t before = o->box_count, old_version = o->ecm_version;
+        _Static_assert(sizeof(scene_box) == sizeof *u.boxes, "a box is six floats");
+        int rc = scene_set_ecm(s->scene, u.object_id, u.version, (const scene_box *)u.boxes, u.count);
+        refiner_update_free(&u);
+        if (rc < 0) {
+            log_error("object %u: cannot take collision map v%u: %s", u.object_id, u.version, strerror(-rc));
+            continue;
+        }
+        o = scene_get(s->scene, u.object_id);
+        log_info("object %u \"%s\": collision map v%u -> v%u in force, %u -> %u boxes", o->id, o->name, old_version,
+                 o->ecm_version, before, o->box_count);
+        broadcast_info(s, o, NULL, 0);
     }
 }
 
@@ -453,7 +485,9 @@ int objects__start(server *s, char *err, size_t errlen)
         snprintf(err, errlen, "out of memory");
         return -1;
     }
-    if (db_objects_load(s->db, restore_one, s) < 0) {
+    /* Changes after this point reach the scene through the refiner. */
+    int64_t feed_head;
+    if (db_ecm_events_head(s->db, &feed_head) < 0 || db_objects_load(s->db, restore_one, s) < 0) {
         snprintf(err, errlen, "database %s: %s", s->cfg.db_path, db_error(s->db));
         return -1;
     }
@@ -468,11 +502,36 @@ int objects__start(server *s, char *err, size_t errlen)
         snprintf(err, errlen, "event loop setup failed");
         return -1;
     }
+    const server_config *c = &s->cfg;
+    refiner_config rcfg = {.db_path = c->db_path, .feed_after = feed_head, .interval_s = c->refine_interval_s,
+                         .cluster = {.eps = c->refine_eps, .min_points = c->refine_min_points,
+                                     .min_users = c->refine_min_users, .threads = 1}};
+    ecm_params_default(&rcfg.ecm);
+    rcfg.ecm.depth = c->refine_depth;
+    rcfg.ecm.max_boxes = c->refine_max_boxes;
+    rcfg.ecm.max_empty = c->refine_max_empty;
+    s->refiner = refiner_start(&rcfg, err, errlen);
+    if (!s->refiner)
+        return -1;
+    if (ev_io_add(s->loop, refiner_fd(s->refiner), EV_READ, on_refiner_updates, s) < 0) {
+        snprintf(err, errlen, "event loop setup failed");
+        return -1;
+    }
+    if (c->refine_interval_s > 0)
+        log_info("collision maps: looking for clusters every %g s (eps %g m, %u collisions, %u users; grid 2^%u, "
+                 "at most %u boxes)",
+                 c->refine_interval_s, c->refine_eps, c->refine_min_points, c->refine_min_users, c->refine_depth,
+                 c->refine_max_boxes);
     return 0;
 }
 
 void objects__stop(server *s)
 {
+    if (s->refiner) {
+        ev_io_del(s->loop, refiner_fd(s->refiner));
+        refiner_stop(s->refiner);
+        s->refiner = NULL;
+    }
     if (s->importer) {
         ev_io_del(s->loop, importer_fd(s->importer));
         importer_stop(s->importer);

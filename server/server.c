@@ -22,6 +22,8 @@
 #include "srv_limits.h"
 #include "log.h"
 #include "proto.h"
+#include "record.h"
+#include "refine.h"
 #include "serverInt.h"
 #include "world.h"
 
@@ -53,6 +55,13 @@ void server_config_defaults(server_config *cfg)
         .max_upload = SRV_MAX_UPLOAD_DEFAULT,
         .max_triangles = SRV_MAX_TRIANGLES_DEFAULT,
         .world_file = NULL,
+        .refine_interval_s = SRV_REFINE_INTERVAL_DEFAULT,
+        .refine_eps = CLUSTER_EPS_DEFAULT,
+        .refine_min_points = CLUSTER_MIN_POINTS_DEFAULT,
+        .refine_min_users = CLUSTER_MIN_USERS_DEFAULT,
+        .refine_depth = ECM_DEPTH_DEFAULT,
+        .refine_max_boxes = ECM_MAX_BOXES_DEFAULT,
+        .refine_max_empty = ECM_MAX_EMPTY_DEFAULT,
     };
 }
 

@@ -27,6 +27,14 @@ typedef struct server_config {
     uint32_t max_upload;    /* bytes of one model file */
     uint32_t max_triangles; /* of one model */
     const char *world_file; /* objects to preload; NULL: none */
+    /* The collision map's online loop (refiner.h). */
+    double refine_interval_s;  /* 0: off (changes from other processes still arrive) */
+    double refine_eps;         /* DBSCAN radius, m */
+    uint32_t refine_min_points;
+    uint32_t refine_min_users;
+    uint32_t refine_depth;     /* grid 2^depth per axis */
+    uint32_t refine_max_boxes; /* per object */
+    double refine_max_empty;   /* share of a merged box that may be new empty space */
 } server_config;
 
 typedef struct server server;

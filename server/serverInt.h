@@ -13,6 +13,7 @@
 #include "ev.h"
 #include "importer.h"
 #include "proto.h"
+#include "refiner.h"
 #include "scene/scene.h"
 #include "server.h"
 #include "world.h"
@@ -112,6 +113,7 @@ struct server {
     /* Objects (objects.c). */
     scene *scene;
     importer *importer;
+    refiner *refiner;    /* new collision maps from the online loop and the store */
     size_t upload_bytes; /* held by unfinished uploads, all clients */
 };
 

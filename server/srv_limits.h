@@ -84,6 +84,11 @@
  * model here (the city block has 400,020) and still fits in memory. */
 #define SRV_MAX_TRIANGLES_DEFAULT 4000000u
 
+/* The online loop looks for clusters every 10 s: a crowd stopped at a
+ * doorway gets it opened within seconds, and a quiet world costs one
+ * indexed read of new rows per interval. */
+#define SRV_REFINE_INTERVAL_DEFAULT 10.0
+
 /* At shutdown the last session records may wait this long for the lock. */
 #define SRV_DB_BUSY_SHUTDOWN_MS 5000
 

@@ -3,8 +3,10 @@
  * reads the collisions against the object's current ECM version, in
  * object-local coordinates, clusters them with DBSCAN (dbscan.h) and writes
  * a run record and one row per cluster, each naming the ECM box the cluster
- * presses on (the problem box). Safe beside a running server: it reads in
- * one snapshot (WAL) and writes its results in one short transaction.
+ * presses on (the problem box). With --apply it then refines each object
+ * with clusters (server/ecm/apply.h) and writes its next ECM version, which
+ * a running server picks up and publishes. Safe beside a running server: it
+ * reads in one snapshot (WAL) and writes in short transactions.
  */
 #include <errno.h>
 #include <getopt.h>
@@ -17,8 +19,10 @@
 #include <unistd.h>
 
 #include "alloc.h"
+#include "apply.h"
 #include "db.h"
 #include "dbscan.h"
+#include "record.h"
 
 enum { EXIT_OK = 0, EXIT_USAGE = 2, EXIT_DB = 3, EXIT_INTERNAL = 4 };
 
@@ -39,11 +43,18 @@ static const char usage[] =
     "  --object ID        only this object (repeatable)\n"
     "  --since T, --until T  only collisions in this window (Unix seconds or\n"
     "                     YYYY-MM-DDTHH:MM:SS, UTC)\n"
+    "  --apply            refine every object with clusters and write its next\n"
+    "                     collision map version (a running server publishes it)\n"
+    "  --depth D          with --apply: grid of 2^D cells per axis of a box, 2..8 (default 7)\n"
+    "  --max-boxes N      with --apply: most boxes per object, 1..1024 (default 64)\n"
+    "  --max-empty F      with --apply: share of a merged box that may be empty, 0..1\n"
+    "                     (default 0.25)\n"
     "  --json             print the result as one JSON object\n"
     "  --help, --version\n"
     "\n"
     "Exit codes: 0 done (clusters or not: see the summary), 2 bad arguments,\n"
-    "3 database missing, of another schema version or unusable, 4 internal error.\n";
+    "3 database missing, of another schema version or unusable, 4 internal error\n"
+    "or an object that could not be refined (the others were).\n";
 
 typedef struct object_row {
     int64_t id;
@@ -51,12 +62,6 @@ typedef struct object_row {
     float (*boxes)[6];
     uint32_t nboxes;
 } object_row;
-
-typedef struct found_cluster {
-    size_t object; /* index in the objects read */
-    uint32_t cluster_id, box;
-    dbscan_cluster c;
-} found_cluster;
 
 typedef struct points {
     float *xyz;
@@ -96,26 +101,6 @@ static int parse_time(const char *s, double *out)
     return 0;
 }
 
-/* The ECM box of o that contains p, or else the nearest one. */
-static uint32_t problem_box(const object_row *o, const float p[3])
-{
-    uint32_t best = 0;
-    double best_d = INFINITY;
-    for (uint32_t i = 0; i < o->nboxes; i++) {
-        double d = 0;
-        for (int k = 0; k < 3; k++) {
-            double lo = o->boxes[i][k], hi = o->boxes[i][3 + k];
-            double e = p[k] < lo ? lo - p[k] : p[k] > hi ? p[k] - hi : 0;
-            d += e * e;
-        }
-        if (d < best_d) {
-            best_d = d;
-            best = i;
-        }
-    }
-    return best;
-}
-
 static void push_point(points *pt, const float xyz[3], uint32_t user)
 {
     if (pt->n == pt->cap) {
@@ -129,16 +114,23 @@ static void push_point(points *pt, const float xyz[3], uint32_t user)
 
 int main(int argc, char **argv)
 {
-    enum { O_DB = 256, O_EPS, O_MINP, O_MINU, O_OBJ, O_SINCE, O_UNTIL, O_JSON, O_HELP, O_VERSION };
+    enum { O_DB = 256, O_EPS, O_MINP, O_MINU, O_OBJ, O_SINCE, O_UNTIL, O_JSON, O_HELP, O_VERSION, O_APPLY, O_DEPTH,
+           O_BOXES, O_EMPTY };
     static const struct option opts[] = {
         {"db", required_argument, 0, O_DB},         {"eps", required_argument, 0, O_EPS},
         {"min-points", required_argument, 0, O_MINP}, {"min-users", required_argument, 0, O_MINU},
         {"object", required_argument, 0, O_OBJ},    {"since", required_argument, 0, O_SINCE},
         {"until", required_argument, 0, O_UNTIL},   {"json", no_argument, 0, O_JSON},
         {"help", no_argument, 0, O_HELP},           {"version", no_argument, 0, O_VERSION},
+        {"apply", no_argument, 0, O_APPLY},         {"depth", required_argument, 0, O_DEPTH},
+        {"max-boxes", required_argument, 0, O_BOXES}, {"max-empty", required_argument, 0, O_EMPTY},
         {0, 0, 0, 0}};
     const char *path = "cvre.db";
-    dbscan_params prm = {.eps = 0.5, .min_points = 10, .min_users = 3, .threads = 0};
+    dbscan_params prm = {.eps = CLUSTER_EPS_DEFAULT, .min_points = CLUSTER_MIN_POINTS_DEFAULT,
+                         .min_users = CLUSTER_MIN_USERS_DEFAULT, .threads = 0};
+    ecm_params ep;
+    ecm_params_default(&ep);
+    int apply = 0;
     double since = -INFINITY, until = INFINITY;
     int json = 0, has_since = 0, has_until = 0, o;
     int64_t only[MAX_OBJECT_FLAGS];
@@ -177,6 +169,22 @@ int main(int argc, char **argv)
             *(o == O_SINCE ? &has_since : &has_until) = 1;
             break;
         case O_JSON: json = 1; break;
+        case O_APPLY: apply = 1; break;
+        case O_DEPTH:
+        case O_BOXES: {
+            long v = strtol(optarg, &end, 10);
+            long lo = o == O_DEPTH ? ECM_DEPTH_MIN : 1, hi = o == O_DEPTH ? ECM_DEPTH_MAX : ECM_MAX_BOXES_LIMIT;
+            if (end == optarg || *end || v < lo || v > hi)
+                return fail_usage("--%s wants a whole number from %ld to %ld, not \"%s\"",
+                                  o == O_DEPTH ? "depth" : "max-boxes", lo, hi, optarg);
+            *(o == O_DEPTH ? &ep.depth : &ep.max_boxes) = (uint32_t)v;
+            break;
+        }
+        case O_EMPTY:
+            ep.max_empty = strtod(optarg, &end);
+            if (end == optarg || *end || !(ep.max_empty >= 0 && ep.max_empty <= 1))
+                return fail_usage("--max-empty wants a share from 0 to 1, not \"%s\"", optarg);
+            break;
         case O_HELP: fputs(usage, stdout); return EXIT_OK;
         case O_VERSION: printf("cvre-cluster %s\n", CVRE_VERSION); return EXIT_OK;
         default: fputs("cvre-cluster: try --help\n", stderr); return EXIT_USAGE;
@@ -210,10 +218,12 @@ int main(int argc, char **argv)
     sqlite3_stmt *st = NULL;
     points pt = {0};
     int32_t *labels = NULL;
-    uint64_t total_points = 0, total_clusters = 0, problem_boxes = 0;
+    uint64_t total_points = 0;
     int64_t run_id = 0;
-    found_cluster *found = NULL;
+    cluster_found *found = NULL;
     size_t nfound = 0;
+    ecm_applied *applied = NULL; /* per object, with --apply */
+    int *outcome = NULL, refused = 0;
 
     /* One read snapshot for everything read. */
     if (sqlite3_exec(sql, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
@@ -286,9 +296,10 @@ int main(int argc, char **argv)
         }
         for (size_t k = 0; k < dbscan_result_count(res); k++) {
             found = xrealloc(found, (nfound + 1) * sizeof *found);
-            found[nfound] = (found_cluster){.object = i, .cluster_id = (uint32_t)k,
-                                            .c = *dbscan_result_cluster(res, k)};
-            found[nfound].box = problem_box(&objs[i], found[nfound].c.centroid);
+            found[nfound] = (cluster_found){.object_id = objs[i].id, .ecm_version = objs[i].version,
+                                            .cluster_id = (uint32_t)k, .c = *dbscan_result_cluster(res, k)};
+            found[nfound].box = cluster_problem_box((const float(*)[6])objs[i].boxes, objs[i].nboxes,
+                                                    found[nfound].c.centroid);
             nfound++;
         }
         dbscan_result_free(res);
@@ -302,95 +313,110 @@ int main(int argc, char **argv)
     st = NULL;
     if (sqlite3_exec(sql, "COMMIT", NULL, NULL, NULL) != SQLITE_OK)
         goto db_fail;
-    total_clusters = nfound;
+    cluster_run run = {.started = started, .finished = db_now(), .params = prm, .has_since = has_since,
+                       .has_until = has_until, .since = since, .until = until, .objects = nobjs,
+                       .points = total_points};
+    if (cluster_record(d, &run, found, nfound, &run_id, err, sizeof err) < 0) {
+        fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
+        rc = EXIT_DB;
+        goto done;
+    }
+    uint64_t problem_boxes = 0;
     for (size_t k = 0; k < nfound; k++) {
         int dup = 0;
-        for (size_t j = 0; j < k; j++)
-            dup |= found[j].object == found[k].object && found[j].box == found[k].box;
+        for (size_t j = 0; j < k && !dup; j++)
+            dup = found[j].object_id == found[k].object_id && found[j].box == found[k].box;
         problem_boxes += !dup;
     }
 
-    /* Results in one short write transaction. */
-    if (db_begin(d) < 0 ||
-        sqlite3_prepare_v2(sql,
-                           "INSERT INTO cluster_runs(started_at, finished_at, eps, min_points, min_users, since, "
-                           "until, objects, points, clusters, problem_boxes) "
-                           "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
-                           -1, &st, NULL) != SQLITE_OK)
-        goto db_fail;
-    sqlite3_bind_double(st, 1, started);
-    sqlite3_bind_double(st, 2, db_now());
-    sqlite3_bind_double(st, 3, prm.eps);
-    sqlite3_bind_int64(st, 4, prm.min_points);
-    sqlite3_bind_int64(st, 5, prm.min_users);
-    if (has_since)
-        sqlite3_bind_double(st, 6, since);
-    if (has_until)
-        sqlite3_bind_double(st, 7, until);
-    sqlite3_bind_int64(st, 8, (sqlite3_int64)nobjs);
-    sqlite3_bind_int64(st, 9, (sqlite3_int64)total_points);
-    sqlite3_bind_int64(st, 10, (sqlite3_int64)total_clusters);
-    sqlite3_bind_int64(st, 11, (sqlite3_int64)problem_boxes);
-    if (sqlite3_step(st) != SQLITE_DONE)
-        goto db_fail;
-    run_id = sqlite3_last_insert_rowid(sql);
-    sqlite3_finalize(st);
-    st = NULL;
-    if (sqlite3_prepare_v2(sql,
-                           "INSERT INTO clusters(run_id, object_id, ecm_version, cluster_id, points, users, "
-                           "centroid_x, centroid_y, centroid_z, min_x, min_y, min_z, max_x, max_y, max_z, "
-                           "box_index) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, "
-                           "?16)",
-                           -1, &st, NULL) != SQLITE_OK)
-        goto db_fail;
-    for (size_t k = 0; k < nfound; k++) {
-        const found_cluster *f = &found[k];
-        sqlite3_bind_int64(st, 1, run_id);
-        sqlite3_bind_int64(st, 2, objs[f->object].id);
-        sqlite3_bind_int64(st, 3, objs[f->object].version);
-        sqlite3_bind_int64(st, 4, f->cluster_id);
-        sqlite3_bind_int64(st, 5, f->c.points);
-        sqlite3_bind_int64(st, 6, f->c.users);
-        for (int j = 0; j < 3; j++) {
-            sqlite3_bind_double(st, 7 + j, (double)f->c.centroid[j]);
-            sqlite3_bind_double(st, 10 + j, (double)f->c.min[j]);
-            sqlite3_bind_double(st, 13 + j, (double)f->c.max[j]);
+    /* --apply: each object's clusters (consecutive in found) refine it. */
+    applied = xcalloc(nobjs ? nobjs : 1, sizeof *applied);
+    outcome = xcalloc(nobjs ? nobjs : 1, sizeof *outcome);
+    for (size_t i = 0, k = 0; apply && i < nobjs; i++) {
+        size_t first = k;
+        while (k < nfound && found[k].object_id == objs[i].id)
+            k++;
+        outcome[i] = -2; /* no clusters: not refined */
+        if (k == first)
+            continue;
+        ecm_cluster *cl = xmalloc((k - first) * sizeof *cl);
+        uint32_t *ids = xmalloc((k - first) * sizeof *ids);
+        for (size_t j = first; j < k; j++) {
+            ecm_cluster *c = &cl[j - first];
+            c->box = found[j].box;
+            memcpy(c->min, found[j].c.min, sizeof c->min);
+            memcpy(c->max, found[j].c.max, sizeof c->max);
+            memcpy(c->centroid, found[j].c.centroid, sizeof c->centroid);
+            ids[j - first] = found[j].cluster_id;
         }
-        sqlite3_bind_int64(st, 16, f->box);
-        if (sqlite3_step(st) != SQLITE_DONE)
-            goto db_fail;
-        sqlite3_reset(st);
+        outcome[i] = ecm_apply(d, &ep, objs[i].id, objs[i].version, run_id, cl, ids, (uint32_t)(k - first),
+                               &applied[i], err, sizeof err);
+        free(cl);
+        free(ids);
+        if (outcome[i] == ECM_APPLY_DB_ERROR) {
+            fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
+            rc = EXIT_DB;
+            goto done;
+        }
+        if (outcome[i] == ECM_APPLY_REFUSED) {
+            fprintf(stderr, "cvre-cluster: %s; not refined\n", err);
+            refused++;
+        }
     }
-    sqlite3_finalize(st);
-    st = NULL;
-    if (db_commit(d) < 0)
-        goto db_fail;
 
     if (json) {
         printf("{\"run\":%lld,\"objects\":%zu,\"points\":%llu,\"clusters\":[", (long long)run_id, nobjs,
                (unsigned long long)total_points);
         for (size_t k = 0; k < nfound; k++) {
-            const found_cluster *f = &found[k];
+            const cluster_found *f = &found[k];
             printf("%s{\"object\":%lld,\"ecm_version\":%u,\"cluster\":%u,\"points\":%u,\"users\":%u,"
                    "\"centroid\":[%.4f,%.4f,%.4f],\"min\":[%.4f,%.4f,%.4f],\"max\":[%.4f,%.4f,%.4f],\"box\":%u}",
-                   k ? "," : "", (long long)objs[f->object].id, objs[f->object].version, f->cluster_id,
-                   f->c.points, f->c.users, (double)f->c.centroid[0], (double)f->c.centroid[1],
-                   (double)f->c.centroid[2], (double)f->c.min[0], (double)f->c.min[1], (double)f->c.min[2],
-                   (double)f->c.max[0], (double)f->c.max[1], (double)f->c.max[2], f->box);
+                   k ? "," : "", (long long)f->object_id, f->ecm_version, f->cluster_id, f->c.points, f->c.users,
+                   (double)f->c.centroid[0], (double)f->c.centroid[1], (double)f->c.centroid[2],
+                   (double)f->c.min[0], (double)f->c.min[1], (double)f->c.min[2], (double)f->c.max[0],
+                   (double)f->c.max[1], (double)f->c.max[2], f->box);
         }
-        printf("],\"problem_boxes\":%llu}\n", (unsigned long long)problem_boxes);
+        printf("],\"problem_boxes\":%llu,\"refined\":[", (unsigned long long)problem_boxes);
+        int first = 1;
+        for (size_t i = 0; i < nobjs; i++) {
+            if (!apply || outcome[i] == -2)
+                continue;
+            static const char *const names[] = {"written", "unchanged", "stale"};
+            const ecm_applied *a = &applied[i];
+            printf("%s{\"object\":%lld,\"from\":%u,\"outcome\":\"%s\",\"version\":%u,\"boxes_before\":%u,"
+                   "\"boxes_after\":%u,\"capped\":%u,\"voxel_ms\":%.3f,\"divide_ms\":%.3f,\"total_ms\":%.3f}",
+                   first ? "" : ",", (long long)objs[i].id, objs[i].version,
+                   outcome[i] >= 0 ? names[outcome[i]] : "refused", a->version, a->boxes_before, a->boxes_after,
+                   a->stats.capped, a->stats.voxel_ms, a->stats.divide_ms, a->total_ms);
+            first = 0;
+        }
+        printf("]}\n");
     } else {
-        printf("run %lld: %zu objects, %llu collisions, %llu clusters, %llu problem boxes "
+        printf("run %lld: %zu objects, %llu collisions, %zu clusters, %llu problem boxes "
                "(eps %g m, min points %u, min users %u)\n",
-               (long long)run_id, nobjs, (unsigned long long)total_points, (unsigned long long)total_clusters,
+               (long long)run_id, nobjs, (unsigned long long)total_points, nfound,
                (unsigned long long)problem_boxes, prm.eps, prm.min_points, prm.min_users);
         for (size_t k = 0; k < nfound; k++) {
-            const found_cluster *f = &found[k];
+            const cluster_found *f = &found[k];
             printf("  object %lld v%u cluster %u: %u collisions by %u users around (%.2f, %.2f, %.2f) -> box %u\n",
-                   (long long)objs[f->object].id, objs[f->object].version, f->cluster_id, f->c.points,
-                   f->c.users, (double)f->c.centroid[0], (double)f->c.centroid[1], (double)f->c.centroid[2],
-                   f->box);
+                   (long long)f->object_id, f->ecm_version, f->cluster_id, f->c.points, f->c.users,
+                   (double)f->c.centroid[0], (double)f->c.centroid[1], (double)f->c.centroid[2], f->box);
         }
+        for (size_t i = 0; apply && i < nobjs; i++) {
+            const ecm_applied *a = &applied[i];
+            if (outcome[i] == ECM_APPLY_WRITTEN)
+                printf("  object %lld: v%u -> v%u, %u -> %u boxes (%.1f ms)\n", (long long)objs[i].id,
+                       objs[i].version, a->version, a->boxes_before, a->boxes_after, a->total_ms);
+            else if (outcome[i] == ECM_APPLY_UNCHANGED)
+                printf("  object %lld: v%u unchanged: its clusters press on real geometry only\n",
+                       (long long)objs[i].id, objs[i].version);
+            else if (outcome[i] == ECM_APPLY_STALE)
+                printf("  object %lld: changed meanwhile; not refined\n", (long long)objs[i].id);
+        }
+    }
+    if (refused) {
+        rc = EXIT_INTERNAL;
+        goto done;
     }
     rc = EXIT_OK;
     goto done;
@@ -408,5 +434,7 @@ done:
     free(pt.users);
     free(labels);
     free(found);
+    free(applied);
+    free(outcome);
     return rc;
 }

@@ -264,6 +264,49 @@ int scene_place(scene *s, uint32_t id, const proto_transform *at)
     return 0;
 }
 
+int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxes, uint32_t count)
+{
+    object *o = find(s, id, NULL);
+    if (!o)
+        return -ENOENT;
+    if (count == 0 || count > PROTO_OBJECT_BOXES_MAX)
+        return -EINVAL;
+    scene_box *local = cvre_malloc(count * sizeof *local), *world = cvre_malloc(count * sizeof *world);
+    uint32_t *handles = cvre_malloc(count * sizeof *handles);
+    if (!local || !world || !handles) {
+        free(local);
+        free(world);
+        free(handles);
+        return -ENOMEM;
+    }
+    memcpy(local, boxes, count * sizeof *local);
+    for (uint32_t i = 0; i < count; i++)
+        handles[i] = NO_HANDLE;
+    object old = *o;
+    unfile_boxes(s, o);
+    o->pub.local = o->local = local;
+    o->pub.world = o->world = world;
+    o->handles = handles;
+    o->pub.box_count = count;
+    place(s, o, &o->pub.at);
+    int rc = file_boxes(s, o);
+    if (rc < 0) {
+        /* Back to the old boxes: the handles just given back make room. */
+        unfile_boxes(s, o);
+        free(local);
+        free(world);
+        free(handles);
+        *o = old;
+        (void)file_boxes(s, o);
+        return rc;
+    }
+    o->pub.ecm_version = version;
+    free(old.local);
+    free(old.world);
+    free(old.handles);
+    return 0;
+}
+
 const scene_object *scene_get(const scene *s, uint32_t id)
 {
     const object *o = find(s, id, NULL);

@@ -68,6 +68,12 @@ int scene_remove(scene *s, uint32_t id);
 /* Moves, turns or rescales an object (its world boxes follow). */
 int scene_place(scene *s, uint32_t id, const proto_transform *at);
 
+/* Replaces an object's boxes with those of ECM version `version` (local
+ * boxes, copied), between ticks: the next query sees only the new ones.
+ * Returns 0, -ENOENT, -EINVAL as scene_add, or -ENOMEM (the object keeps
+ * its boxes). */
+int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxes, uint32_t count);
+
 /* The object, or NULL. Valid until the next change to the scene. */
 const scene_object *scene_get(const scene *s, uint32_t id);
 uint32_t scene_count(const scene *s);

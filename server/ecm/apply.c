@@ -1,0 +1,88 @@
+#include "apply.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
+#include "ecm.h"
+
+/* The object's uniform scale (world metres per local unit), or -1. */
+static int object_scale(db *d, int64_t id, double *scale, char *err, size_t errlen)
+{
+    sqlite3_stmt *st = NULL;
+    int rc = -1;
+    if (sqlite3_prepare_v2(db_sqlite(d), "SELECT scale FROM objects WHERE id = ?1", -1, &st, NULL) == SQLITE_OK) {
+        sqlite3_bind_int64(st, 1, id);
+        if (sqlite3_step(st) == SQLITE_ROW) {
+            *scale = sqlite3_column_double(st, 0);
+            rc = *scale > 0 ? 0 : -1;
+        }
+    }
+    if (rc < 0)
+        snprintf(err, errlen, "object %lld: no usable scale", (long long)id);
+    sqlite3_finalize(st);
+    return rc;
+}
+
+int ecm_apply(db *d, const ecm_params *p, int64_t object_id, uint32_t version, int64_t run_id,
+              const ecm_cluster *clusters, const uint32_t *cluster_ids, uint32_t n, ecm_applied *out, char *err,
+              size_t errlen)
+{
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    memset(out, 0, sizeof *out);
+    db_ecm_object o = {0};
+    ecm_result r = {0};
+    double scale;
+    int rc = ECM_APPLY_DB_ERROR;
+    if (db_ecm_object_load(d, object_id, &o) < 0) {
+        /* Removed or gone: what the clusters were about no longer stands. */
+        rc = ECM_APPLY_STALE;
+        goto done;
+    }
+    if (o.version != version) {
+        rc = ECM_APPLY_STALE;
+        goto done;
+    }
+    if (object_scale(d, object_id, &scale, err, errlen) < 0)
+        goto done;
+    ecm_params lp = *p;
+    for (int a = 0; a < 3; a++)
+        lp.avatar[a] = (float)(p->avatar[a] / scale);
+    out->boxes_before = o.box_count;
+    char why[256];
+    if (ecm_refine(&lp, o.tris, o.tri_count, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why,
+                   sizeof why) < 0) {
+        snprintf(err, errlen, "object %lld: %s", (long long)object_id, why);
+        rc = ECM_APPLY_REFUSED;
+        goto done;
+    }
+    out->stats = r;
+    out->stats.boxes = NULL;
+    out->boxes_after = r.count;
+    if (r.count == o.box_count && memcmp(r.boxes, o.boxes, r.count * sizeof *r.boxes) == 0) {
+        rc = ECM_APPLY_UNCHANGED;
+        goto done;
+    }
+    char detail[256];
+    snprintf(detail, sizeof detail,
+             "depth %u, max boxes %u, max empty %.2f: %u -> %u boxes, %u problem boxes, %u capped merges",
+             p->depth, p->max_boxes, p->max_empty, o.box_count, r.count, r.problem_boxes, r.capped);
+    db_ecm_change c = {.object_id = object_id, .parent_version = version, .reason = "refine", .run_id = run_id,
+                       .ncluster_ids = run_id ? n : 0, .cluster_ids = cluster_ids, .detail = detail, .box_count = r.count,
+                       .boxes = (const float(*)[6])r.boxes};
+    int w = db_ecm_write(d, &c, db_now(), &out->version);
+    if (w == DB_ECM_STALE)
+        rc = ECM_APPLY_STALE;
+    else if (w < 0)
+        snprintf(err, errlen, "object %lld: writing the new version: %s", (long long)object_id, db_error(d));
+    else
+        rc = ECM_APPLY_WRITTEN;
+done:
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    out->total_ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;
+    ecm_result_free(&r);
+    db_ecm_object_free(&o);
+    return rc;
+}

@@ -1,0 +1,43 @@
+/*
+ * apply.h: one refinement round for one object, from the store to the store:
+ * load its mesh and the version in force, refine (refine.h) and write the
+ * next version with its history (db/ecm.h), which every running server then
+ * publishes. Shared by the offline job (cvre-cluster --apply) and the
+ * server's online loop.
+ */
+#ifndef CVRE_ECM_APPLY_H
+#define CVRE_ECM_APPLY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "db.h"
+#include "refine.h"
+
+/* What became of one object. */
+typedef struct ecm_applied {
+    uint32_t version;       /* the version written (0 if none) */
+    uint32_t boxes_before, boxes_after;
+    ecm_result stats;       /* counts and times; no boxes */
+    double total_ms;        /* load, refine, write */
+} ecm_applied;
+
+enum {
+    ECM_APPLY_WRITTEN = 0,
+    ECM_APPLY_UNCHANGED = 1, /* the refined boxes are the ones in force: nothing written */
+    ECM_APPLY_STALE = 2,     /* the object changed version or left meanwhile: nothing written */
+    ECM_APPLY_REFUSED = -1,  /* refine.h refused the input (an object without triangles...) */
+    ECM_APPLY_DB_ERROR = -2, /* the store failed */
+};
+
+/*
+ * Refines object_id, whose version `version` the n clusters (of run run_id,
+ * numbered cluster_ids[i]; run_id 0: none) were found on. p's avatar is in metres; it is
+ * divided by the object's scale. Returns one of ECM_APPLY_*; with the last
+ * two, a message in err.
+ */
+int ecm_apply(db *d, const ecm_params *p, int64_t object_id, uint32_t version, int64_t run_id,
+              const ecm_cluster *clusters, const uint32_t *cluster_ids, uint32_t n, ecm_applied *out, char *err,
+              size_t errlen);
+
+#endif

@@ -1,0 +1,448 @@
+#include "refiner.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "alloc.h"
+#include "apply.h"
+#include "db.h"
+#include "ecm.h"
+#include "log.h"
+#include "mailbox.h"
+#include "record.h"
+
+/* How often the change feed is read: a rollback or an offline refinement
+ * reaches clients within a quarter of a second, for one indexed query. */
+#define REFINER_FEED_MS 250
+/* Collision rows read per query, so that one read never holds a snapshot
+ * over a huge backlog for long. */
+#define REFINER_READ_BATCH 65536
+/* Points kept per object and version: DBSCAN over 2^20 points takes under a
+ * second (tests/bench/bench_dbscan.py), 16 MiB of memory. Past it, new
+ * points of that version are ignored (logged once); a refinement starts
+ * the next version afresh. */
+#define REFINER_POINTS_MAX (1u << 20)
+
+/* One object whose collisions the online loop follows. */
+typedef struct tracked {
+    int64_t id;
+    uint32_t version; /* the version in force; points are of this one only */
+    int gone;         /* removed from the world */
+    float *xyz;
+    uint32_t *users;
+    uint32_t n, cap;
+    uint32_t fresh;   /* points added since it was last clustered */
+    int full_logged;
+    /* The clusters' problem boxes when a refinement last changed nothing:
+     * the same clusters again are not worth a run. */
+    uint32_t *settled;
+    uint32_t nsettled;
+} tracked;
+
+struct refiner {
+    refiner_config cfg;
+    pthread_t thread;
+    pthread_mutex_t lock;
+    pthread_cond_t wake;
+    int stop;
+    mailbox *updates; /* refiner_update *, to the loop */
+    db *db;
+    int64_t feed_after, collisions_after;
+    tracked *objs; /* sorted by id */
+    uint32_t nobjs, cap;
+};
+
+static uint64_t now_ms(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (uint64_t)t.tv_sec * 1000u + (uint64_t)t.tv_nsec / 1000000u;
+}
+
+static void tracked_reset(tracked *t, uint32_t version)
+{
+    t->version = version;
+    t->n = t->fresh = 0;
+    t->full_logged = 0;
+    free(t->settled);
+    t->settled = NULL;
+    t->nsettled = 0;
+}
+
+/* The tracked entry for id, created (with its version read from the store)
+ * if new; NULL if the store cannot say. */
+static tracked *track(refiner *r, int64_t id)
+{
+    uint32_t lo = 0, hi = r->nobjs;
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (r->objs[mid].id < id)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (lo < r->nobjs && r->objs[lo].id == id)
+        return &r->objs[lo];
+    sqlite3_stmt *st = NULL;
+    tracked t = {.id = id, .gone = 1};
+    if (sqlite3_prepare_v2(db_sqlite(r->db), "SELECT ecm_version, removed_at IS NOT NULL FROM objects WHERE id = ?1",
+                           -1, &st, NULL) != SQLITE_OK) {
+        log_error("refiner: %s", sqlite3_errmsg(db_sqlite(r->db)));
+        return NULL;
+    }
+    sqlite3_bind_int64(st, 1, id);
+    if (sqlite3_step(st) == SQLITE_ROW) {
+        t.version = (uint32_t)sqlite3_column_int64(st, 0);
+        t.gone = sqlite3_column_int(st, 1);
+    }
+    sqlite3_finalize(st);
+    if (r->nobjs == r->cap) {
+        r->cap = r->cap ? r->cap * 2 : 64;
+        r->objs = xrealloc(r->objs, r->cap * sizeof *r->objs);
+    }
+    memmove(r->objs + lo + 1, r->objs + lo, (r->nobjs - lo) * sizeof *r->objs);
+    r->objs[lo] = t;
+    r->nobjs++;
+    return &r->objs[lo];
+}
+
+/* One change feed event: queue the version for the tick and start the
+ * object's points afresh. */
+static int on_event(void *ctx, int64_t event_id, int64_t object_id, uint32_t version)
+{
+    refiner *r = ctx;
+    refiner_update u = {.object_id = (uint32_t)object_id, .version = version};
+    if (db_ecm_boxes(r->db, object_id, version, &u.boxes, &u.count) < 0) {
+        log_error("refiner: change %lld: object %lld version %u: %s", (long long)event_id, (long long)object_id,
+                  version, db_error(r->db));
+        return 0;
+    }
+    refiner_update *q = xmalloc(sizeof *q);
+    *q = u;
+    mailbox_put(r->updates, q);
+    tracked *t = track(r, object_id);
+    if (t && version > t->version)
+        tracked_reset(t, version);
+    return 0;
+}
+
+static void follow_feed(refiner *r)
+{
+    if (db_ecm_events(r->db, r->feed_after, on_event, r, &r->feed_after) < 0)
+        log_error("refiner: reading the change feed: %s", db_error(r->db));
+}
+
+static void add_point(tracked *t, const float xyz[3], uint32_t user)
+{
+    if (t->n == REFINER_POINTS_MAX) {
+        if (!t->full_logged)
+            log_warn("refiner: object %lld version %u: %u collisions kept, later ones ignored until it changes",
+                     (long long)t->id, t->version, REFINER_POINTS_MAX);
+        t->full_logged = 1;
+        return;
+    }
+    if (t->n == t->cap) {
+        t->cap = t->cap ? t->cap * 2 : 1024;
+        t->xyz = xrealloc(t->xyz, (size_t)t->cap * 3 * sizeof *t->xyz);
+        t->users = xrealloc(t->users, t->cap * sizeof *t->users);
+    }
+    memcpy(t->xyz + 3 * (size_t)t->n, xyz, 3 * sizeof *xyz);
+    t->users[t->n++] = user;
+    t->fresh++;
+}
+
+/* Reads the collisions logged since the last look into the tracked objects.
+ * Returns 0 or -1. */
+static int read_collisions(refiner *r)
+{
+    sqlite3 *sql = db_sqlite(r->db);
+    sqlite3_stmt *st = NULL;
+    if (sqlite3_prepare_v2(sql,
+                           "SELECT id, object_id, ecm_version, local_x, local_y, local_z, "
+                           "coalesce(user_id, -session_id) FROM collisions WHERE id > ?1 ORDER BY id LIMIT ?2",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto fail;
+    for (;;) {
+        sqlite3_bind_int64(st, 1, r->collisions_after);
+        sqlite3_bind_int64(st, 2, REFINER_READ_BATCH);
+        int rows = 0, rc;
+        while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+            rows++;
+            r->collisions_after = sqlite3_column_int64(st, 0);
+            tracked *t = track(r, sqlite3_column_int64(st, 1));
+            uint32_t version = (uint32_t)sqlite3_column_int64(st, 2);
+            if (!t || t->gone || version != t->version)
+                continue; /* an older version's (or the object left) */
+            float xyz[3] = {(float)sqlite3_column_double(st, 3), (float)sqlite3_column_double(st, 4),
+                            (float)sqlite3_column_double(st, 5)};
+            add_point(t, xyz, (uint32_t)sqlite3_column_int64(st, 6));
+        }
+        sqlite3_reset(st);
+        if (rc != SQLITE_DONE)
+            goto fail;
+        if (rows < REFINER_READ_BATCH)
+            break;
+    }
+    sqlite3_finalize(st);
+    return 0;
+fail:
+    log_error("refiner: reading collisions: %s", sqlite3_errmsg(sql));
+    sqlite3_finalize(st);
+    return -1;
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Clusters t's points; appends what it finds to *found (problem boxes
+ * resolved against the version's boxes). Returns the clusters found, or -1. */
+static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nfound)
+{
+    int32_t *labels = xmalloc((t->n ? t->n : 1) * sizeof *labels);
+    dbscan_result *res = NULL;
+    float(*boxes)[6] = NULL;
+    uint32_t nboxes = 0;
+    int rc = dbscan_run(t->xyz, t->users, t->n, &r->cfg.cluster, labels, &res);
+    free(labels);
+    if (rc < 0) {
+        log_error("refiner: object %lld: clustering failed: %s", (long long)t->id, strerror(-rc));
+        return -1;
+    }
+    size_t k = dbscan_result_count(res);
+    if (k && db_ecm_boxes(r->db, t->id, t->version, &boxes, &nboxes) < 0) {
+        log_error("refiner: object %lld: %s", (long long)t->id, db_error(r->db));
+        dbscan_result_free(res);
+        return -1;
+    }
+    *found = xrealloc(*found, (*nfound + k + 1) * sizeof **found);
+    for (size_t i = 0; i < k; i++) {
+        cluster_found *f = &(*found)[(*nfound)++];
+        *f = (cluster_found){.object_id = t->id, .ecm_version = t->version, .cluster_id = (uint32_t)i,
+                             .c = *dbscan_result_cluster(res, i)};
+        f->box = cluster_problem_box((const float(*)[6])boxes, nboxes, f->c.centroid);
+    }
+    free(boxes);
+    dbscan_result_free(res);
+    return (int)k;
+}
+
+/* Whether t's clusters (found[0..k)) press on the boxes they pressed on when
+ * a refinement last changed nothing; else remembers nothing. */
+static int settled_again(const tracked *t, const cluster_found *f, size_t k)
+{
+    if (!t->settled || t->nsettled != k)
+        return 0;
+    uint32_t *boxes = xmalloc((k ? k : 1) * sizeof *boxes);
+    for (size_t i = 0; i < k; i++)
+        boxes[i] = f[i].box;
+    qsort(boxes, k, sizeof *boxes, cmp_u32);
+    int same = memcmp(boxes, t->settled, k * sizeof *boxes) == 0;
+    free(boxes);
+    return same;
+}
+
+static void settle(tracked *t, const cluster_found *f, size_t k)
+{
+    free(t->settled);
+    t->settled = xmalloc((k ? k : 1) * sizeof *t->settled);
+    for (size_t i = 0; i < k; i++)
+        t->settled[i] = f[i].box;
+    qsort(t->settled, k, sizeof *t->settled, cmp_u32);
+    t->nsettled = (uint32_t)k;
+}
+
+/* Refines one object from its clusters (found[0..k)) of run run_id. */
+static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_found *f, size_t k)
+{
+    ecm_cluster *cl = xmalloc(k * sizeof *cl);
+    uint32_t *ids = xmalloc(k * sizeof *ids);
+    for (size_t i = 0; i < k; i++) {
+        cl[i].box = f[i].box;
+        memcpy(cl[i].min, f[i].c.min, sizeof cl[i].min);
+        memcpy(cl[i].max, f[i].c.max, sizeof cl[i].max);
+        memcpy(cl[i].centroid, f[i].c.centroid, sizeof cl[i].centroid);
+        ids[i] = f[i].cluster_id;
+    }
+    ecm_applied a;
+    char err[512];
+    int rc = ecm_apply(r->db, &r->cfg.ecm, t->id, t->version, run_id, cl, ids, (uint32_t)k, &a, err, sizeof err);
+    if (rc == ECM_APPLY_WRITTEN)
+        log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %zu clusters of run %lld "
+                 "(digitize %.1f ms, divide %.1f ms, in all %.1f ms)",
+                 (long long)t->id, t->version, a.version, a.boxes_before, a.boxes_after, k, (long long)run_id,
+                 a.stats.voxel_ms, a.stats.divide_ms, a.total_ms);
+    else if (rc == ECM_APPLY_UNCHANGED) {
+        log_info("object %lld v%u: %zu clusters of run %lld press on real geometry only; map unchanged",
+                 (long long)t->id, t->version, k, (long long)run_id);
+        settle(t, f, k);
+    } else if (rc == ECM_APPLY_STALE)
+        log_info("object %lld: changed while it was refined; the next round uses the new version", (long long)t->id);
+    else
+        log_error("refiner: %s", err);
+    free(cl);
+    free(ids);
+}
+
+/* One round of the online loop. */
+static void examine(refiner *r)
+{
+    if (read_collisions(r) < 0)
+        return;
+    cluster_run run = {.started = db_now(), .params = r->cfg.cluster};
+    cluster_found *found = NULL;
+    size_t nfound = 0;
+    /* Per object with clusters: where its clusters start in found. */
+    uint32_t *which = xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *which);
+    size_t *from = xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *from);
+    uint32_t nwhich = 0;
+    for (uint32_t i = 0; i < r->nobjs; i++) {
+        tracked *t = &r->objs[i];
+        if (t->gone || t->fresh == 0 || t->n < r->cfg.cluster.min_points)
+            continue;
+        t->fresh = 0;
+        run.objects++;
+        run.points += t->n;
+        size_t before = nfound;
+        int k = cluster_one(r, t, &found, &nfound);
+        if (k <= 0)
+            continue;
+        if (settled_again(t, found + before, (size_t)k)) {
+            nfound = before;
+            continue;
+        }
+        which[nwhich] = i;
+        from[nwhich++] = before;
+    }
+    if (nfound) {
+        run.finished = db_now();
+        int64_t run_id;
+        char err[512];
+        if (cluster_record(r->db, &run, found, nfound, &run_id, err, sizeof err) < 0)
+            log_error("refiner: %s", err);
+        else
+            for (uint32_t w = 0; w < nwhich; w++) {
+                size_t end = w + 1 < nwhich ? from[w + 1] : nfound;
+                refine_one(r, &r->objs[which[w]], run_id, found + from[w], end - from[w]);
+            }
+    }
+    free(found);
+    free(which);
+    free(from);
+}
+
+static void *run_thread(void *arg)
+{
+    refiner *r = arg;
+    uint64_t interval_ms = (uint64_t)(r->cfg.interval_s * 1000.0);
+    uint64_t next_examine = now_ms() + interval_ms;
+    pthread_mutex_lock(&r->lock);
+    while (!r->stop) {
+        uint64_t wake = now_ms() + REFINER_FEED_MS;
+        if (interval_ms && next_examine < wake)
+            wake = next_examine;
+        struct timespec ts = {.tv_sec = (time_t)(wake / 1000u), .tv_nsec = (long)(wake % 1000u) * 1000000L};
+        while (!r->stop && pthread_cond_timedwait(&r->wake, &r->lock, &ts) != ETIMEDOUT)
+            ;
+        if (r->stop)
+            break;
+        pthread_mutex_unlock(&r->lock);
+        follow_feed(r);
+        if (interval_ms && now_ms() >= next_examine) {
+            examine(r);
+            follow_feed(r); /* publish what this round wrote now */
+            next_examine = now_ms() + interval_ms;
+        }
+        pthread_mutex_lock(&r->lock);
+    }
+    pthread_mutex_unlock(&r->lock);
+    return NULL;
+}
+
+refiner *refiner_start(const refiner_config *cfg, char *err, size_t errlen)
+{
+    refiner *r = xcalloc(1, sizeof *r);
+    r->cfg = *cfg;
+    r->feed_after = cfg->feed_after;
+    r->updates = mailbox_create();
+    if (!r->updates) {
+        snprintf(err, errlen, "eventfd: %s", strerror(errno));
+        free(r);
+        return NULL;
+    }
+    r->db = db_open(cfg->db_path, DB_READWRITE, err, errlen);
+    if (!r->db) {
+        mailbox_destroy(r->updates, NULL);
+        free(r);
+        return NULL;
+    }
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    pthread_cond_init(&r->wake, &ca);
+    pthread_condattr_destroy(&ca);
+    pthread_mutex_init(&r->lock, NULL);
+    int rc = pthread_create(&r->thread, NULL, run_thread, r);
+    if (rc != 0) {
+        snprintf(err, errlen, "cannot start the refiner thread: %s", strerror(rc));
+        pthread_mutex_destroy(&r->lock);
+        pthread_cond_destroy(&r->wake);
+        db_close(r->db);
+        mailbox_destroy(r->updates, NULL);
+        free(r);
+        return NULL;
+    }
+    return r;
+}
+
+static void free_update(void *p)
+{
+    refiner_update_free(p);
+    free(p);
+}
+
+void refiner_stop(refiner *r)
+{
+    if (!r)
+        return;
+    pthread_mutex_lock(&r->lock);
+    r->stop = 1;
+    pthread_cond_signal(&r->wake);
+    pthread_mutex_unlock(&r->lock);
+    pthread_join(r->thread, NULL);
+    mailbox_destroy(r->updates, free_update);
+    for (uint32_t i = 0; i < r->nobjs; i++) {
+        free(r->objs[i].xyz);
+        free(r->objs[i].users);
+        free(r->objs[i].settled);
+    }
+    free(r->objs);
+    pthread_mutex_destroy(&r->lock);
+    pthread_cond_destroy(&r->wake);
+    db_close(r->db);
+    free(r);
+}
+
+int refiner_fd(const refiner *r) { return mailbox_fd(r->updates); }
+
+int refiner_take(refiner *r, refiner_update *out)
+{
+    refiner_update *u = mailbox_take(r->updates);
+    if (!u)
+        return -EAGAIN;
+    *out = *u;
+    free(u);
+    return 0;
+}
+
+void refiner_update_free(refiner_update *u)
+{
+    free(u->boxes);
+    u->boxes = NULL;
+}

@@ -1,0 +1,292 @@
+"""Refinement end to end, on the real server with real models: users stopped
+at an opening make a cluster, the online loop (or `cvre-cluster --apply`)
+writes a refined collision map, every connected client receives it without
+a restart, the opening lets avatars through while the walls still block,
+a moved object keeps its refined boxes, a rollback reaches connected
+clients, an avatar inside a box that appears is not trapped, and bad
+parameters and an object without triangles get clear errors."""
+import json
+import os
+import sqlite3
+import struct
+import subprocess
+import time
+
+from harness import MODELS, T, Raw, Server, args, frame, move, run, transform, upload_frames
+
+A = args()
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOM_WORLD = os.path.join(HERE, "room.world")
+# The doorway room at x = 10 (Z-up file): its door is in the east wall,
+# world x = 10.218, z from -2.349 to -1.581 (centre -1.965), 2.1 m high.
+DOOR_X, DOOR_Z = 10.218, -1.965
+FAST = ("--spawn-radius", "0", "--max-speed", "20", "--refine-min-points", "5")
+
+
+def cmd(name, *argv):
+    p = subprocess.run([os.path.join(A.bin, name), *argv], capture_output=True, text=True, timeout=120)
+    return p.returncode, p.stdout, p.stderr
+
+
+class Crowd:
+    """Users driven together; positions come from the first one's snapshots
+    (it sees every avatar near it, itself included)."""
+
+    def __init__(self, srv, names):
+        self.cs = []
+        self.ids = {}
+        for n in names:
+            c = Raw(srv.port)
+            _, ok = c.handshake(n)
+            self.cs.append(c)
+            self.ids[n] = ok["id"]
+        self.pos, self.infos, self.seq = {}, [], 0
+
+    def pump(self, seconds=0.0):
+        end = time.time() + seconds
+        while True:
+            for m in self.cs[0].poll(0.02):
+                if m["type"] == "snapshot":
+                    self.pos.update(m["avatars"])
+                elif m["type"] == "object":
+                    self.infos.append(m)
+            if time.time() >= end:
+                return
+
+    def walk(self, targets, seconds):
+        """Each user (or the given ones: {name: target}) heads for its target."""
+        end = time.time() + seconds
+        while time.time() < end:
+            self.seq += 1
+            for c, (n, i) in zip(self.cs, self.ids.items()):
+                t = targets.get(n) if isinstance(targets, dict) else targets
+                if t is not None:
+                    c.send(move(self.seq, t))
+            self.pump(0.05)
+
+    def at(self, name):
+        return self.pos[self.ids[name]]
+
+    def wait_version(self, object_id, version, timeout=15):
+        end = time.time() + timeout
+        while time.time() < end:
+            for m in self.infos:
+                if m["id"] == object_id and m["ecm_version"] >= version:
+                    return m
+            self.pump(0.1)
+        raise AssertionError(f"no OBJECT_INFO v{version} for object {object_id}; saw "
+                             f"{[(m['id'], m['ecm_version']) for m in self.infos]}")
+
+    def close(self):
+        for c in self.cs:
+            c.close()
+
+
+def to_east_of_door(crowd, names=None):
+    """Around the room (it spans world x 4.36..10.22, z -4.44..0.42) to the
+    east side, in front of the door."""
+    sel = names or list(crowd.ids)
+    crowd.walk({n: (0, 0, 3) for n in sel}, 0.5)
+    crowd.walk({n: (14, 0, 3) for n in sel}, 1.0)
+    crowd.walk({n: (14, 0, DOOR_Z) for n in sel}, 0.6)
+
+
+def object_id(db, name):
+    return sqlite3.connect(db).execute("SELECT id FROM objects WHERE name = ?", (name,)).fetchone()[0]
+
+
+def blocked_x(x):
+    """Stopped by the room's east face: the avatar (0.6 wide) keeps 1 mm off."""
+    return abs(x - (DOOR_X + 0.3)) < 0.05
+
+
+def test_doorway_opens_live_and_walls_stay():
+    srv = Server(A.bin, "--world", ROOM_WORLD, "--refine-interval", "1", *FAST)
+    crowd = Crowd(srv, ["u1", "u2", "u3", "u4", "wallbumper"])
+    room = object_id(srv.db, "openfoam_room_with_doorway.stl")
+    to_east_of_door(crowd)
+    # Into the doorway: the MBR stops everyone at the east face.
+    crowd.walk((5, 0, DOOR_Z), 0.8)
+    assert blocked_x(crowd.at("u1")[0]), crowd.at("u1")
+    info = crowd.wait_version(room, 2)
+    assert len(info["boxes"]) > 1, info
+    # Keep walking: now the door lets them in, up to the west wall inside.
+    crowd.walk({n: (5, 0, DOOR_Z) for n in ["u1", "u2", "u3", "u4"]}, 1.5)
+    x = crowd.at("u1")[0]
+    assert 4.358 + 0.3 - 0.05 < x < 5.2, crowd.at("u1")
+    # Later rounds: inside, the south part of the room is covered by coarse
+    # boxes (only the strip behind the door was wanted at first); walking
+    # there makes collisions against the version in force, which the next
+    # round opens, until nothing stops the crowd.
+    inner = ["u1", "u2", "u3", "u4"]
+    for _ in range(4):
+        crowd.walk({n: (7, 0, -3.9) for n in inner}, 1.0)
+        if crowd.at("u1")[2] < -3.8:
+            break
+        crowd.wait_version(room, max(m["ecm_version"] for m in crowd.infos if m["id"] == room) + 1)
+    assert crowd.at("u1")[2] < -3.8, crowd.at("u1")
+    assert max(m["ecm_version"] for m in crowd.infos if m["id"] == room) >= 3
+    # The east wall beside the door still blocks (z = -0.8 is solid wall).
+    crowd.walk({"wallbumper": (14, 0, -0.8)}, 0.5)
+    crowd.walk({"wallbumper": (5, 0, -0.8)}, 1.0)
+    assert blocked_x(crowd.at("wallbumper")[0]), crowd.at("wallbumper")
+    crowd.close()
+    assert srv.stop() == 0
+    db = sqlite3.connect(srv.db)
+    v = db.execute("SELECT version, reason, parent_version, run_id, box_count FROM ecm_versions "
+                   "WHERE object_id = ? ORDER BY version", (room,)).fetchall()
+    assert v[0][:2] == (1, "import") and v[1][1:3] == ("refine", 1) and v[1][3] is not None, v
+    ties = db.execute("SELECT count(*) FROM ecm_version_clusters WHERE object_id = ? AND version = 2",
+                      (room,)).fetchone()[0]
+    assert ties >= 1
+    # A restart serves the refined version.
+    srv2 = Server(A.bin, "--refine-interval", "0", db=srv.db)
+    c = Raw(srv2.port)
+    c.handshake("later")
+    m = c.expect("object", where=lambda m: m["id"] == room)
+    assert m["ecm_version"] == v[-1][0] and len(m["boxes"]) == v[-1][4], m
+    c.close()
+    assert srv2.stop() == 0
+
+
+def test_archway_opens_and_stays_solid_at_its_sides():
+    world = os.path.join(os.path.dirname(ROOM_WORLD), "..", "..", "..", "shared", "models", "openings",
+                         "kenney_archway_cliff_cave_stone.glb")
+    srv = Server(A.bin, "--refine-interval", "1", *FAST)
+    path = os.path.join(srv.tmp, "arch.world")
+    with open(path, "w") as f:
+        # 4 m wide, 4 m high; its opening runs through z, about 3 m wide at the foot.
+        f.write(f"object {os.path.abspath(world)} name arch at 0 0.2 6 scale 4\n")
+    assert srv.stop() == 0
+    srv = Server(A.bin, "--world", path, "--refine-interval", "1", *FAST, db=srv.db)
+    arch = object_id(srv.db, "arch")
+    crowd = Crowd(srv, ["a1", "a2", "a3", "side"])
+    front = 6 + 4 * 0.3315 - 0.3  # the MBR's face, minus half the avatar
+    crowd.walk({"a1": (0, 0, 12), "a2": (0.1, 0, 12), "a3": (-0.1, 0, 12)}, 1.0)
+    assert abs(crowd.at("a1")[2] - front) < 0.05, crowd.at("a1")
+    crowd.wait_version(arch, 2)
+    crowd.walk({"a1": (0, 0, 12), "a2": (0.1, 0, 12), "a3": (-0.1, 0, 12)}, 1.5)
+    for n in ("a1", "a2", "a3"):
+        assert crowd.at(n)[2] > 10, (n, crowd.at(n))
+    # The solid side of the arch (x = -1.8) still stops an avatar.
+    crowd.walk({"side": (-1.8, 0, 0)}, 0.5)
+    crowd.walk({"side": (-1.8, 0, 12)}, 1.5)
+    assert crowd.at("side")[2] < front + 0.05, crowd.at("side")
+    crowd.close()
+    assert srv.stop() == 0
+
+
+def test_moved_object_keeps_its_boxes_and_rollback_reaches_clients():
+    srv = Server(A.bin, "--refine-interval", "1", *FAST)
+    owner = Raw(srv.port)
+    owner.handshake("owner")
+    stl = open(os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl"), "rb").read()
+    owner.send(upload_frames(1, stl, "room.stl", up=1, pos=(10, 0, 0)))
+    room = owner.expect("object", timeout=20, where=lambda m: m["upload"] == 1)["id"]
+    crowd = Crowd(srv, ["u1", "u2", "u3", "u4"])
+    to_east_of_door(crowd)
+    crowd.walk((5, 0, DOOR_Z), 0.8)
+    v2 = crowd.wait_version(room, 2)
+    # The owner moves the room 20 m north: same version, same local boxes,
+    # world boxes shifted by the move.
+    owner.send(frame(T["OBJECT_PLACE"], struct.pack("<I", room) + transform((10, 0, 20))))
+    moved = owner.expect("object", where=lambda m: m["id"] == room and m["pos"][2] == 20)
+    assert moved["ecm_version"] == v2["ecm_version"] and len(moved["boxes"]) == len(v2["boxes"]), moved
+    for a, b in zip(moved["boxes"], v2["boxes"]):
+        assert all(abs(a[k] - b[k] - (20 if k in (2, 5) else 0)) < 1e-3 for k in range(6)), (a, b)
+    # Its door, now at z = 20 - 1.965, lets the crowd in as before.
+    crowd.walk((14, 0, 20 + DOOR_Z), 1.5)
+    crowd.walk((5, 0, 20 + DOOR_Z), 1.5)
+    inside = crowd.at("u1")
+    assert inside[0] < 9.5, inside
+    # Rollback to version 1 while everyone is connected: the MBR comes back
+    # for every client, as a new version.
+    rc, out, err = cmd("cvre-admin", "--db", srv.db, "rollback", str(room), "1")
+    assert rc == 0, err
+    back = crowd.wait_version(room, v2["ecm_version"] + 1, timeout=5)
+    assert len(back["boxes"]) == 1, back
+    owner_view = owner.expect("object", where=lambda m: m["id"] == room and m["ecm_version"] == back["ecm_version"])
+    assert owner_view["boxes"] == back["boxes"]
+    # Inside the restored MBR, the avatars are not trapped: they walk out.
+    crowd.walk((14, 0, 20 + DOOR_Z), 1.5)
+    assert crowd.at("u1")[0] > 10.5, crowd.at("u1")
+    crowd.close()
+    owner.close()
+    assert srv.stop() == 0
+    inside_rows = sqlite3.connect(srv.db).execute(
+        "SELECT count(*) FROM collisions WHERE object_id = ? AND inside = 1 AND ecm_version = ?",
+        (room, back["ecm_version"])).fetchone()[0]
+    assert inside_rows > 0  # walking out of a box is logged as evidence
+
+
+def test_offline_apply_is_published_live():
+    srv = Server(A.bin, "--world", ROOM_WORLD, "--refine-interval", "0", *FAST)
+    crowd = Crowd(srv, ["u1", "u2", "u3"])
+    room = object_id(srv.db, "openfoam_room_with_doorway.stl")
+    to_east_of_door(crowd)
+    crowd.walk((5, 0, DOOR_Z), 1.0)
+    time.sleep(0.6)  # the collision log's writer flushes every 250 ms
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json")
+    assert rc == 0, err
+    res = json.loads(out)
+    refined = [r for r in res["refined"] if r["object"] == room]
+    assert refined and refined[0]["outcome"] == "written" and refined[0]["version"] == 2, res
+    assert refined[0]["boxes_after"] > 1
+    info = crowd.wait_version(room, 2, timeout=5)
+    assert len(info["boxes"]) == refined[0]["boxes_after"]
+    crowd.walk((5, 0, DOOR_Z), 1.5)
+    assert crowd.at("u1")[0] < 5.2, crowd.at("u1")
+    # Nothing new against version 2 yet: a second run refines nothing.
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json")
+    assert rc == 0 and json.loads(out)["refined"] == [], out
+    crowd.close()
+    assert srv.stop() == 0
+
+
+def test_bad_parameters_and_an_object_without_triangles():
+    srv = Server(A.bin, "--world", ROOM_WORLD)
+    assert srv.stop() == 0
+    for flags in (("--depth", "20"), ("--depth", "1"), ("--depth", "x"), ("--max-boxes", "0"),
+                  ("--max-boxes", "1025"), ("--max-empty", "2"), ("--max-empty", "nan")):
+        rc, _, err = cmd("cvre-cluster", "--db", srv.db, "--apply", *flags)
+        assert rc == 2 and flags[0] in err and "try --help" in err, (flags, rc, err)
+    for flags in (("--refine-depth", "9"), ("--refine-depth", "1"), ("--refine-max-boxes", "0"),
+                  ("--refine-max-empty", "-1"), ("--refine-interval", "-5"), ("--refine-min-users", "0")):
+        p = subprocess.run([os.path.join(A.bin, "cvre-server"), "--port", "0", "--db", srv.db, *flags],
+                           capture_output=True, text=True, timeout=10)
+        assert p.returncode == 2 and flags[0] in p.stderr, (flags, p.returncode, p.stderr)
+    # An object whose mesh is empty (written behind the server's back), with
+    # a cluster on it: the job says so and still refines the others.
+    db = sqlite3.connect(srv.db)
+    room = object_id(srv.db, "openfoam_room_with_doorway.stl")
+    owner = db.execute("SELECT owner_id FROM objects WHERE id = ?", (room,)).fetchone()[0]
+    cur = db.execute("INSERT INTO objects(owner_id, name, format, created_at, pos_x, pos_y, pos_z, yaw, scale, "
+                     "ecm_version, tri_count, min_x, min_y, min_z, max_x, max_y, max_z) "
+                     "VALUES (?, 'hollow', 'stl', 0, 0, 0, 30, 0, 1, 1, 0, -1, 0, -1, 1, 2, 1)", (owner,))
+    hollow = cur.lastrowid
+    db.execute("INSERT INTO meshes VALUES (?, x'')", (hollow,))
+    db.execute("INSERT INTO ecm_versions(object_id, version, created_at, reason, box_count) "
+               "VALUES (?, 1, 0, 'import', 1)", (hollow,))
+    db.execute("INSERT INTO ecm_boxes VALUES (?, 1, 0, -1, 0, -1, 1, 2, 1)", (hollow,))
+    rows = []
+    for oid, x, z in ((hollow, 1.0, 0.2), (room, 0.21757, -1.965)):
+        for u in range(3):
+            for k in range(4):
+                rows.append((oid, u + 1, x, 0.9, z + 0.01 * k))
+    db.executemany("INSERT INTO collisions(g, at, session_id, user_id, avatar_id, object_id, ecm_version, "
+                   "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, "
+                   "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
+                   "VALUES (0, 1, 1, ?2, 1, ?1, 1, 0, 0, 0, 0, 0, 0, 0, 0, ?3, ?4, ?5, 1, 0, 0, 0, 0, 0)", rows)
+    db.commit()
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply")
+    assert rc == 4, (rc, out, err)
+    assert f"object {hollow}" in err and "no triangles" in err, err
+    assert "v1 -> v2" in out, out  # the room was refined all the same
+    v = db.execute("SELECT ecm_version FROM objects WHERE id IN (?, ?) ORDER BY id", (room, hollow)).fetchall()
+    assert v == [(2,), (1,)], v
+
+
+if __name__ == "__main__":
+    run([test_doorway_opens_live_and_walls_stay, test_archway_opens_and_stays_solid_at_its_sides,
+         test_moved_object_keeps_its_boxes_and_rollback_reaches_clients, test_offline_apply_is_published_live,
+         test_bad_parameters_and_an_object_without_triangles])
