@@ -67,11 +67,12 @@ int ecm_apply(db *d, const ecm_params *p, int64_t object_id, uint32_t version, i
     }
     char detail[256];
     snprintf(detail, sizeof detail,
-             "depth %u, max boxes %u, max empty %.2f: %u -> %u boxes, %u problem boxes, %u capped merges",
+             "depth %u, max boxes %u, max empty %.2f: %u -> %u boxes, %u problem boxes, %u kept whole at "
+             "the cap",
              p->depth, p->max_boxes, p->max_empty, o.box_count, r.count, r.problem_boxes, r.capped);
     db_ecm_change c = {.object_id = object_id, .parent_version = version, .reason = "refine", .run_id = run_id,
-                       .ncluster_ids = run_id ? n : 0, .cluster_ids = cluster_ids, .detail = detail, .box_count = r.count,
-                       .boxes = (const float(*)[6])r.boxes};
+                       .ncluster_ids = run_id ? n : 0, .cluster_ids = cluster_ids, .detail = detail,
+                       .box_count = r.count, .boxes = (const float(*)[6])r.boxes};
     int w = db_ecm_write(d, &c, db_now(), &out->version);
     if (w == DB_ECM_STALE)
         rc = ECM_APPLY_STALE;
