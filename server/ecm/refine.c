@@ -413,7 +413,6 @@ static int divide(work *w)
                 /* The budget is spent: what waits stays whole. */
                 if ((rc = push(&w->out, &nd.b)) < 0)
                     goto done;
-                w->capped = 1 + h.n;
                 while (h.n) {
                     node rest = heap_pop(&h);
                     if ((rc = push(&w->out, &rest.b)) < 0)
@@ -426,7 +425,10 @@ static int divide(work *w)
             if ((rc = file_node(w, &h, &ch[c])) < 0)
                 goto done;
     }
-    rc = merge_all(w);
+    if ((rc = merge_all(w)) < 0)
+        goto done;
+    for (uint32_t i = 0; i < w->out.n; i++)
+        w->capped += svt_sum(&w->want, &w->out.b[i]) > 0;
 done:
     free(h.v);
     return rc;
@@ -731,8 +733,10 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     for (uint32_t i = 0; i < nboxes; i++)
         total += problem[i] ? lists[i].n : 0;
     out->boxes = cvre_malloc((size_t)total * sizeof *out->boxes);
-    if (!out->boxes)
+    if (!out->boxes) {
+        rc = -ENOMEM;
         goto done;
+    }
     for (uint32_t i = 0; i < nboxes; i++)
         if (!problem[i])
             memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
