@@ -24,6 +24,19 @@ _Static_assert(ECM_DEPTH_MAX <= 15, "cell indices are uint16_t");
 /* Counts of a whole grid fit a summed-volume table's uint32_t. */
 _Static_assert(3 * ECM_DEPTH_MAX < 32, "cell counts fit uint32_t");
 
+/* Boxes a division may hold beyond the budget before merging brings it
+ * back (see divide): a division adds up to 7 at once, so a small budget
+ * still divides. More slack spends the whole budget in the first round and
+ * leaves later rounds nothing to divide with (the scenario runner's
+ * archway, staircase and Sponza did worse at 64), and merging costs grow
+ * with the square of the boxes held. */
+#define DIVIDE_SLACK 8u
+/* Most bytes of the padded array one cluster's wanted space is worked out
+ * in: 256^3, an avatar as long as half the grid on each axis. */
+#define WANTED_BYTES_MAX ((size_t)16 << 20)
+/* Kernel lengths are at most n, so padded lines fit uint16_t marks. */
+_Static_assert(3u << ECM_DEPTH_MAX <= UINT16_MAX, "marks fit uint16_t");
+
 /* A box of cells: [lo, hi) on each axis. */
 typedef struct ibox {
     uint16_t lo[3], hi[3];
@@ -234,14 +247,14 @@ typedef struct partner {
     int has;
 } partner;
 
-static void find_best(const work *w, const ilist *l, uint32_t i, partner *out)
+static void find_best(const work *w, const ilist *l, uint32_t i, int any, partner *out)
 {
     out->has = 0;
     for (uint32_t j = 0; j < l->n; j++) {
         if (j == i)
             continue;
         price p = price_of(w, &l->b[i], &l->b[j]);
-        if (allowed(w, &p) && (!out->has || cheaper(&p, &out->p))) {
+        if ((any || allowed(w, &p)) && (!out->has || cheaper(&p, &out->p))) {
             out->has = 1;
             out->j = j;
             out->p = p;
@@ -250,21 +263,24 @@ static void find_best(const work *w, const ilist *l, uint32_t i, partner *out)
 }
 
 /*
- * Step 4 on w->out: merges the cheapest allowed pair while there is one.
- * Each box remembers its cheapest partner; a merge looks again only for the
- * boxes that pointed at one of the pair. Returns 0 or -ENOMEM.
+ * Merges the cheapest pair of w->out, again and again: with keep 0, any pair
+ * step 4 allows, while there is one; else (the cap) any pair at all, while
+ * there are more than keep boxes. Each box remembers its cheapest partner;
+ * a merge looks again only for the boxes that pointed at one of the pair.
+ * Returns 0 or -ENOMEM.
  */
-static int merge_all(work *w)
+static int merge_all(work *w, uint32_t keep)
 {
     ilist *l = &w->out;
-    if (l->n < 2)
+    int any = keep > 0;
+    if (l->n < 2 || (any && l->n <= keep))
         return 0;
     partner *bs = cvre_malloc(l->n * sizeof *bs);
     if (!bs)
         return -ENOMEM;
     for (uint32_t i = 0; i < l->n; i++)
-        find_best(w, l, i, &bs[i]);
-    for (;;) {
+        find_best(w, l, i, any, &bs[i]);
+    while (!any || l->n > keep) {
         uint32_t bi = UINT32_MAX;
         for (uint32_t k = 0; k < l->n; k++)
             if (bs[k].has && (bi == UINT32_MAX || cheaper(&bs[k].p, &bs[bi].p)))
@@ -289,14 +305,14 @@ static int merge_all(work *w)
             if (k == i)
                 continue;
             if (bs[k].has == 2) {
-                find_best(w, l, k, &bs[k]);
+                find_best(w, l, k, any, &bs[k]);
                 continue;
             }
             price p = price_of(w, &l->b[k], &l->b[i]);
-            if (allowed(w, &p) && (!bs[k].has || cheaper(&p, &bs[k].p)))
+            if ((any || allowed(w, &p)) && (!bs[k].has || cheaper(&p, &bs[k].p)))
                 bs[k] = (partner){.j = i, .p = p, .has = 1};
         }
-        find_best(w, l, i, &bs[i]);
+        find_best(w, l, i, any, &bs[i]);
     }
     free(bs);
     return 0;
@@ -373,10 +389,15 @@ static int file_node(work *w, heap *h, const ibox *b)
  * Step 3, best first: the node holding the most wanted cells is halved
  * along each axis longer than one cell (its children shrunk, the empty ones
  * dropped), until no node holds a wanted cell or the next division would
- * pass the budget even after merging what is done (step 4). Nodes left at
- * the budget are kept whole, wanted cells and all (w->capped counts them).
- * A node holding a wanted cell is never a single cell (wanted cells are
- * empty and nodes are shrunk to occupied ones), so it always divides.
+ * pass the budget plus DIVIDE_SLACK even after merging what is done (step
+ * 4); nodes left then are kept whole. Then step 4 on everything, and step
+ * 5: while there are more boxes than the budget, the pair whose hull adds
+ * the fewest wanted cells, then the fewest empty ones, is merged. The slack
+ * lets division go past the budget where merging brings it back (8 children
+ * at a time would otherwise stop it early). w->capped counts the boxes that
+ * still hold wanted cells. A node holding a wanted cell is never a single
+ * cell (wanted cells are empty and nodes are shrunk to occupied ones), so it
+ * always divides.
  */
 static int divide(work *w)
 {
@@ -406,10 +427,10 @@ static int divide(work *w)
             if (!skip && shrink(&w->occ, &b))
                 ch[nch++] = b;
         }
-        if (w->out.n + h.n + (uint32_t)nch > w->budget) {
-            if ((rc = merge_all(w)) < 0)
+        if (w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
+            if ((rc = merge_all(w, 0)) < 0)
                 goto done;
-            if (w->out.n + h.n + (uint32_t)nch > w->budget) {
+            if (w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
                 /* The budget is spent: what waits stays whole. */
                 if ((rc = push(&w->out, &nd.b)) < 0)
                     goto done;
@@ -425,7 +446,7 @@ static int divide(work *w)
             if ((rc = file_node(w, &h, &ch[c])) < 0)
                 goto done;
     }
-    if ((rc = merge_all(w)) < 0)
+    if ((rc = merge_all(w, 0)) < 0 || (rc = merge_all(w, w->budget)) < 0)
         goto done;
     for (uint32_t i = 0; i < w->out.n; i++)
         w->capped += svt_sum(&w->want, &w->out.b[i]) > 0;
@@ -537,13 +558,25 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3])
         if (lo[a] >= hi[a])
             return 0;
         /* The avatar in cells, rounded down (a smaller kernel finds more
-         * space, never less), at most a quarter of the grid to bound the
-         * padded array (a tiny object's whole box is then wanted space). */
+         * space, never less), at most n: a window as long as the grid
+         * meets it in the same prefixes, suffixes and whole lines as any
+         * longer one (space outside the grid is free). */
         double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
-        uint32_t kmax = n / 4 ? n / 4 : 1;
-        k[a] = kc < 1 ? 1 : kc > kmax ? kmax : (uint32_t)kc;
-        dim[a] = hi[a] - lo[a] + 2 * k[a]; /* index i is cell lo - k + i */
-        total *= dim[a];
+        k[a] = kc < 1 ? 1 : kc > n ? n : (uint32_t)kc;
+    }
+    /* Bounded memory: past WANTED_BYTES_MAX the longest kernel is halved
+     * (more space counts as wanted, never less; only deep grids with a
+     * large avatar get there). */
+    for (;;) {
+        total = 1;
+        for (int a = 0; a < 3; a++) {
+            dim[a] = hi[a] - lo[a] + 2 * k[a]; /* index i is cell lo - k + i */
+            total *= dim[a];
+        }
+        int longest = k[0] >= k[1] && k[0] >= k[2] ? 0 : k[1] >= k[2] ? 1 : 2;
+        if (total <= WANTED_BYTES_MAX || k[longest] == 1)
+            break;
+        k[longest] /= 2;
     }
     uint8_t *v = cvre_malloc(total);
     uint16_t *mark = cvre_malloc((size_t)dim[0] * dim[1] * sizeof *mark);
