@@ -128,6 +128,18 @@ def decode(t, p):
     return dict(type="other", t=t)
 
 
+def split_frames(buf):
+    """The whole frames at the start of buf, decoded, and the bytes left."""
+    out = []
+    while len(buf) >= 6:
+        ln, t = struct.unpack_from("<IH", buf)
+        if len(buf) < 4 + ln:
+            break
+        out.append(decode(t, buf[6:4 + ln]))
+        buf = buf[4 + ln:]
+    return out, buf
+
+
 class Server:
     """The real cvre-server on 127.0.0.1 and a free port, with a fresh
     database unless one is given."""
@@ -198,13 +210,8 @@ class Raw:
             if not d:
                 self.closed = True
                 break
-            self.buf += d
-            while len(self.buf) >= 6:
-                ln, t = struct.unpack_from("<IH", self.buf)
-                if len(self.buf) < 4 + ln:
-                    break
-                out.append(decode(t, self.buf[6:4 + ln]))
-                self.buf = self.buf[4 + ln:]
+            msgs, self.buf = split_frames(self.buf + d)
+            out += msgs
             if first and out:
                 break
         return out
