@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages cvre needs to build, test and run, if any
-# is missing. Needs root (apt-get). The same list is in docker/Dockerfile.
+# is missing. Needs root (apt-get). The same list is in docker/Dockerfile,
+# less chromium: the map render test (tests/integration/test_map.py) draws
+# cvre-admin map's SVG with headless Chromium, the image builds no tests.
 # --bench also installs what only the benchmarks compare against: OpenVDB
 # (libopenvdb-dev, with TBB) for bench-voxel.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
-          libflann-dev python3-sklearn time libassimp-dev)
+          libflann-dev python3-sklearn time libassimp-dev chromium)
 for arg in "$@"; do
   case "$arg" in
     --bench) packages+=(libopenvdb-dev) ;;

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "db.h"
+#include "map.h"
 #include "out.h"
 #include "query.h"
 
@@ -42,6 +43,8 @@ static const char usage[] =
     "                            (as a new version; the only command that writes)\n"
     "  sessions                  who was connected when (--user, --since, --until, --limit)\n"
     "  clusters                  the latest clustering run's clusters (--object, --limit)\n"
+    "  map --svg FILE            a picture of an object's collision map (--object ID,\n"
+    "                            --version N) or of the whole world, and its figures\n"
     "  totals                    users, sessions, objects, collisions and the time span\n"
     "  help [COMMAND]            this text, or a command's (same as COMMAND --help)\n"
     "\n"
@@ -68,7 +71,7 @@ static const char usage[] =
     "  2  bad arguments\n"
     "  3  the database cannot be used: missing or unreadable file, not a cvre\n"
     "     database, a schema version this build does not know, or a failed query\n"
-    "     or write\n"
+    "     or write (also: map's picture could not be written)\n"
     "  4  rollback refused, nothing written: the object was removed, the version\n"
     "     is already in force, or another writer changed the object meanwhile\n";
 
@@ -82,7 +85,8 @@ struct command {
 /* Most positional arguments of a command (diff: ID A B). */
 #define ADMIN_POS_MAX 3
 
-enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32 };
+enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32, OPT_SVG = 64,
+       OPT_MAPVERSION = 128 };
 
 static const struct command commands[] = {
     {"collisions", OPT_OBJECT | OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_REGION | OPT_LIMIT, 0,
@@ -189,6 +193,41 @@ static const struct command commands[] = {
      "finished, object, version (ECM), cluster, points, users, box (the ECM box\n"
      "it presses on: the problem box) and the centroid in object-local\n"
      "coordinates. Nothing if the job never ran.\n"},
+    {"map", OPT_OBJECT | OPT_SVG | OPT_MAPVERSION, 0,
+     "usage: cvre-admin map --svg FILE [--object ID [--version N]] [--json]\n"
+     "       cvre-admin map --json [--object ID [--version N]]\n"
+     "\n"
+     "Draws collision maps as an SVG picture and prints their figures. With\n"
+     "--object, one object at version N (default: the version in force); without,\n"
+     "the whole world: every object in it at its version in force.\n"
+     "\n"
+     "  --svg FILE        write the picture to FILE (replaced)\n"
+     "  --object ID       this object only (exit 1 if there is none, or it was removed)\n"
+     "  --version N       this version of it (exit 1 if there is none)\n"
+     "  --json            the figures as JSON: one object for --object, else an array\n"
+     "\n"
+     "The picture has two views side by side in world metres, TOP (looking down:\n"
+     "x right, z down the page) and SIDE (x right, y up): the geometry's outline\n"
+     "(grey), the original boxes (version 1, dashed), the boxes of the version shown\n"
+     "(filled; a box turned by a yaw that is not a multiple of 90 degrees as its\n"
+     "world AABB, as the server sees it), and the collision points: those against\n"
+     "the version's parent (what a refinement answered), or against the version\n"
+     "itself if it has none, coloured by cluster (noise grey). Clusters are\n"
+     "recomputed with DBSCAN over exactly those points, with the parameters of the\n"
+     "run that made the version, else of the latest run with clusters over those\n"
+     "points; without one every point is grey. At most 20,000 points are drawn (an\n"
+     "evenly spaced subsample in id order beyond that, which the caption says).\n"
+     "The same database gives the same file, byte for byte.\n"
+     "\n"
+     "Figures (a table, or --json): object, name, version, boxes, original_boxes\n"
+     "(version 1), box_volume (sum of the boxes' volumes, m^3 of the world: local\n"
+     "volume times scale^3), union_volume (the volume their union covers, overlaps\n"
+     "once), occupied_volume (the geometry: the cells a 2^7-per-axis digitization\n"
+     "of the object's MBR marks), tightness (occupied_volume / union_volume; 1 for\n"
+     "a map of one box per occupied cell), full_voxel_boxes (those cells: the box\n"
+     "count of that map), depth (7), points, clusters, and points_drawn,\n"
+     "points_version (the version the points were logged against), run (whose\n"
+     "parameters, or null).\n"},
     {"totals", 0, 0,
      "usage: cvre-admin totals\n"
      "\n"
@@ -336,7 +375,8 @@ static const struct command *find_command(const char *name)
     return NULL;
 }
 
-enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT };
+enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT, O_SVG,
+       O_MAPVERSION };
 
 static const struct option options[] = {
     {"db", required_argument, 0, O_DB},         {"csv", no_argument, 0, O_CSV},
@@ -344,13 +384,27 @@ static const struct option options[] = {
     {"version", no_argument, 0, O_VERSION},     {"object", required_argument, 0, O_OBJECT},
     {"user", required_argument, 0, O_USER},     {"since", required_argument, 0, O_SINCE},
     {"until", required_argument, 0, O_UNTIL},   {"region", required_argument, 0, O_REGION},
-    {"limit", required_argument, 0, O_LIMIT},   {0, 0, 0, 0},
+    {"limit", required_argument, 0, O_LIMIT},   {"svg", required_argument, 0, O_SVG},
+    {0, 0, 0, 0},
+};
+
+/* map's options: the same, except that --version names an ECM version. */
+static const struct option map_options[] = {
+    {"db", required_argument, 0, O_DB},         {"csv", no_argument, 0, O_CSV},
+    {"json", no_argument, 0, O_JSON},           {"help", no_argument, 0, O_HELP},
+    {"version", required_argument, 0, O_MAPVERSION}, {"object", required_argument, 0, O_OBJECT},
+    {"user", required_argument, 0, O_USER},     {"since", required_argument, 0, O_SINCE},
+    {"until", required_argument, 0, O_UNTIL},   {"region", required_argument, 0, O_REGION},
+    {"limit", required_argument, 0, O_LIMIT},   {"svg", required_argument, 0, O_SVG},
+    {0, 0, 0, 0},
 };
 
 struct args {
     const char *db;
     int format, help, version;
     query_filter f;
+    const char *svg;      /* map --svg */
+    uint32_t map_version; /* map --version; 0: none given */
 };
 
 /* Parses options from argv[1..] (argv[0] names the program or the command).
@@ -361,20 +415,22 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
 {
     static const unsigned bit[] = {[O_OBJECT - O_OBJECT] = OPT_OBJECT, [O_USER - O_OBJECT] = OPT_USER,
                                    [O_SINCE - O_OBJECT] = OPT_SINCE,   [O_UNTIL - O_OBJECT] = OPT_UNTIL,
-                                   [O_REGION - O_OBJECT] = OPT_REGION, [O_LIMIT - O_OBJECT] = OPT_LIMIT};
+                                   [O_REGION - O_OBJECT] = OPT_REGION, [O_LIMIT - O_OBJECT] = OPT_LIMIT,
+                                   [O_SVG - O_OBJECT] = OPT_SVG,       [O_MAPVERSION - O_OBJECT] = OPT_MAPVERSION};
+    const struct option *table = cmd && (cmd->opts & OPT_MAPVERSION) ? map_options : options;
     const char *where = cmd ? cmd->name : NULL;
     int o, li = 0;
     long long n;
     optind = 0; /* glibc: start afresh, argv[0] is skipped */
     opterr = 0;
-    while ((o = getopt_long(argc, argv, cmd ? ":" : "+:", options, &li)) != -1) {
+    while ((o = getopt_long(argc, argv, cmd ? ":" : "+:", table, &li)) != -1) {
         if (o == '?')
             return usage_error(where, "unknown option %s", argv[optind - 1]);
         if (o == ':')
             return usage_error(where, "%s needs a value", argv[optind - 1]);
         if (o >= O_OBJECT && (!cmd || !(cmd->opts & bit[o - O_OBJECT])))
             return usage_error(where, cmd ? "--%s is not an option of this command" : "--%s must come after the command",
-                               options[li].name);
+                               table[li].name);
         switch (o) {
         case O_DB: a->db = optarg; break;
         case O_CSV: a->format = OUT_CSV; break;
@@ -409,6 +465,17 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
             if (parse_int(optarg, 0, ADMIN_LIMIT_MAX, &n) < 0)
                 return usage_error(where, "--limit wants a whole number from 0 to 100000000, not \"%s\"", optarg);
             a->f.limit = n;
+            break;
+        case O_SVG:
+            if (!*optarg)
+                return usage_error(where, "--svg wants a file name");
+            a->svg = optarg;
+            break;
+        case O_MAPVERSION:
+            if (parse_int(optarg, 1, UINT32_MAX, &n) < 0)
+                return usage_error(where, "--version wants a version number from 1 to %u, not \"%s\"", UINT32_MAX,
+                                   optarg);
+            a->map_version = (uint32_t)n;
             break;
         }
     }
@@ -464,6 +531,11 @@ static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, co
         rc = query_sessions(s, &a->f, a->format, err, sizeof err);
     else if (strcmp(cmd->name, "clusters") == 0)
         rc = query_clusters(s, &a->f, a->format, err, sizeof err);
+    else if (strcmp(cmd->name, "map") == 0) {
+        map_request r = {.has_object = a->f.has_object, .object = a->f.object, .version = a->map_version,
+                         .svg = a->svg, .json = a->format == OUT_JSON};
+        rc = map_run(s, &r, err, sizeof err);
+    }
     else
         rc = query_totals(s, a->format, err, sizeof err);
     return exit_status(rc, err);
@@ -524,6 +596,14 @@ int main(int argc, char **argv)
     }
     if (a.format == OUT_TABLE && a.f.limit == 0)
         a.f.limit = ADMIN_LIMIT_MAX; /* a table is held in memory */
+    if (strcmp(cmd->name, "map") == 0) {
+        if (a.format == OUT_CSV)
+            return usage_error(cmd->name, "%s", "prints its figures as a table or --json, not --csv");
+        if (!a.svg && a.format != OUT_JSON)
+            return usage_error(cmd->name, "%s", "wants --svg FILE, --json or both");
+        if (a.map_version && !a.f.has_object)
+            return usage_error(cmd->name, "%s", "--version needs --object: the world map shows the versions in force");
+    }
 
     if (access(a.db, F_OK) != 0) {
         fprintf(stderr, "%s: %s: %s (give the database with --db FILE)\n", prog, a.db, strerror(errno));
