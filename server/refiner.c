@@ -261,18 +261,9 @@ static void settle(tracked *t, const cluster_found *f, size_t k)
 /* Refines one object from its clusters (found[0..k)) of run run_id. */
 static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_found *f, size_t k)
 {
-    ecm_cluster *cl = xmalloc(k * sizeof *cl);
-    uint32_t *ids = xmalloc(k * sizeof *ids);
-    for (size_t i = 0; i < k; i++) {
-        cl[i].box = f[i].box;
-        memcpy(cl[i].min, f[i].c.min, sizeof cl[i].min);
-        memcpy(cl[i].max, f[i].c.max, sizeof cl[i].max);
-        memcpy(cl[i].centroid, f[i].c.centroid, sizeof cl[i].centroid);
-        ids[i] = f[i].cluster_id;
-    }
     ecm_applied a;
     char err[512];
-    int rc = ecm_apply(r->db, &r->cfg.ecm, t->id, t->version, run_id, cl, ids, (uint32_t)k, &a, err, sizeof err);
+    int rc = ecm_apply(r->db, &r->cfg.ecm, run_id, f, (uint32_t)k, &a, err, sizeof err);
     if (rc == ECM_APPLY_WRITTEN)
         log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %zu clusters of run %lld "
                  "(digitize %.1f ms, divide %.1f ms, in all %.1f ms)",
@@ -286,8 +277,6 @@ static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_fou
         log_info("object %lld: changed while it was refined; the next round uses the new version", (long long)t->id);
     else
         log_error("refiner: %s", err);
-    free(cl);
-    free(ids);
 }
 
 /* One round of the online loop. */

@@ -321,13 +321,7 @@ int main(int argc, char **argv)
         rc = EXIT_DB;
         goto done;
     }
-    uint64_t problem_boxes = 0;
-    for (size_t k = 0; k < nfound; k++) {
-        int dup = 0;
-        for (size_t j = 0; j < k && !dup; j++)
-            dup = found[j].object_id == found[k].object_id && found[j].box == found[k].box;
-        problem_boxes += !dup;
-    }
+    uint64_t problem_boxes = cluster_problem_boxes(found, nfound);
 
     /* --apply: each object's clusters (consecutive in found) refine it. */
     applied = xcalloc(nobjs ? nobjs : 1, sizeof *applied);
@@ -339,20 +333,7 @@ int main(int argc, char **argv)
         outcome[i] = -2; /* no clusters: not refined */
         if (k == first)
             continue;
-        ecm_cluster *cl = xmalloc((k - first) * sizeof *cl);
-        uint32_t *ids = xmalloc((k - first) * sizeof *ids);
-        for (size_t j = first; j < k; j++) {
-            ecm_cluster *c = &cl[j - first];
-            c->box = found[j].box;
-            memcpy(c->min, found[j].c.min, sizeof c->min);
-            memcpy(c->max, found[j].c.max, sizeof c->max);
-            memcpy(c->centroid, found[j].c.centroid, sizeof c->centroid);
-            ids[j - first] = found[j].cluster_id;
-        }
-        outcome[i] = ecm_apply(d, &ep, objs[i].id, objs[i].version, run_id, cl, ids, (uint32_t)(k - first),
-                               &applied[i], err, sizeof err);
-        free(cl);
-        free(ids);
+        outcome[i] = ecm_apply(d, &ep, run_id, found + first, (uint32_t)(k - first), &applied[i], err, sizeof err);
         if (outcome[i] == ECM_APPLY_DB_ERROR) {
             fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
             rc = EXIT_DB;

@@ -22,11 +22,8 @@ uint32_t cluster_problem_box(const float (*boxes)[6], uint32_t n, const float p[
     return best;
 }
 
-int cluster_record(db *d, const cluster_run *run, const cluster_found *found, size_t n, int64_t *run_id, char *err,
-                   size_t errlen)
+uint64_t cluster_problem_boxes(const cluster_found *found, size_t n)
 {
-    sqlite3 *sql = db_sqlite(d);
-    sqlite3_stmt *st = NULL;
     uint64_t problem_boxes = 0;
     for (size_t k = 0; k < n; k++) {
         int dup = 0;
@@ -35,6 +32,15 @@ int cluster_record(db *d, const cluster_run *run, const cluster_found *found, si
                   found[j].box == found[k].box;
         problem_boxes += !dup;
     }
+    return problem_boxes;
+}
+
+int cluster_record(db *d, const cluster_run *run, const cluster_found *found, size_t n, int64_t *run_id, char *err,
+                   size_t errlen)
+{
+    sqlite3 *sql = db_sqlite(d);
+    sqlite3_stmt *st = NULL;
+    uint64_t problem_boxes = cluster_problem_boxes(found, n);
     if (db_begin(d) < 0)
         goto fail;
     if (sqlite3_prepare_v2(sql,

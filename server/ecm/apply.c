@@ -2,9 +2,11 @@
 
 #include <errno.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
+#include "alloc.h"
 #include "ecm.h"
 
 /* The object's uniform scale (world metres per local unit), or -1. */
@@ -25,10 +27,20 @@ static int object_scale(db *d, int64_t id, double *scale, char *err, size_t errl
     return rc;
 }
 
-int ecm_apply(db *d, const ecm_params *p, int64_t object_id, uint32_t version, int64_t run_id,
-              const ecm_cluster *clusters, const uint32_t *cluster_ids, uint32_t n, ecm_applied *out, char *err,
-              size_t errlen)
+int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f, uint32_t n, ecm_applied *out,
+              char *err, size_t errlen)
 {
+    int64_t object_id = f[0].object_id;
+    uint32_t version = f[0].ecm_version;
+    ecm_cluster *clusters = xmalloc(n * sizeof *clusters);
+    uint32_t *cluster_ids = xmalloc(n * sizeof *cluster_ids);
+    for (uint32_t i = 0; i < n; i++) {
+        clusters[i].box = f[i].box;
+        memcpy(clusters[i].min, f[i].c.min, sizeof clusters[i].min);
+        memcpy(clusters[i].max, f[i].c.max, sizeof clusters[i].max);
+        memcpy(clusters[i].centroid, f[i].c.centroid, sizeof clusters[i].centroid);
+        cluster_ids[i] = f[i].cluster_id;
+    }
     struct timespec t0, t1;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     memset(out, 0, sizeof *out);
@@ -85,5 +97,7 @@ done:
     out->total_ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;
     ecm_result_free(&r);
     db_ecm_object_free(&o);
+    free(clusters);
+    free(cluster_ids);
     return rc;
 }

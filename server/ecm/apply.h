@@ -12,6 +12,7 @@
 #include <stdint.h>
 
 #include "db.h"
+#include "record.h"
 #include "refine.h"
 
 /* What became of one object. */
@@ -31,13 +32,12 @@ enum {
 };
 
 /*
- * Refines object_id, whose version `version` the n clusters (of run run_id,
- * numbered cluster_ids[i]; run_id 0: none) were found on. p's avatar is in metres; it is
+ * Refines the object the n clusters f were found on (all of one object and
+ * version, of run run_id; 0: none recorded). p's avatar is in metres; it is
  * divided by the object's scale. Returns one of ECM_APPLY_*; with the last
  * two, a message in err.
  */
-int ecm_apply(db *d, const ecm_params *p, int64_t object_id, uint32_t version, int64_t run_id,
-              const ecm_cluster *clusters, const uint32_t *cluster_ids, uint32_t n, ecm_applied *out, char *err,
-              size_t errlen);
+int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f, uint32_t n, ecm_applied *out,
+              char *err, size_t errlen);
 
 #endif

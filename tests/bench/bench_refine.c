@@ -124,9 +124,9 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         return -1;
     }
     float cx = (m.min[0] + m.max[0]) / 2, cy = fminf(m.min[1] + 0.9f, m.max[1]);
-    ecm_cluster cl = {.box = 0, .min = {cx - 0.3f, cy - 0.2f, m.max[2]}, .max = {cx + 0.3f, cy + 0.2f, m.max[2]},
-                      .centroid = {cx, cy, m.max[2]}};
-    uint32_t id = 0;
+    cluster_found cl = {.object_id = o.id, .ecm_version = 1, .box = 0,
+                        .c = {.min = {cx - 0.3f, cy - 0.2f, m.max[2]}, .max = {cx + 0.3f, cy + 0.2f, m.max[2]},
+                              .centroid = {cx, cy, m.max[2]}}};
     ecm_params p;
     ecm_params_default(&p);
     p.depth = (uint32_t)depth;
@@ -147,7 +147,7 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         sqlite3_exec(db_sqlite(d), reset, NULL, NULL, NULL);
         double t0 = now_ms();
         ecm_applied a;
-        int rc = ecm_apply(d, &p, o.id, 1, 0, &cl, &id, 1, &a, err, sizeof err);
+        int rc = ecm_apply(d, &p, 0, &cl, 1, &a, err, sizeof err);
         if (rc != ECM_APPLY_WRITTEN) {
             fprintf(stderr, "%s: refinement: %d %s\n", label, rc, err);
             return -1;
@@ -226,7 +226,8 @@ int main(int argc, char **argv)
     printf("End-to-end refinement of one object (median of %d; ms)\n\n", repeat);
     printf("| %-22s | %7s | %6s | %5s | %8s | %8s | %12s | %7s | %8s |\n", "object", "tris", "grid", "boxes",
            "digitize", "divide", "load+ref+wr", "publish", "total");
-    printf("|------------------------|---------|--------|-------|----------|----------|--------------|---------|----------|\n");
+    printf("|------------------------|---------|--------|-------|----------|----------|--------------|"
+           "---------|----------|\n");
     struct {
         const char *label, *rel;
         int z_up;
