@@ -14,6 +14,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from datetime import datetime, timezone
 
 MAGIC = 0x45525643
 TEMP_DIRS = []  # removed when every test passed; kept (with server logs) otherwise
@@ -265,6 +266,15 @@ class Client:
 
     def of(self, kind):
         return [e for e in self.events if e["event"] == kind]
+
+
+def iso(t, digits=6):
+    """cvre-admin's time form: Unix seconds as ISO-8601 UTC with 3 (table) or
+    6 (CSV, JSON) decimals, rounded half away from zero as out.c's llround
+    does (Python's round() goes half to even: t * 1e6 of a stored time is a
+    multiple of 1/4, so the two differ on about one time in four)."""
+    secs, frac = divmod(math.floor(t * 10 ** digits + 0.5), 10 ** digits)
+    return datetime.fromtimestamp(secs, timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.") + f"{frac:0{digits}d}Z"
 
 
 def close_to(a, b, tol=0.05):

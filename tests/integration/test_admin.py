@@ -17,20 +17,12 @@ import subprocess
 import tempfile
 import threading
 import time
-from datetime import datetime, timezone
 
-from harness import TEMP_DIRS, Server, args, run
+from harness import TEMP_DIRS, Server, args, iso, run
 
 A = args()
 ADMIN = os.path.join(A.bin, "cvre-admin")
 T0 = calendar.timegm((2026, 11, 22, 10, 0, 0))  # 2026-11-22T10:00:00Z
-
-
-def iso(t, digits=6):
-    """The admin's time form: ISO-8601 UTC, milliseconds (table) or
-    microseconds (CSV, JSON). Test times are exact in binary."""
-    d = datetime.fromtimestamp(t, timezone.utc)
-    return d.strftime("%Y-%m-%dT%H:%M:%S.") + f"{d.microsecond:06d}"[:digits] + "Z"
 
 
 def admin(*argv, db=None, check=0):

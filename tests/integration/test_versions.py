@@ -19,9 +19,8 @@ import sqlite3
 import struct
 import subprocess
 import tempfile
-from datetime import datetime, timezone
 
-from harness import MODELS, TEMP_DIRS, Raw, Server, args, close_to, run
+from harness import MODELS, TEMP_DIRS, Raw, Server, args, close_to, iso, run
 
 A = args()
 ADMIN = os.path.join(A.bin, "cvre-admin")
@@ -42,13 +41,6 @@ V3 = [E, W, R, W]
 
 def f32(x):
     return struct.unpack("<f", struct.pack("<f", x))[0]
-
-
-def iso(t, digits=6):
-    """The admin's time form: ISO-8601 UTC, rounded to 3 (table) or 6 (CSV,
-    JSON) decimals as out.c rounds."""
-    secs, frac = divmod(round(t * 10 ** digits), 10 ** digits)
-    return datetime.fromtimestamp(secs, timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.") + f"{frac:0{digits}d}Z"
 
 
 def volume(b):
