@@ -14,6 +14,7 @@
 #include <sys/signalfd.h>
 #include <unistd.h>
 
+#include "avatar.h"
 #include "bots.h"
 #include "ev.h"
 #include "log.h"
@@ -140,7 +141,7 @@ static unsigned digits(unsigned v)
  * or --version, 2 after a usage error (already reported). */
 static int parse_args(int argc, char **argv, options *o)
 {
-    *o = (options){.net = {.host = "127.0.0.1", .port = 7878, .name = "user", .box = {0.6f, 1.8f, 0.6f}},
+    *o = (options){.net = {.host = "127.0.0.1", .port = 7878, .name = "user", .box = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH}},
                    .rate = 20.0, .pattern = BOTS_RANDOM_WALK, .duration = 10.0, .ramp = 1000.0};
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];

@@ -27,9 +27,9 @@
 
 void move_params_default(move_params *p)
 {
-    p->size[0] = 0.6f;
-    p->size[1] = 1.8f;
-    p->size[2] = 0.6f;
+    p->size[0] = AVATAR_WIDTH;
+    p->size[1] = AVATAR_HEIGHT;
+    p->size[2] = AVATAR_WIDTH;
     p->gravity = MOVE_GRAVITY_DEFAULT;
     p->step_height = MOVE_STEP_DEFAULT;
     p->floor_y = 0.0f;

@@ -58,6 +58,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "avatar.h"
+
 /* Contacts one move reports at most. At most three block it (one per axis)
  * and the rest are inside contacts; 16 leaves room for an avatar spawned
  * inside a dozen overlapping boxes. More are counted, not kept. */
@@ -83,7 +85,7 @@
 #define MOVE_MAX_FALL_SPEED 55.0f
 
 #define MOVE_GRAVITY_DEFAULT 9.81f
-#define MOVE_STEP_DEFAULT 0.35f
+#define MOVE_STEP_DEFAULT AVATAR_STEP
 
 _Static_assert(MOVE_MAX_CONTACTS >= 3, "room for every blocking contact");
 
