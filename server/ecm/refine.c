@@ -17,6 +17,7 @@
 #include <time.h>
 
 #include "alloc.h"
+#include "avatar.h"
 
 _Static_assert(ECM_DEPTH_MIN >= VOXEL_DEPTH_MIN && ECM_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Cell indices, and one past the last, fit 16 bits. */
@@ -25,11 +26,10 @@ _Static_assert(ECM_DEPTH_MAX <= 15, "cell indices are uint16_t");
 _Static_assert(3 * ECM_DEPTH_MAX < 32, "cell counts fit uint32_t");
 
 /* Boxes a division may hold beyond the budget before merging brings it
- * back (see divide): a division adds up to 7 at once, so a small budget
- * still divides. More slack spends the whole budget in the first round and
- * leaves later rounds nothing to divide with (the scenario runner's
- * archway, staircase and Sponza did worse at 64), and merging costs grow
- * with the square of the boxes held. */
+ * back (see divide): parts that merging joins again cost nothing in the
+ * end. More slack spends the whole budget in the first round and leaves
+ * later rounds nothing to divide with, and merging costs grow with the
+ * square of the boxes held. */
 #define DIVIDE_SLACK 8u
 /* Most bytes of the padded array one cluster's wanted space is worked out
  * in: 256^3, an avatar as long as half the grid on each axis. */
@@ -71,7 +71,8 @@ void ecm_params_default(ecm_params *p)
     *p = (ecm_params){.depth = ECM_DEPTH_DEFAULT,
                       .max_boxes = ECM_MAX_BOXES_DEFAULT,
                       .max_empty = ECM_MAX_EMPTY_DEFAULT,
-                      .avatar = {0.6f, 1.8f, 0.6f}};
+                      .avatar = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH},
+                      .step = AVATAR_STEP};
 }
 
 void ecm_result_free(ecm_result *r)
@@ -386,18 +387,62 @@ static int file_node(work *w, heap *h, const ibox *b)
 }
 
 /*
- * Step 3, best first: the node holding the most wanted cells is halved
- * along each axis longer than one cell (its children shrunk, the empty ones
- * dropped), until no node holds a wanted cell or the next division would
- * pass the budget plus DIVIDE_SLACK even after merging what is done (step
- * 4); nodes left then are kept whole. Then step 4 on everything, and step
- * 5: while there are more boxes than the budget, the pair whose hull adds
- * the fewest wanted cells, then the fewest empty ones, is merged. The slack
- * lets division go past the budget where merging brings it back (8 children
- * at a time would otherwise stop it early). w->capped counts the boxes that
- * still hold wanted cells. A node holding a wanted cell is never a single
- * cell (wanted cells are empty and nodes are shrunk to occupied ones), so it
- * always divides.
+ * Cuts b in two (step 3) and shrinks the parts to their occupied cells;
+ * returns how many are not empty (their boxes in ch). The plane: a face of
+ * the bounding box of b's wanted cells, the one that cuts off the largest
+ * slab without wanted cells (a doorway in a wall: the wall on one side,
+ * then on the other, and what is left shrinks to the lintel: three boxes);
+ * when the wanted cells reach every face of b (it always holds some), the
+ * middle of b's longest side.
+ */
+static int cut(const work *w, const ibox *b, ibox ch[2])
+{
+    ibox want = *b;
+    shrink(&w->want, &want);
+    int axis = -1;
+    uint16_t at = 0;
+    uint64_t best = 0;
+    for (int a = 0; a < 3; a++) {
+        uint64_t area = volume(b) / (uint64_t)(b->hi[a] - b->lo[a]);
+        uint64_t below = (uint64_t)(want.lo[a] - b->lo[a]) * area, above = (uint64_t)(b->hi[a] - want.hi[a]) * area;
+        if (below > best) {
+            best = below;
+            axis = a;
+            at = want.lo[a];
+        }
+        if (above > best) {
+            best = above;
+            axis = a;
+            at = want.hi[a];
+        }
+    }
+    if (axis < 0) {
+        axis = 0;
+        for (int a = 1; a < 3; a++)
+            if (b->hi[a] - b->lo[a] > b->hi[axis] - b->lo[axis])
+                axis = a;
+        at = (uint16_t)((b->lo[axis] + b->hi[axis]) / 2);
+    }
+    int n = 0;
+    ch[n] = *b;
+    ch[n].hi[axis] = at;
+    n += shrink(&w->occ, &ch[n]);
+    ch[n] = *b;
+    ch[n].lo[axis] = at;
+    n += shrink(&w->occ, &ch[n]);
+    return n;
+}
+
+/*
+ * Step 3, best first: the node holding the most wanted cells is cut in two
+ * (cut), until no node holds a wanted cell or the next cut would pass the
+ * budget plus DIVIDE_SLACK even after merging what is done (step 4); nodes
+ * left then are kept whole. Then step 4 on everything, and step 5: while
+ * there are more boxes than the budget, the pair whose hull adds the fewest
+ * wanted cells, then the fewest empty ones, is merged. w->capped counts the
+ * boxes that still hold wanted cells. A node holding a wanted cell is never
+ * a single cell (wanted cells are empty and nodes are shrunk to occupied
+ * ones), so it always divides, and both parts are smaller.
  */
 static int divide(work *w)
 {
@@ -409,24 +454,8 @@ static int divide(work *w)
         goto done;
     while (h.n) {
         node nd = heap_pop(&h);
-        ibox ch[8];
-        int nch = 0;
-        for (int c = 0; c < 8; c++) {
-            ibox b = nd.b;
-            int skip = 0;
-            for (int a = 0; a < 3; a++) {
-                int upper = (c >> a) & 1;
-                uint16_t mid = (uint16_t)((b.lo[a] + b.hi[a]) / 2);
-                if (b.hi[a] - b.lo[a] < 2)
-                    skip |= upper;
-                else if (upper)
-                    b.lo[a] = mid;
-                else
-                    b.hi[a] = mid;
-            }
-            if (!skip && shrink(&w->occ, &b))
-                ch[nch++] = b;
-        }
+        ibox ch[2];
+        int nch = cut(w, &nd.b, ch);
         if (w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
             if ((rc = merge_all(w, 0)) < 0)
                 goto done;
@@ -529,7 +558,7 @@ static uint32_t cell_of(const voxel_grid *g, int a, double v, int up)
  * that an avatar-sized box of free cells covers. The opening runs on the
  * region grown by the kernel on each side, cells outside the grid free.
  */
-static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3])
+static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3], double step)
 {
     const voxel_grid *g = &w->g;
     uint32_t n = w->n;
@@ -552,8 +581,9 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3])
             lo[a] = 0;
             hi[a] = n;
         } else {
+            double up = a == 1 ? step : 0;
             lo[a] = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
-            hi[a] = cell_of(g, a, (double)cl->max[a] + size[a] / 2, 1);
+            hi[a] = cell_of(g, a, (double)cl->max[a] + size[a] / 2 + up, 1);
         }
         if (lo[a] >= hi[a])
             return 0;
@@ -623,16 +653,32 @@ static void work_free(work *w)
     memset(w, 0, sizeof *w);
 }
 
+/* Whether cluster c presses on box i of boxes: the box it names, or any
+ * box its points lie on (their bounding box, grown by a hundredth of the
+ * avatar's width for rounding, meets the box): a cluster along a wall of
+ * several boxes presses on all of them. */
+static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, const float avatar[3])
+{
+    if (c->box == i)
+        return 1;
+    double tol = 0.01 * fmin(avatar[0], avatar[2]);
+    for (int a = 0; a < 3; a++)
+        if ((double)c->min[a] - tol > boxes[i][3 + a] || (double)c->max[a] + tol < boxes[i][a])
+            return 0;
+    return 1;
+}
+
 /* Steps 1 to 5 for one problem box, into at most budget boxes (w->out).
  * Adds to the result's counts and times. */
-static int refine_box(work *w, const ecm_params *p, const float box[6], const float *tris, uint32_t ntris,
-                      const ecm_cluster *cl, uint32_t ncl, uint32_t box_index, uint32_t budget, ecm_result *r)
+static int refine_box(work *w, const ecm_params *p, const float (*boxes)[6], uint32_t box_index, const float *tris,
+                      uint32_t ntris, const ecm_cluster *cl, uint32_t ncl, uint32_t budget, ecm_result *r)
 {
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     memset(w, 0, sizeof *w);
     w->max_empty = p->max_empty;
     w->budget = budget;
+    const float *box = boxes[box_index];
     int rc = voxel_grid_init(&w->g, p->depth, box, box + 3);
     if (rc < 0)
         return rc;
@@ -646,7 +692,7 @@ static int refine_box(work *w, const ecm_params *p, const float box[6], const fl
     if (!w->wanted)
         return -ENOMEM;
     for (uint32_t i = 0; i < ncl; i++)
-        if (cl[i].box == box_index && (rc = mark_wanted(w, &cl[i], p->avatar)) < 0)
+        if (presses(&cl[i], boxes, box_index, p->avatar) && (rc = mark_wanted(w, &cl[i], p->avatar, p->step)) < 0)
             return rc;
     if ((rc = svt_build(&w->occ, &w->g, NULL)) < 0 || (rc = svt_build(&w->want, &w->g, w->wanted)) < 0 ||
         (rc = divide(w)) < 0)
@@ -715,6 +761,8 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     for (int a = 0; a < 3; a++)
         if (!(p->avatar[a] > 0) || !isfinite(p->avatar[a]))
             return fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
+    if (!(p->step >= 0) || !isfinite(p->step))
+        return fail(err, errlen, -EINVAL, "the avatar's step must be finite and at least 0");
     if (ntris == 0 || !tris)
         return fail(err, errlen, -EINVAL, "the object has no triangles");
     if (!finite_all(tris, (size_t)ntris * 9))
@@ -744,11 +792,12 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         goto done;
     uint32_t kept = nboxes, nproblem = 0;
     for (uint32_t i = 0; i < nclusters; i++)
-        if (!problem[clusters[i].box]) {
-            problem[clusters[i].box] = 1;
-            kept--;
-            nproblem++;
-        }
+        for (uint32_t b = 0; b < nboxes; b++)
+            if (!problem[b] && presses(&clusters[i], boxes, b, p->avatar)) {
+                problem[b] = 1;
+                kept--;
+                nproblem++;
+            }
     /* Each problem box may become an equal share of what the kept boxes
      * leave of max_boxes (the first ones get the remainder), at least one. */
     uint32_t room = p->max_boxes > kept ? p->max_boxes - kept : 0, given = 0;
@@ -757,7 +806,7 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
             continue;
         uint32_t budget = room / nproblem + (given < room % nproblem);
         given++;
-        if ((rc = refine_box(&w, p, boxes[i], tris, ntris, clusters, nclusters, i, budget ? budget : 1, out)) < 0 ||
+        if ((rc = refine_box(&w, p, boxes, i, tris, ntris, clusters, nclusters, budget ? budget : 1, out)) < 0 ||
             (rc = take_boxes(&w, boxes[i], &lists[i])) < 0)
             goto done;
         work_free(&w);

@@ -3,9 +3,13 @@
  * "divide bounding box into smaller bounding boxes"). Pure module: no I/O.
  *
  * Input: the object's triangles and boxes (local coordinates) and the
- * clusters of unexpected collisions, each pressing on one box (the problem
- * box). Each problem box is replaced by boxes that hug the geometry where
- * users want to go; every other box is kept as it is. For each problem box:
+ * clusters of unexpected collisions. A cluster presses on the box it names
+ * and on every box its points lie on (their bounding box, grown by a
+ * hundredth of the avatar's width for rounding, meets it): users stopped
+ * along a wall that earlier rounds cut into several boxes press on all of
+ * them. Each box a cluster presses on (a problem box) is replaced by boxes
+ * that hug the geometry where users want to go; every other box is kept as
+ * it is. For each problem box:
  *
  *   1. Digitize (voxel.h): a grid of 2^depth cells per axis over the box,
  *      a cell occupied when a triangle touches it.
@@ -13,15 +17,22 @@
  *      stands for a region: its points' bounding box, grown by half the
  *      avatar's size, and stretched through the whole box along the axis of
  *      the face it presses on (users walk into the box across that face: a
- *      tunnel under an arch, a room behind a door). Only space an avatar fits
- *      in counts (a morphological opening of the empty cells by the avatar's
- *      box, space outside the grid counting as empty): the hollow between
- *      the two faces of a thick wall is never wanted, so it stays covered.
+ *      tunnel under an arch, a room behind a door), and upwards by the
+ *      avatar's step as well (a user who climbed onto something there
+ *      stands that much higher). Only space an avatar fits in counts (a
+ *      morphological opening of the empty cells by the avatar's box, space
+ *      outside the grid counting as empty): the hollow between the two
+ *      faces of a thick wall is never wanted, so it stays covered.
  *   3. Divide, best first: shrink the box to its occupied cells; while a
- *      node holds wanted cells, halve the one holding the most along each
- *      axis longer than one cell, shrink the halves to their occupied cells
- *      and drop the empty ones. Nodes without wanted cells are kept whole:
- *      fine near the clusters, down to single cells, coarse elsewhere.
+ *      node holds wanted cells, cut the one holding the most in two, shrink
+ *      the parts to their occupied cells and drop the empty ones. The cut
+ *      lies on a face of the bounding box of the node's wanted cells, the
+ *      one that cuts off the largest part without wanted cells (a doorway
+ *      in a wall: the wall on one side, then on the other, and the rest
+ *      shrinks to the lintel: three boxes); when the wanted cells reach
+ *      every face of the node, it is halved across its longest side. Nodes
+ *      without wanted cells are kept whole: fine near the clusters, down to
+ *      single cells, coarse elsewhere; one cut adds at most one box.
  *   4. Merge: two boxes of the same problem box whose hull covers no new
  *      wanted cell and adds at most max_empty of the hull's volume as new
  *      empty space become one, cheapest first, until no pair qualifies.
@@ -67,10 +78,11 @@ typedef struct ecm_params {
     uint32_t max_boxes; /* most boxes for the object, 1..ECM_MAX_BOXES_LIMIT */
     double max_empty;   /* share of a merged box that may be new empty space, 0..1 */
     float avatar[3];    /* the avatar's size in object-local units (> 0) */
+    float step;         /* the highest step it climbs, object-local units (>= 0) */
 } ecm_params;
 
-/* Fills p with the defaults above and the default 0.6 x 1.8 x 0.6 m avatar
- * (for an object of scale 1: divide by the object's scale). */
+/* Fills p with the defaults above and the default avatar of avatar.h, its
+ * size and step (for an object of scale 1: divide by the object's scale). */
 void ecm_params_default(ecm_params *p);
 
 /* A cluster of unexpected collisions, in object-local coordinates. */

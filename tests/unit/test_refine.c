@@ -240,7 +240,9 @@ static void assert_results_equal(const ecm_result *a, const ecm_result *b)
 
 /*
  * Everything a successful ecm_refine promises, whatever the geometry:
- * problem_boxes counts the distinct boxes named by a cluster; the boxes
+ * problem_boxes counts the distinct boxes a cluster presses on (the one it
+ * names, and every one its points' bounding box, grown by a hundredth of
+ * the avatar's width, meets); the boxes
  * without a cluster come first, unchanged and in order; each box after them
  * is a proper, finite box inside its problem box, in problem box order; the
  * count respects the cap (max_boxes, or one box per problem box for an
@@ -254,10 +256,16 @@ static void check_result(const ecm_params *p, const float *tris, uint32_t ntris,
     uint8_t *problem = calloc(nboxes, 1);
     assert_non_null(problem);
     uint32_t nproblem = 0;
-    for (uint32_t i = 0; i < ncl; i++)
-        if (!problem[cl[i].box]) {
-            problem[cl[i].box] = 1;
-            nproblem++;
+    float tol = 0.01f * fminf(p->avatar[0], p->avatar[2]);
+    for (uint32_t b = 0; b < nboxes; b++)
+        for (uint32_t i = 0; i < ncl && !problem[b]; i++) {
+            int meets = 1;
+            for (int a = 0; a < 3; a++)
+                meets &= cl[i].max[a] + tol >= boxes[b][a] && cl[i].min[a] - tol <= boxes[b][3 + a];
+            if (cl[i].box == b || meets) {
+                problem[b] = 1;
+                nproblem++;
+            }
         }
     uint32_t kept = nboxes - nproblem;
     uint32_t cap = p->max_boxes > kept + nproblem ? p->max_boxes : kept + nproblem;
@@ -866,12 +874,84 @@ static void two_cubes(float tris[24 * 9])
     box_surface((const float[3]){3, 3, 3}, (const float[3]){4, 4, 4}, tris + 12 * 9);
 }
 
+/* A wall 4 m wide, 3 m high, 0.2 m thick (z 1.9..2.1) with a doorway 1 m
+ * wide and 2.2 m high in its middle (x 1.5..2.5): three solid blocks, left,
+ * right and the lintel, into t[108]. */
+static void doorway_wall(float *t)
+{
+    box_surface((const float[3]){0, 0, 1.9f}, (const float[3]){1.5f, 3, 2.1f}, t);
+    box_surface((const float[3]){2.5f, 0, 1.9f}, (const float[3]){4, 3, 2.1f}, t + 12 * 9);
+    box_surface((const float[3]){1.5f, 2.2f, 1.9f}, (const float[3]){2.5f, 3, 2.1f}, t + 24 * 9);
+}
+
+/* Whether an avatar (0.6 x 1.8 x 0.6) standing in the doorway, at its
+ * middle and 0.1 m to either side (where users were stopped), is free. */
+static int doorway_free(const ecm_result *r)
+{
+    for (float x = 1.9f; x <= 2.1f; x += 0.1f) {
+        const float lo[3] = {x - 0.3f, 0, 1.7f}, hi[3] = {x + 0.3f, 1.8f, 2.3f};
+        if (blocked(CBOXES(r->boxes), r->count, lo, hi))
+            return 0;
+    }
+    return 1;
+}
+
+/* Step 3's cuts: users stopped in front of the doorway (on the MBR's face)
+ * want the space in it; three cuts along the faces of that space leave the
+ * wall on either side and the lintel above: three boxes, nothing capped,
+ * the doorway open and the wall beside it still blocking. */
+static void test_doorway_three_cuts(void **state)
+{
+    (void)state;
+    snprintf(check_ctx, sizeof check_ctx, "doorway wall");
+    float tris[36 * 9];
+    doorway_wall(tris);
+    const float box[6] = {0, 0, 1.9f, 4, 3, 2.1f};
+    ecm_cluster cl = {.box = 0, .min = {1.9f, 0.9f, 1.9f}, .max = {2.1f, 0.9f, 1.9f}, .centroid = {2, 0.9f, 1.9f}};
+    ecm_params p;
+    ecm_params_default(&p);
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, tris, 36, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
+    check_result(&p, tris, 36, CBOXES(box), 1, &cl, 1, &r, 16);
+    assert_int_equal(r.count, 3);
+    assert_int_equal(r.capped, 0);
+    assert_true(doorway_free(&r));
+    const float wall_lo[3] = {0.5f, 0, 1.7f}, wall_hi[3] = {1.1f, 1.8f, 2.3f};
+    assert_true(blocked(CBOXES(r.boxes), r.count, wall_lo, wall_hi));
+    ecm_result_free(&r);
+}
+
+/* A cluster presses on every box its points lie on, not only the one it
+ * names: the doorway wall's map already split at x = 2 into two boxes,
+ * users stopped across the split. Both boxes are refined and the whole
+ * doorway opens; refining only the named box would leave the other half
+ * of the doorway shut. */
+static void test_cluster_over_two_boxes(void **state)
+{
+    (void)state;
+    snprintf(check_ctx, sizeof check_ctx, "doorway wall in two boxes");
+    float tris[36 * 9];
+    doorway_wall(tris);
+    const float boxes[2][6] = {{0, 0, 1.9f, 2, 3, 2.1f}, {2, 0, 1.9f, 4, 3, 2.1f}};
+    ecm_cluster cl = {.box = 0, .min = {1.8f, 0.9f, 1.9f}, .max = {2.2f, 0.9f, 1.9f}, .centroid = {1.99f, 0.9f, 1.9f}};
+    ecm_params p;
+    ecm_params_default(&p);
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, tris, 36, CBOXES(boxes), 2, &cl, 1, &r, err, sizeof err), 0);
+    check_result(&p, tris, 36, CBOXES(boxes), 2, &cl, 1, &r, 16);
+    assert_int_equal(r.problem_boxes, 2);
+    assert_true(doorway_free(&r));
+    ecm_result_free(&r);
+}
+
 /*
  * Step 2 by numbers. A cluster on the x = 0 face, its points y 1.5..2.5,
- * z 2..2.5, the avatar 2 x 1 x 0.5: grown by half the avatar (horizontally
- * the smaller of x and z, 0.5, whatever the yaw) to y 1..3, z 1.75..2.75,
- * and stretched through the box along x: 32 x 16 x 8 = 4096 free cells, all
- * wanted. A point cluster on the y = 0 face at x = z = 2 is stretched along
+ * z 2..2.5, the avatar 2 x 1 x 0.5 with a 0.5 step: grown by half the
+ * avatar (horizontally the smaller of x and z, 0.5, whatever the yaw) and
+ * upwards by the step too, to y 1..3.5, z 1.75..2.75, and stretched through
+ * the box along x: 32 x 20 x 8 = 5120 free cells, all wanted. A point cluster on the y = 0 face at x = z = 2 is stretched along
  * y instead: 4 x 32 x 4 = 512.
  */
 static void test_wanted_region(void **state)
@@ -887,13 +967,14 @@ static void test_wanted_region(void **state)
     p.avatar[0] = 2;
     p.avatar[1] = 1;
     p.avatar[2] = 0.5f;
+    p.step = 0.5f;
     ecm_cluster on_x = {.box = 0, .min = {0, 1.5f, 2}, .max = {0, 2.5f, 2.5f}, .centroid = {0, 2, 2.25f}};
     ecm_cluster on_y = {.box = 0, .min = {2, 0, 2}, .max = {2, 0, 2}, .centroid = {2, 0, 2}};
     ecm_result r;
     char err[256];
     assert_int_equal(ecm_refine(&p, tris, 24, CBOXES(box), 1, &on_x, 1, &r, err, sizeof err), 0);
     check_result(&p, tris, 24, CBOXES(box), 1, &on_x, 1, &r, 16);
-    assert_int_equal(r.wanted, 32 * 16 * 8);
+    assert_int_equal(r.wanted, 32 * 20 * 8);
     /* Each cube is left in a box of its own cells (its faces lie on cell
      * faces, so it touches one more layer of cells on each side). */
     assert_int_equal(r.count, 2);
@@ -912,7 +993,7 @@ static void test_wanted_region(void **state)
     /* Space outside the grid is free. A plate at y = 0.25 over the whole
      * box (its cells: y layers 1 and 2), the avatar 2 x 2 x 2 (its kernel
      * held to a quarter of the grid, 8 cells), a cluster on the x = 0 face
-     * at y = 0.1, z = 2: the region is y layers 0..8, z 8..23. Above the
+     * at y = 0.1, z = 2, no step: the region is y layers 0..8, z 8..23. Above the
      * plate layers 3..8 are wanted (the kernel reaches up into the free
      * space above the region); below it layer 0 is too, a kernel there
      * reaching down out of the box. */
@@ -920,6 +1001,7 @@ static void test_wanted_region(void **state)
     const float plate[2 * 9] = {0, 0.25f, 0, 4, 0.25f, 0, 4, 0.25f, 4, 0, 0.25f, 0, 4, 0.25f, 4, 0, 0.25f, 4};
     ecm_cluster low = {.box = 0, .min = {0, 0.1f, 2}, .max = {0, 0.1f, 2}, .centroid = {0, 0.1f, 2}};
     p.avatar[0] = p.avatar[1] = p.avatar[2] = 2;
+    p.step = 0;
     assert_int_equal(ecm_refine(&p, plate, 2, CBOXES(box), 1, &low, 1, &r, err, sizeof err), 0);
     check_result(&p, plate, 2, CBOXES(box), 1, &low, 1, &r, 16);
     assert_int_equal(r.wanted, 32 * 16 * (6 + 1));
@@ -984,46 +1066,54 @@ static void test_cap_exact(void **state)
 /* ---- merging ----------------------------------------------------------- */
 
 /*
- * Step 4 by numbers. Cubes A [0,1]^3, B [3,4] x [0,1]^2 and C [0,1] x
- * [3,4]^2 in [0,4]^3 (depth 5), users pressing on the x = 0 face at y = z =
- * 2: the box divides into A's, B's and C's cells (9^3 each: the faces touch
- * a cell on each side). A and C, or B and C, would cover the wanted tunnel
- * between them; A and B only add empty space, 32 x 9 x 9 - 2 x 9^3 = 1134
- * cells of their hull's 2592 (0.4375): they merge only when max_empty
- * allows that share.
+ * Step 4 by numbers. Cubes A [0,0.4]^3, B [3.6,4] x [0,0.4]^2 and C [0,0.4]
+ * x [3.6,4]^2 in [0,4]^3 (depth 5: each cube lies in 4^3 cells, its 2^3
+ * inner ones empty; too small inside for the 0.5 avatar, so never wanted).
+ * Two clusters on the x = 0 face want everything at y >= 1.25, and at y <
+ * 1.25 for z >= 2.25: wanted cells reach every face, so division halves
+ * the box at x = 2 (B alone), then the rest at y = 2 (A and C apart). A and
+ * C would cover wanted cells; A and B only add empty space, 32 x 4 x 4 - 2
+ * x 56 - 2 x 8 = 384 cells of their hull's 512 (0.75): they merge only when
+ * max_empty allows that share.
  */
 static void test_merge_max_empty(void **state)
 {
     (void)state;
     snprintf(check_ctx, sizeof check_ctx, "three cubes");
     float tris[36 * 9];
-    box_surface((const float[3]){0, 0, 0}, (const float[3]){1, 1, 1}, tris);
-    box_surface((const float[3]){3, 0, 0}, (const float[3]){4, 1, 1}, tris + 12 * 9);
-    box_surface((const float[3]){0, 3, 3}, (const float[3]){1, 4, 4}, tris + 24 * 9);
-    const float box[6] = {0, 0, 0, 4, 4, 4}, ab[6] = {0, 0, 0, 4, 1.125f, 1.125f};
-    ecm_cluster cl = {.box = 0, .min = {0, 2, 2}, .max = {0, 2, 2}, .centroid = {0, 2, 2}};
+    box_surface((const float[3]){0, 0, 0}, (const float[3]){0.4f, 0.4f, 0.4f}, tris);
+    box_surface((const float[3]){3.6f, 0, 0}, (const float[3]){4, 0.4f, 0.4f}, tris + 12 * 9);
+    box_surface((const float[3]){0, 3.6f, 3.6f}, (const float[3]){0.4f, 4, 4}, tris + 24 * 9);
+    const float box[6] = {0, 0, 0, 4, 4, 4}, ab[6] = {0, 0, 0, 4, 0.5f, 0.5f};
+    const ecm_cluster cl[2] = {
+        {.box = 0, .min = {0, 1.5f, 0}, .max = {0, 4, 4}, .centroid = {0, 2.75f, 2}},
+        {.box = 0, .min = {0, 0, 2.5f}, .max = {0, 1, 4}, .centroid = {0, 0.5f, 3.25f}}};
     static const struct {
         double max_empty;
         uint32_t count;
-    } cases[] = {{0, 3}, {0.43, 3}, {0.4375, 2}, {1, 2}};
+    } cases[] = {{0, 3}, {0.74, 3}, {0.75, 2}, {1, 2}};
     for (size_t i = 0; i < NELEM(cases); i++) {
         ecm_params p;
         ecm_params_default(&p);
         p.depth = 5;
         p.avatar[0] = p.avatar[1] = p.avatar[2] = 0.5f;
+        p.step = 0;
         p.max_empty = cases[i].max_empty;
         ecm_result r;
         char err[256];
-        assert_int_equal(ecm_refine(&p, tris, 36, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
-        check_result(&p, tris, 36, CBOXES(box), 1, &cl, 1, &r, 16);
+        assert_int_equal(ecm_refine(&p, tris, 36, CBOXES(box), 1, cl, 2, &r, err, sizeof err), 0);
+        check_result(&p, tris, 36, CBOXES(box), 1, cl, 2, &r, 16);
         CHECK(r.count == cases[i].count, "max_empty %g: %u boxes, expected %u", cases[i].max_empty, r.count,
               cases[i].count);
+        assert_int_equal(r.capped, 0);
         int merged = 0;
         for (uint32_t j = 0; j < r.count; j++)
             merged |= memcmp(r.boxes[j], ab, sizeof ab) == 0;
         assert_int_equal(merged, cases[i].count == 2);
-        const float lo[3] = {0, 1.75f, 1.75f}, hi[3] = {4, 2.25f, 2.25f};
+        const float lo[3] = {0, 1.5f, 0.5f}, hi[3] = {4, 3.5f, 3.5f}, lo2[3] = {0.5f, 0, 2.5f},
+                    hi2[3] = {3.5f, 1, 3.5f};
         assert_false(blocked(CBOXES(r.boxes), r.count, lo, hi));
+        assert_false(blocked(CBOXES(r.boxes), r.count, lo2, hi2));
         ecm_result_free(&r);
     }
 }
@@ -1297,6 +1387,9 @@ static void test_bad_input(void **state)
             snprintf(what, sizeof what, "avatar[%d] = %g", a, (double)bad_sizes[i]);
             call_init(&c), c.p.avatar[a] = bad_sizes[i], expect_einval(&c, what);
         }
+    call_init(&c), c.p.step = -0.1f, expect_einval(&c, "step -0.1");
+    call_init(&c), c.p.step = INFINITY, expect_einval(&c, "step infinite");
+    call_init(&c), c.p.step = NAN, expect_einval(&c, "step NaN");
     call_init(&c), c.ntris = 0, expect_einval(&c, "no triangles");
     call_init(&c), c.tp = NULL, expect_einval(&c, "triangles NULL");
     call_init(&c), c.nboxes = 0, expect_einval(&c, "no boxes");
@@ -1472,6 +1565,8 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_flat_objects),
         cmocka_unit_test(test_nothing_wanted_only_shrinks),
         cmocka_unit_test(test_thick_wall_stays_whole),
+        cmocka_unit_test(test_doorway_three_cuts),
+        cmocka_unit_test(test_cluster_over_two_boxes),
         cmocka_unit_test(test_wanted_region),
         cmocka_unit_test(test_cap_exact),
         cmocka_unit_test(test_merge_max_empty),
