@@ -27,6 +27,13 @@
  * the next version afresh. */
 #define REFINER_POINTS_MAX (1u << 20)
 
+/* What a refinement makes of a cluster: the box it names and the extent
+ * of its points (which decides the other boxes it presses on). */
+typedef struct cluster_sig {
+    uint32_t box;
+    float min[3], max[3];
+} cluster_sig;
+
 /* One object whose collisions the online loop follows. */
 typedef struct tracked {
     int64_t id;
@@ -37,9 +44,9 @@ typedef struct tracked {
     uint32_t n, cap;
     uint32_t fresh;   /* points added since it was last clustered */
     int full_logged;
-    /* The clusters' problem boxes when a refinement last changed nothing:
-     * the same clusters again are not worth a run. */
-    uint32_t *settled;
+    /* The clusters when a refinement last changed nothing: the same
+     * clusters again are not worth a run. */
+    cluster_sig *settled;
     uint32_t nsettled;
 } tracked;
 
@@ -195,10 +202,9 @@ fail:
     return -1;
 }
 
-static int cmp_u32(const void *a, const void *b)
+static int cmp_sig(const void *a, const void *b)
 {
-    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-    return (x > y) - (x < y);
+    return memcmp(a, b, sizeof(cluster_sig));
 }
 
 /* Clusters t's points; appends what it finds to *found (problem boxes
@@ -233,28 +239,35 @@ static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nf
     return (int)k;
 }
 
-/* Whether t's clusters (found[0..k)) press on the boxes they pressed on when
- * a refinement last changed nothing; else remembers nothing. */
+/* The clusters found[0..k), in an order that does not depend on DBSCAN's. */
+static cluster_sig *signature(const cluster_found *f, size_t k)
+{
+    cluster_sig *sig = xcalloc(k ? k : 1, sizeof *sig); /* zeroed: compared bytewise */
+    for (size_t i = 0; i < k; i++) {
+        sig[i].box = f[i].box;
+        memcpy(sig[i].min, f[i].c.min, sizeof sig[i].min);
+        memcpy(sig[i].max, f[i].c.max, sizeof sig[i].max);
+    }
+    qsort(sig, k, sizeof *sig, cmp_sig);
+    return sig;
+}
+
+/* Whether t's clusters (found[0..k)) are the ones a refinement last made
+ * nothing of. */
 static int settled_again(const tracked *t, const cluster_found *f, size_t k)
 {
     if (!t->settled || t->nsettled != k)
         return 0;
-    uint32_t *boxes = xmalloc((k ? k : 1) * sizeof *boxes);
-    for (size_t i = 0; i < k; i++)
-        boxes[i] = f[i].box;
-    qsort(boxes, k, sizeof *boxes, cmp_u32);
-    int same = memcmp(boxes, t->settled, k * sizeof *boxes) == 0;
-    free(boxes);
+    cluster_sig *sig = signature(f, k);
+    int same = memcmp(sig, t->settled, k * sizeof *sig) == 0;
+    free(sig);
     return same;
 }
 
 static void settle(tracked *t, const cluster_found *f, size_t k)
 {
     free(t->settled);
-    t->settled = xmalloc((k ? k : 1) * sizeof *t->settled);
-    for (size_t i = 0; i < k; i++)
-        t->settled[i] = f[i].box;
-    qsort(t->settled, k, sizeof *t->settled, cmp_u32);
+    t->settled = signature(f, k);
     t->nsettled = (uint32_t)k;
 }
 

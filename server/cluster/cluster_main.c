@@ -2,8 +2,8 @@
  * cvre-cluster: the offline clustering job. For each object in the world it
  * reads the collisions against the object's current ECM version, in
  * object-local coordinates, clusters them with DBSCAN (dbscan.h) and writes
- * a run record and one row per cluster, each naming the ECM box the cluster
- * presses on (the problem box). With --apply it then refines each object
+ * a run record and one row per cluster, each naming the ECM box nearest its
+ * centroid (where it presses). With --apply it then refines each object
  * with clusters (server/ecm/apply.h) and writes its next ECM version, which
  * a running server picks up and publishes. Safe beside a running server: it
  * reads in one snapshot (WAL) and writes in short transactions.
