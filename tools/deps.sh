@@ -3,11 +3,13 @@
 # is missing. Needs root (apt-get). The same list is in docker/Dockerfile,
 # less chromium: the map render test (tests/integration/test_map.py) draws
 # cvre-admin map's SVG with headless Chromium, the image builds no tests.
+# python3-sklearn and python3-numpy serve the tests and the scenario runner
+# (DBSCAN against scikit-learn's; triangle tests of simulated users).
 # --bench also installs what only the benchmarks compare against: OpenVDB
 # (libopenvdb-dev, with TBB) for bench-voxel.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
-          libflann-dev python3-sklearn time libassimp-dev chromium)
+          libflann-dev python3-sklearn python3-numpy time libassimp-dev chromium)
 for arg in "$@"; do
   case "$arg" in
     --bench) packages+=(libopenvdb-dev) ;;

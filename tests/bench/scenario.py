@@ -23,7 +23,8 @@ instead (accidental contacts), and three users push into the same real wall
 on purpose (their cluster must never open it).
 
 Writes into --out: report.md (the table), report.json, and one SVG per
-scene and round (cvre-admin map), plus the whole world. Deterministic
+scene and round (cvre-admin map; each scene is a world of its own, its
+one object the whole picture). Deterministic
 for a given --seed: users move in lockstep with the server (one move per
 acknowledgement, a fixed step each), so their paths, their choices and the
 collisions do not depend on timing.
@@ -711,8 +712,9 @@ def report(a, scenes, rounds, bump):
     boxes = max(s["boxes"] for r in rounds for s in r["scenes"].values())
     lines += [f"- leaks in all rounds: {leaks} (target 0)", f"- most boxes of an object: {boxes} (target <= 64)",
               f"- deliberate bumpers ({bump.name if wall else 'none'}) pushing at "
-              f"{tuple(round(v, 2) for v in wall['goal']) if wall else '-'}: "
-              f"{sum(r['bumpers']['leaks'] for r in rounds)} leaks through the real wall", "",
+              f"{tuple(round(v, 2) + 0.0 for v in wall['goal']) if wall else '-'}: "
+              f"{sum(r['bumpers']['leaks'] for r in rounds)} leaks through the real wall, stopped "
+              f"{rounds[-1]['bumpers']['collisions']} times by it in the last round", "",
               "Pictures: `<scene>-round<N>.svg`: the map in force during round N (its boxes; the original MBR "
               "dashed; the collisions against the version before it, coloured by cluster, noise grey)."]
     with open(os.path.join(a.out, "report.md"), "w") as f:
