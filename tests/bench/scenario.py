@@ -695,6 +695,15 @@ def report(a, scenes, rounds, bump):
     for r in rounds:
         lines.append(f"| {r['round']} | {r.get('cluster_s', 0):.2f} | {r.get('refine_ms', 0):.1f} | "
                      f"{r['bumpers']['collisions']} | {r['bumpers']['leaks']} |")
+    first = rounds[0]["scenes"]
+    lines += ["", "## The three maps side by side", "",
+              "| scene | single MBR: boxes | tightness | phantom / 1000 | refined (last round): boxes | tightness "
+              "| phantom / 1000 | full voxel: boxes | tightness |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for n in names:
+        f, l = first[n], last[n]
+        lines.append(f"| {n} | {f['boxes']} | {f['tightness']:.3f} | {f['phantom_per_1000']:.2f} | {l['boxes']} "
+                     f"| {l['tightness']:.3f} | {l['phantom_per_1000']:.2f} | {l['full_voxel_boxes']} | 1.000 |")
     lines += ["", "## Targets", ""]
     verdicts = []
     for n in names:
