@@ -896,6 +896,20 @@ static int doorway_free(const ecm_result *r)
     return 1;
 }
 
+/* Refines the doorway wall's map (boxes) for cluster cl with the default
+ * parameters, and checks what every refinement promises. */
+static void refine_doorway(const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *cl, ecm_result *r)
+{
+    float tris[36 * 9];
+    doorway_wall(tris);
+    ecm_params p;
+    ecm_params_default(&p);
+    char err[256];
+    int rc = ecm_refine(&p, tris, 36, boxes, nboxes, cl, 1, r, err, sizeof err);
+    CHECK(rc == 0, "%s", err);
+    check_result(&p, tris, 36, boxes, nboxes, cl, 1, r, 16);
+}
+
 /* Step 3's cuts: users stopped in front of the doorway (on the MBR's face)
  * want the space in it; three cuts along the faces of that space leave the
  * wall on either side and the lintel above: three boxes, nothing capped,
@@ -904,16 +918,10 @@ static void test_doorway_three_cuts(void **state)
 {
     (void)state;
     snprintf(check_ctx, sizeof check_ctx, "doorway wall");
-    float tris[36 * 9];
-    doorway_wall(tris);
     const float box[6] = {0, 0, 1.9f, 4, 3, 2.1f};
     ecm_cluster cl = {.box = 0, .min = {1.9f, 0.9f, 1.9f}, .max = {2.1f, 0.9f, 1.9f}, .centroid = {2, 0.9f, 1.9f}};
-    ecm_params p;
-    ecm_params_default(&p);
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, tris, 36, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, tris, 36, CBOXES(box), 1, &cl, 1, &r, 16);
+    refine_doorway(CBOXES(box), 1, &cl, &r);
     assert_int_equal(r.count, 3);
     assert_int_equal(r.capped, 0);
     assert_true(doorway_free(&r));
@@ -931,16 +939,10 @@ static void test_cluster_over_two_boxes(void **state)
 {
     (void)state;
     snprintf(check_ctx, sizeof check_ctx, "doorway wall in two boxes");
-    float tris[36 * 9];
-    doorway_wall(tris);
     const float boxes[2][6] = {{0, 0, 1.9f, 2, 3, 2.1f}, {2, 0, 1.9f, 4, 3, 2.1f}};
     ecm_cluster cl = {.box = 0, .min = {1.8f, 0.9f, 1.9f}, .max = {2.2f, 0.9f, 1.9f}, .centroid = {1.99f, 0.9f, 1.9f}};
-    ecm_params p;
-    ecm_params_default(&p);
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, tris, 36, CBOXES(boxes), 2, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, tris, 36, CBOXES(boxes), 2, &cl, 1, &r, 16);
+    refine_doorway(CBOXES(boxes), 2, &cl, &r);
     assert_int_equal(r.problem_boxes, 2);
     assert_true(doorway_free(&r));
     ecm_result_free(&r);
@@ -951,8 +953,9 @@ static void test_cluster_over_two_boxes(void **state)
  * z 2..2.5, the avatar 2 x 1 x 0.5 with a 0.5 step: grown by half the
  * avatar (horizontally the smaller of x and z, 0.5, whatever the yaw) and
  * upwards by the step too, to y 1..3.5, z 1.75..2.75, and stretched through
- * the box along x: 32 x 20 x 8 = 5120 free cells, all wanted. A point cluster on the y = 0 face at x = z = 2 is stretched along
- * y instead: 4 x 32 x 4 = 512.
+ * the box along x: 32 x 20 x 8 = 5120 free cells, all wanted. A point
+ * cluster on the y = 0 face at x = z = 2 is stretched along y instead: 4 x
+ * 32 x 4 = 512.
  */
 static void test_wanted_region(void **state)
 {
