@@ -62,7 +62,6 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     ecm_params lp = *p;
     for (int a = 0; a < 3; a++)
         lp.avatar[a] = (float)(p->avatar[a] / scale);
-    lp.step = (float)(p->step / scale);
     out->boxes_before = o.box_count;
     char why[256];
     if (ecm_refine(&lp, o.tris, o.tri_count, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why,

@@ -71,8 +71,7 @@ void ecm_params_default(ecm_params *p)
     *p = (ecm_params){.depth = ECM_DEPTH_DEFAULT,
                       .max_boxes = ECM_MAX_BOXES_DEFAULT,
                       .max_empty = ECM_MAX_EMPTY_DEFAULT,
-                      .avatar = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH},
-                      .step = AVATAR_STEP};
+                      .avatar = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH}};
 }
 
 void ecm_result_free(ecm_result *r)
@@ -558,7 +557,7 @@ static uint32_t cell_of(const voxel_grid *g, int a, double v, int up)
  * that an avatar-sized box of free cells covers. The opening runs on the
  * region grown by the kernel on each side, cells outside the grid free.
  */
-static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3], double step)
+static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3])
 {
     const voxel_grid *g = &w->g;
     uint32_t n = w->n;
@@ -581,7 +580,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3], do
             lo[a] = 0;
             hi[a] = n;
         } else {
-            double up = a == 1 ? step : 0;
+            double up = a == 1 ? g->cell[1] : 0;
             lo[a] = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
             hi[a] = cell_of(g, a, (double)cl->max[a] + size[a] / 2 + up, 1);
         }
@@ -692,7 +691,7 @@ static int refine_box(work *w, const ecm_params *p, const float (*boxes)[6], uin
     if (!w->wanted)
         return -ENOMEM;
     for (uint32_t i = 0; i < ncl; i++)
-        if (presses(&cl[i], boxes, box_index, p->avatar) && (rc = mark_wanted(w, &cl[i], p->avatar, p->step)) < 0)
+        if (presses(&cl[i], boxes, box_index, p->avatar) && (rc = mark_wanted(w, &cl[i], p->avatar)) < 0)
             return rc;
     if ((rc = svt_build(&w->occ, &w->g, NULL)) < 0 || (rc = svt_build(&w->want, &w->g, w->wanted)) < 0 ||
         (rc = divide(w)) < 0)
@@ -761,8 +760,6 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     for (int a = 0; a < 3; a++)
         if (!(p->avatar[a] > 0) || !isfinite(p->avatar[a]))
             return fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
-    if (!(p->step >= 0) || !isfinite(p->step))
-        return fail(err, errlen, -EINVAL, "the avatar's step must be finite and at least 0");
     if (ntris == 0 || !tris)
         return fail(err, errlen, -EINVAL, "the object has no triangles");
     if (!finite_all(tris, (size_t)ntris * 9))

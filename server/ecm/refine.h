@@ -17,9 +17,9 @@
  *      stands for a region: its points' bounding box, grown by half the
  *      avatar's size, and stretched through the whole box along the axis of
  *      the face it presses on (users walk into the box across that face: a
- *      tunnel under an arch, a room behind a door), and upwards by the
- *      avatar's step as well (a user who climbed onto something there
- *      stands that much higher). Only space an avatar fits in counts (a
+ *      tunnel under an arch, a room behind a door), and upwards by one
+ *      cell more (a user stands on a box of the map, whose top may be a
+ *      cell above the geometry under it). Only space an avatar fits in counts (a
  *      morphological opening of the empty cells by the avatar's box, space
  *      outside the grid counting as empty): the hollow between the two
  *      faces of a thick wall is never wanted, so it stays covered.
@@ -78,11 +78,10 @@ typedef struct ecm_params {
     uint32_t max_boxes; /* most boxes for the object, 1..ECM_MAX_BOXES_LIMIT */
     double max_empty;   /* share of a merged box that may be new empty space, 0..1 */
     float avatar[3];    /* the avatar's size in object-local units (> 0) */
-    float step;         /* the highest step it climbs, object-local units (>= 0) */
 } ecm_params;
 
-/* Fills p with the defaults above and the default avatar of avatar.h, its
- * size and step (for an object of scale 1: divide by the object's scale). */
+/* Fills p with the defaults above and the default avatar's size (avatar.h;
+ * for an object of scale 1: divide by the object's scale). */
 void ecm_params_default(ecm_params *p);
 
 /* A cluster of unexpected collisions, in object-local coordinates. */
