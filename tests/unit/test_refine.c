@@ -953,9 +953,8 @@ static void test_cluster_over_two_boxes(void **state)
  * z 2..2.5, the avatar 2 x 1 x 0.5: grown by half the avatar (horizontally
  * the smaller of x and z, 0.5, whatever the yaw) and upwards by one cell
  * more, to y 1..3.125, z 1.75..2.75, and stretched through the box along x:
- * 32 x 17 x 8 = 4352 free cells, all wanted. A point
- * cluster on the y = 0 face at x = z = 2 is stretched along y instead: 4 x
- * 32 x 4 = 512.
+ * 32 x 17 x 8 = 4352 free cells, all wanted. A point cluster on the y = 0
+ * face at x = z = 2 is stretched along y instead: 4 x 32 x 4 = 512.
  */
 static void test_wanted_region(void **state)
 {
