@@ -44,6 +44,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../testdb.h"
 #include "dblog.h"
 #include "log.h"
 
@@ -169,16 +170,6 @@ static void db_path(char *out, size_t len, const char *name)
     snprintf(out, len, "%s/bench-logger-%d-%s.db", opt.dir, (int)getpid(), name);
 }
 
-static void remove_db(const char *path)
-{
-    char p[520];
-    unlink(path);
-    snprintf(p, sizeof p, "%s-wal", path);
-    unlink(p);
-    snprintf(p, sizeof p, "%s-shm", path);
-    unlink(p);
-}
-
 struct rate {
     double wall, cpu; /* rows per second */
 };
@@ -198,7 +189,7 @@ static struct rate bare(const char *name, const char *extra_ddl, int rtree)
 {
     char path[512];
     db_path(path, sizeof path, name);
-    remove_db(path);
+    testdb_remove(path);
     sqlite3 *s;
     if (sqlite3_open(path, &s) != SQLITE_OK)
         fail_sql(s, path);
@@ -261,7 +252,7 @@ static struct rate bare(const char *name, const char *extra_ddl, int rtree)
     sqlite3_finalize(ins);
     sqlite3_finalize(rt);
     sqlite3_close(s);
-    remove_db(path);
+    testdb_remove(path);
     return out;
 }
 
@@ -280,7 +271,7 @@ static dblog *open_log(const char *name, uint32_t queue, char *path, size_t len)
 {
     char err[256];
     db_path(path, len, name);
-    remove_db(path);
+    testdb_remove(path);
     dblog_config cfg = {.queue_rows = queue, .batch_rows = opt.batch, .batch_ms = opt.batch_ms};
     dblog *l = dblog_open(path, &cfg, err, sizeof err);
     if (!l) {
@@ -315,7 +306,7 @@ static struct rate through_dblog(dblog_stats *st)
     double producer = cpu(CLOCK_THREAD_CPUTIME_ID) - p0;
     dblog_stop(l, st);
     double wall = mono() - t0, writer = cpu(CLOCK_PROCESS_CPUTIME_ID) - c0 - producer;
-    remove_db(path);
+    testdb_remove(path);
     return (struct rate){(double)st->written / wall, (double)st->written / writer};
 }
 
@@ -356,7 +347,7 @@ static struct paced paced(void)
     out.push_ns_avg = total / ((double)ticks * per_tick) * 1e9;
     dblog_stop(l, &out.st);
     out.rate = (double)out.st.written / (mono() - t0);
-    remove_db(path);
+    testdb_remove(path);
     return out;
 }
 
@@ -399,7 +390,7 @@ static void push_cost(double *ring_avg, double *ring_max, double *mutex_avg, dou
     *ring_avg = (mono() - t0) / N * 1e9;
     *ring_max = worst * 1e9;
     dblog_stop(l, NULL);
-    remove_db(path);
+    testdb_remove(path);
 
     pthread_t t;
     pthread_create(&t, NULL, mutex_consumer, NULL);

@@ -19,6 +19,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../testdb.h"
 #include "apply.h"
 #include "db.h"
 #include "ecm.h"
@@ -191,12 +192,7 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
     free(frame);
     scene_destroy(sc);
     db_close(d);
-    unlink(path);
-    char side[sizeof path + 8];
-    snprintf(side, sizeof side, "%s-wal", path);
-    unlink(side);
-    snprintf(side, sizeof side, "%s-shm", path);
-    unlink(side);
+    testdb_remove(path);
     import_mesh_free(&m);
     return 0;
 }

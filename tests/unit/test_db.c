@@ -10,6 +10,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../testdb.h"
 #include "db.h"
 
 static char path[64];
@@ -25,23 +26,8 @@ static int setup(void **state)
 static int teardown(void **state)
 {
     (void)state;
-    char p[80];
-    unlink(path);
-    snprintf(p, sizeof p, "%s-wal", path);
-    unlink(p);
-    snprintf(p, sizeof p, "%s-shm", path);
-    unlink(p);
+    testdb_remove(path);
     return 0;
-}
-
-static int64_t scalar(db *d, const char *sql)
-{
-    sqlite3_stmt *st;
-    assert_int_equal(sqlite3_prepare_v2(db_sqlite(d), sql, -1, &st, NULL), SQLITE_OK);
-    assert_int_equal(sqlite3_step(st), SQLITE_ROW);
-    int64_t v = sqlite3_column_int64(st, 0);
-    sqlite3_finalize(st);
-    return v;
 }
 
 static void test_sessions_round_trip(void **state)
@@ -50,7 +36,7 @@ static void test_sessions_round_trip(void **state)
     char err[256];
     db *d = db_open(path, DB_READWRITE, err, sizeof err);
     assert_non_null(d);
-    assert_int_equal(scalar(d, "PRAGMA user_version"), db_schema_version());
+    assert_int_equal(testdb_scalar(db_sqlite(d), "PRAGMA user_version"), db_schema_version());
     assert_int_equal(db_session_last_id(d), 0);
     assert_int_equal(db_begin(d), 0);
     assert_int_equal(db_session_open(d, 1, "00ff", "127.0.0.1:1", 100.0), 0);
@@ -61,17 +47,17 @@ static void test_sessions_round_trip(void **state)
     assert_true(uid1 == 1 && uid2 == 1);
     assert_int_equal(db_session_close(d, 1, "quit", 102.0), 0);
     assert_int_equal(db_commit(d), 0);
-    assert_int_equal(scalar(d, "SELECT count(*) FROM users"), 1);
-    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE user_id = 1"), 2);
-    assert_int_equal(scalar(d, "SELECT last_seen_at FROM users WHERE name = 'alice'"), 101);
+    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM users"), 1);
+    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM sessions WHERE user_id = 1"), 2);
+    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT last_seen_at FROM users WHERE name = 'alice'"), 101);
     db_close(d); /* session 2 is left open, as by a crash */
 
     d = db_open(path, DB_READWRITE, err, sizeof err);
     assert_non_null(d);
     assert_int_equal(db_session_last_id(d), 2);
     assert_int_equal(db_sessions_close_stale(d, 200.0), 1);
-    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'crashed'"), 1);
-    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'quit'"), 1);
+    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM sessions WHERE end_reason = 'crashed'"), 1);
+    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM sessions WHERE end_reason = 'quit'"), 1);
     /* Duplicate ids are refused, with a message. */
     assert_int_equal(db_session_open(d, 2, "x", "y", 1.0), -1);
     assert_non_null(strstr(db_error(d), "UNIQUE"));

@@ -19,34 +19,25 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "../testdb.h"
 #include "db.h"
 #include "dblog.h"
 #include "log.h"
 
 static char path[64];
 
-static void remove_db(void)
-{
-    char p[80];
-    unlink(path);
-    snprintf(p, sizeof p, "%s-wal", path);
-    unlink(p);
-    snprintf(p, sizeof p, "%s-shm", path);
-    unlink(p);
-}
-
 static int setup(void **state)
 {
     (void)state;
     snprintf(path, sizeof path, "/tmp/cvre-test-dblog-%d.sqlite", (int)getpid());
-    remove_db();
+    testdb_remove(path);
     return 0;
 }
 
 static int teardown(void **state)
 {
     (void)state;
-    remove_db();
+    testdb_remove(path);
     return 0;
 }
 
@@ -79,16 +70,6 @@ static sqlite3 *open_ro(void)
     assert_int_equal(sqlite3_open_v2(path, &s, SQLITE_OPEN_READONLY, NULL), SQLITE_OK);
     sqlite3_busy_timeout(s, 5000);
     return s;
-}
-
-static int64_t scalar(sqlite3 *s, const char *sql)
-{
-    sqlite3_stmt *st;
-    assert_int_equal(sqlite3_prepare_v2(s, sql, -1, &st, NULL), SQLITE_OK);
-    assert_int_equal(sqlite3_step(st), SQLITE_ROW);
-    int64_t v = sqlite3_column_int64(st, 0);
-    sqlite3_finalize(st);
-    return v;
 }
 
 /* The layout the queries rely on (db/README.md, "Collision log storage"):
@@ -141,7 +122,7 @@ static void check_layout(sqlite3 *s, int64_t rows)
     }
     sqlite3_finalize(q);
     assert_int_equal(n, rows);
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), rows);
+    assert_int_equal(testdb_scalar(s, "SELECT count(*) FROM collisions"), rows);
 }
 
 static void test_fields_exact(void **state)
@@ -198,12 +179,12 @@ static void test_fields_exact(void **state)
     sqlite3_finalize(q);
     assert_int_equal(i, N);
     check_layout(s, N);
-    assert_int_equal(scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
+    assert_int_equal(testdb_scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
     /* A region query through the rtree's cells, with the exact filter on
      * the rows, finds exactly the rows inside. */
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collision_cells r JOIN collisions c ON c.g = r.g "
+    assert_int_equal(testdb_scalar(s, "SELECT count(*) FROM collision_cells r JOIN collisions c ON c.g = r.g "
                                "WHERE r.min_x <= -100 AND r.max_x >= -200 AND c.world_x BETWEEN -200 AND -100"),
-                     scalar(s, "SELECT count(*) FROM collisions WHERE world_x BETWEEN -200 AND -100"));
+                     testdb_scalar(s, "SELECT count(*) FROM collisions WHERE world_x BETWEEN -200 AND -100"));
     sqlite3_close(s);
 }
 
@@ -226,7 +207,7 @@ static dblog_stats flood(const dblog_config *cfg, uint32_t n)
     assert_int_equal(st.queued, 0);
     assert_true(st.high_water <= (cfg->queue_rows ? cfg->queue_rows : DBLOG_QUEUE_ROWS_DEFAULT));
     sqlite3 *s = open_ro();
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), st.written);
+    assert_int_equal(testdb_scalar(s, "SELECT count(*) FROM collisions"), st.written);
     check_layout(s, (int64_t)st.written);
     sqlite3_close(s);
     return st;
@@ -301,8 +282,8 @@ static void test_hold_cap_cuts_batches(void **state)
      * that, so the ones after it shrink. */
     assert_true(st.batches >= 3);
     sqlite3 *s = open_ro();
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), N);
-    assert_int_equal(scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
+    assert_int_equal(testdb_scalar(s, "SELECT count(*) FROM collisions"), N);
+    assert_int_equal(testdb_scalar(s, "SELECT max(id) - min(id) + 1 FROM collisions"), N);
     check_layout(s, N);
     sqlite3_close(s);
 }
@@ -448,7 +429,7 @@ static void test_disk_full(void **state)
     assert_true(st.written >= 3000); /* before the limit, and after it was lifted */
 
     sqlite3 *s = open_ro();
-    assert_int_equal(scalar(s, "SELECT count(*) FROM collisions"), st.written);
+    assert_int_equal(testdb_scalar(s, "SELECT count(*) FROM collisions"), st.written);
     check_layout(s, (int64_t)st.written);
     sqlite3_stmt *q;
     assert_int_equal(sqlite3_prepare_v2(s, "PRAGMA integrity_check", -1, &q, NULL), SQLITE_OK);
