@@ -690,7 +690,11 @@ static int refine_box(work *w, const ecm_params *p, const float (*boxes)[6], uin
     w->wanted = cvre_calloc(cells, 1);
     if (!w->wanted)
         return -ENOMEM;
-    for (uint32_t i = 0; i < ncl; i++)
+    /* At a share of one box it can only shrink to its occupied cells: its
+     * wanted space is not worked out (the costly part), and it counts as
+     * kept whole by the cap. */
+    int whole = budget == 1;
+    for (uint32_t i = 0; i < ncl && !whole; i++)
         if (presses(&cl[i], boxes, box_index, p->avatar) && (rc = mark_wanted(w, &cl[i], p->avatar)) < 0)
             return rc;
     if ((rc = svt_build(&w->occ, &w->g, NULL)) < 0 || (rc = svt_build(&w->want, &w->g, w->wanted)) < 0 ||
@@ -700,7 +704,7 @@ static int refine_box(work *w, const ecm_params *p, const float (*boxes)[6], uin
     r->cells += cells;
     r->occupied += w->g.occupied;
     r->wanted += svt_sum(&w->want, &all);
-    r->capped += w->capped;
+    r->capped += whole ? 1 : w->capped;
     r->divide_ms += ms_since(&t0);
     return 0;
 }

@@ -40,9 +40,11 @@
  *      object's other boxes leave of max_boxes (at least one). When the next
  *      division would pass its share even after merging, division stops and
  *      the nodes still waiting stay whole, wanted cells and all (`capped`
- *      counts them): the opening may stay partly closed until the next
- *      round, whose collisions name it again. An object already at the cap
- *      can still grow by one box per problem box beyond it, never more.
+ *      counts them; a problem box whose share is one box is only shrunk
+ *      to its occupied cells, its wanted space never worked out): the
+ *      opening may stay partly closed until the next round, whose
+ *      collisions name it again. An object already at the cap can still
+ *      grow by one box per problem box beyond it, never more.
  *
  * Invariant: every box is a union of whole cells that contains all the
  * occupied cells of its problem box, so the union of the object's boxes
@@ -96,7 +98,8 @@ typedef struct ecm_result {
     float (*boxes)[6];      /* count boxes, local min x y z, max x y z; ecm_result_free */
     uint32_t count;
     uint32_t problem_boxes; /* boxes replaced */
-    uint32_t capped;        /* boxes left holding wanted cells by the cap */
+    uint32_t capped;        /* boxes left holding wanted cells by the cap, and problem
+                             * boxes whose share was one box (only shrunk) */
     uint64_t cells;         /* cells examined: problem boxes x 2^(3 depth) */
     uint64_t occupied;      /* of which occupied */
     uint64_t wanted;        /* of which wanted (step 2) */
