@@ -191,8 +191,8 @@ static const struct command commands[] = {
      "\n"
      "The clusters the latest cvre-cluster run found, largest first: run,\n"
      "finished, object, version (ECM), cluster, points, users, box (the ECM box\n"
-     "it presses on: the problem box) and the centroid in object-local\n"
-     "coordinates. Nothing if the job never ran.\n"},
+     "nearest its centroid; refinement takes every box its points lie on) and\n"
+     "the centroid in object-local coordinates. Nothing if the job never ran.\n"},
     {"map", OPT_OBJECT | OPT_SVG | OPT_MAPVERSION, 0,
      "usage: cvre-admin map --svg FILE [--object ID [--version N]] [--json]\n"
      "       cvre-admin map --json [--object ID [--version N]]\n"
