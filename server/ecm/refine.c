@@ -557,15 +557,18 @@ static uint32_t cell_of(const voxel_grid *g, int a, double v, int up)
  * that an avatar-sized box of free cells covers. The opening runs on the
  * region grown by the kernel on each side, cells outside the grid free.
  */
-static int mark_wanted(work *w, const ecm_cluster *cl, const float avatar[3])
+static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], const float avatar[3])
 {
     const voxel_grid *g = &w->g;
     uint32_t n = w->n;
-    /* Nearest face of the box: the axis users cross. */
+    /* The face of the box the cluster names nearest its centroid: the axis
+     * users cross, in every box the cluster presses on (a neighbour's
+     * nearest face may be the one it shares with the named box). */
     int face = 0;
     double best = INFINITY;
     for (int a = 0; a < 3; a++) {
-        double d = fmin(fabs((double)cl->centroid[a] - g->min[a]), fabs(g->max[a] - (double)cl->centroid[a]));
+        double c = cl->centroid[a];
+        double d = fmin(fabs(c - (double)named[a]), fabs((double)named[3 + a] - c));
         if (d < best) {
             best = d;
             face = a;
@@ -687,24 +690,31 @@ static int refine_box(work *w, const ecm_params *p, const float (*boxes)[6], uin
     clock_gettime(CLOCK_MONOTONIC, &t0);
     uint32_t n = w->n = w->g.n;
     size_t cells = (size_t)n * n * n;
-    w->wanted = cvre_calloc(cells, 1);
-    if (!w->wanted)
-        return -ENOMEM;
-    /* At a share of one box it can only shrink to its occupied cells: its
-     * wanted space is not worked out (the costly part), and it counts as
-     * kept whole by the cap. */
-    int whole = budget == 1;
-    for (uint32_t i = 0; i < ncl && !whole; i++)
-        if (presses(&cl[i], boxes, box_index, p->avatar) && (rc = mark_wanted(w, &cl[i], p->avatar)) < 0)
-            return rc;
-    if ((rc = svt_build(&w->occ, &w->g, NULL)) < 0 || (rc = svt_build(&w->want, &w->g, w->wanted)) < 0 ||
-        (rc = divide(w)) < 0)
-        return rc;
     ibox all = {{0, 0, 0}, {(uint16_t)n, (uint16_t)n, (uint16_t)n}};
+    if ((rc = svt_build(&w->occ, &w->g, NULL)) < 0)
+        return rc;
+    if (budget == 1) {
+        /* A share of one box: it can only shrink to its occupied cells, so
+         * its wanted space is not worked out; kept whole by the cap. */
+        ibox b = all;
+        if (shrink(&w->occ, &b) && (rc = push(&w->out, &b)) < 0)
+            return rc;
+        r->capped += w->out.n;
+    } else {
+        w->wanted = cvre_calloc(cells, 1);
+        if (!w->wanted)
+            return -ENOMEM;
+        for (uint32_t i = 0; i < ncl; i++)
+            if (presses(&cl[i], boxes, box_index, p->avatar) &&
+                (rc = mark_wanted(w, &cl[i], boxes[cl[i].box], p->avatar)) < 0)
+                return rc;
+        if ((rc = svt_build(&w->want, &w->g, w->wanted)) < 0 || (rc = divide(w)) < 0)
+            return rc;
+        r->wanted += svt_sum(&w->want, &all);
+        r->capped += w->capped;
+    }
     r->cells += cells;
     r->occupied += w->g.occupied;
-    r->wanted += svt_sum(&w->want, &all);
-    r->capped += whole ? 1 : w->capped;
     r->divide_ms += ms_since(&t0);
     return 0;
 }

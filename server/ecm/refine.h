@@ -38,10 +38,13 @@
  *      empty space become one, cheapest first, until no pair qualifies.
  *   5. Cap: each problem box may become an equal share of what the
  *      object's other boxes leave of max_boxes (at least one). When the next
- *      division would pass its share even after merging, division stops and
- *      the nodes still waiting stay whole, wanted cells and all (`capped`
- *      counts them; a problem box whose share is one box is only shrunk
- *      to its occupied cells, its wanted space never worked out): the
+ *      cut would pass its share by more than a small slack even after
+ *      merging, division stops and the nodes still waiting stay whole,
+ *      wanted cells and all; then the cheapest pairs (fewest wanted cells
+ *      covered, then fewest empty ones) merge until the share is met.
+ *      `capped` counts the boxes left holding wanted cells, and each
+ *      problem box whose share is one box (it is only shrunk to its
+ *      occupied cells, its wanted space never worked out): the
  *      opening may stay partly closed until the next round, whose
  *      collisions name it again. An object already at the cap can still
  *      grow by one box per problem box beyond it, never more.
