@@ -27,11 +27,12 @@
  * the next version afresh. */
 #define REFINER_POINTS_MAX (1u << 20)
 
-/* What a refinement makes of a cluster: the box it names and the extent
- * of its points (which decides the other boxes it presses on). */
+/* What a refinement makes of a cluster: the box it names, the extent of
+ * its points (the other boxes it presses on, its region) and its centroid
+ * (the face users cross). */
 typedef struct cluster_sig {
     uint32_t box;
-    float min[3], max[3];
+    float min[3], max[3], centroid[3];
 } cluster_sig;
 
 /* One object whose collisions the online loop follows. */
@@ -247,6 +248,7 @@ static cluster_sig *signature(const cluster_found *f, size_t k)
         sig[i].box = f[i].box;
         memcpy(sig[i].min, f[i].c.min, sizeof sig[i].min);
         memcpy(sig[i].max, f[i].c.max, sizeof sig[i].max);
+        memcpy(sig[i].centroid, f[i].c.centroid, sizeof sig[i].centroid);
     }
     qsort(sig, k, sizeof *sig, cmp_sig);
     return sig;
