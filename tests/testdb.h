@@ -4,6 +4,7 @@
 #ifndef CVRE_TESTDB_H
 #define CVRE_TESTDB_H
 
+#include <stdint.h>
 #include <stdio.h>
 #include <unistd.h>
 

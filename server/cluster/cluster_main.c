@@ -373,7 +373,7 @@ int main(int argc, char **argv)
         }
         printf("]}\n");
     } else {
-        printf("run %lld: %zu objects, %llu collisions, %zu clusters, %llu problem boxes "
+        printf("run %lld: %zu objects, %llu collisions, %zu clusters naming %llu boxes "
                "(eps %g m, min points %u, min users %u)\n",
                (long long)run_id, nobjs, (unsigned long long)total_points, nfound,
                (unsigned long long)problem_boxes, prm.eps, prm.min_points, prm.min_users);

@@ -15,6 +15,11 @@
 
 static char path[64];
 
+static int64_t scalar(db *d, const char *sql)
+{
+    return testdb_scalar(db_sqlite(d), sql);
+}
+
 static int setup(void **state)
 {
     (void)state;
@@ -36,7 +41,7 @@ static void test_sessions_round_trip(void **state)
     char err[256];
     db *d = db_open(path, DB_READWRITE, err, sizeof err);
     assert_non_null(d);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "PRAGMA user_version"), db_schema_version());
+    assert_int_equal(scalar(d, "PRAGMA user_version"), db_schema_version());
     assert_int_equal(db_session_last_id(d), 0);
     assert_int_equal(db_begin(d), 0);
     assert_int_equal(db_session_open(d, 1, "00ff", "127.0.0.1:1", 100.0), 0);
@@ -47,17 +52,17 @@ static void test_sessions_round_trip(void **state)
     assert_true(uid1 == 1 && uid2 == 1);
     assert_int_equal(db_session_close(d, 1, "quit", 102.0), 0);
     assert_int_equal(db_commit(d), 0);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM users"), 1);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM sessions WHERE user_id = 1"), 2);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT last_seen_at FROM users WHERE name = 'alice'"), 101);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM users"), 1);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE user_id = 1"), 2);
+    assert_int_equal(scalar(d, "SELECT last_seen_at FROM users WHERE name = 'alice'"), 101);
     db_close(d); /* session 2 is left open, as by a crash */
 
     d = db_open(path, DB_READWRITE, err, sizeof err);
     assert_non_null(d);
     assert_int_equal(db_session_last_id(d), 2);
     assert_int_equal(db_sessions_close_stale(d, 200.0), 1);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM sessions WHERE end_reason = 'crashed'"), 1);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM sessions WHERE end_reason = 'quit'"), 1);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'crashed'"), 1);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'quit'"), 1);
     /* Duplicate ids are refused, with a message. */
     assert_int_equal(db_session_open(d, 2, "x", "y", 1.0), -1);
     assert_non_null(strstr(db_error(d), "UNIQUE"));

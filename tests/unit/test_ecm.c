@@ -29,6 +29,11 @@ _Static_assert(DB_ECM_BOXES_MAX == PROTO_OBJECT_BOXES_MAX, "a version must fit o
 
 static char path[64];
 
+static int64_t scalar(db *d, const char *sql)
+{
+    return testdb_scalar(db_sqlite(d), sql);
+}
+
 static int setup(void **state)
 {
     (void)state;
@@ -101,9 +106,9 @@ static counts count(db *d, int64_t object)
 {
     char text[128];
     snprintf(text, sizeof text, "SELECT ecm_version FROM objects WHERE id = %lld", (long long)object);
-    return (counts){testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_versions"), testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_boxes"),
-                    testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_version_clusters"), testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_events"),
-                    testdb_scalar(db_sqlite(d), text)};
+    return (counts){scalar(d, "SELECT count(*) FROM ecm_versions"), scalar(d, "SELECT count(*) FROM ecm_boxes"),
+                    scalar(d, "SELECT count(*) FROM ecm_version_clusters"), scalar(d, "SELECT count(*) FROM ecm_events"),
+                    scalar(d, text)};
 }
 
 static void assert_counts(counts a, counts b)
@@ -132,7 +137,7 @@ static void test_write_read_round_trip(void **state)
     (void)state;
     db *d = open_rw();
     assert_int_equal(db_schema_version(), 4);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "PRAGMA user_version"), 4);
+    assert_int_equal(scalar(d, "PRAGMA user_version"), 4);
     int64_t id = make_object(d, "a");
     make_run(d, 7, id, 3);
     uint32_t ties[] = {2, 0, 2}; /* a duplicate counts once */
@@ -143,14 +148,14 @@ static void test_write_read_round_trip(void **state)
     assert_int_equal(v, 2);
     assert_boxes(d, id, 2, THREE, 3);
     assert_boxes(d, id, 1, MBR, 1); /* the old version stays */
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT ecm_version FROM objects WHERE id = 1"), 2);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_versions WHERE object_id = 1 AND version = 2 "
+    assert_int_equal(scalar(d, "SELECT ecm_version FROM objects WHERE id = 1"), 2);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_versions WHERE object_id = 1 AND version = 2 "
                                "AND created_at = 2000.5 AND reason = 'refine' AND box_count = 3 "
                                "AND parent_version = 1 AND run_id = 7 AND restores IS NULL "
                                "AND detail = 'depth 6, 3 boxes'"),
                      1);
     /* The import's row has no history. */
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_versions WHERE version = 1 AND parent_version IS NULL "
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_versions WHERE version = 1 AND parent_version IS NULL "
                                "AND run_id IS NULL AND restores IS NULL AND detail IS NULL"),
                      1);
     sqlite3_stmt *st;
@@ -162,7 +167,7 @@ static void test_write_read_round_trip(void **state)
     assert_int_equal(sqlite3_step(st), SQLITE_ROW);
     assert_string_equal((const char *)sqlite3_column_text(st, 0), "0,2");
     sqlite3_finalize(st);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_events WHERE id = 1 AND object_id = 1 AND version = 2 "
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_events WHERE id = 1 AND object_id = 1 AND version = 2 "
                                "AND at = 2000.5 AND reason = 'refine'"),
                      1);
 
@@ -177,7 +182,7 @@ static void test_write_read_round_trip(void **state)
     free(b1);
     assert_int_equal(v, 3);
     assert_boxes(d, id, 3, MBR, 1);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_versions WHERE version = 3 AND parent_version = 2 "
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_versions WHERE version = 3 AND parent_version = 2 "
                                "AND restores = 1 AND run_id IS NULL AND detail IS NULL AND reason = 'rollback'"),
                      1);
     float(*many)[6] = calloc(DB_ECM_BOXES_MAX, sizeof *many);
@@ -642,8 +647,8 @@ static void test_migration_from_3(void **state)
                      SQLITE_OK);
     sqlite3_close(raw);
     db *d = open_rw();
-    assert_int_equal(testdb_scalar(db_sqlite(d), "PRAGMA user_version"), 4);
-    assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM ecm_versions WHERE parent_version IS NULL AND run_id IS NULL "
+    assert_int_equal(scalar(d, "PRAGMA user_version"), 4);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_versions WHERE parent_version IS NULL AND run_id IS NULL "
                                "AND restores IS NULL AND detail IS NULL"),
                      1);
     db_ecm_change c = {.object_id = 1, .parent_version = 1, .reason = "refine", .box_count = 3, .boxes = THREE};
