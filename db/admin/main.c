@@ -378,24 +378,24 @@ static const struct command *find_command(const char *name)
 enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT, O_SVG,
        O_MAPVERSION };
 
+/* Every command's options but --version, whose meaning depends on it. */
+#define SHARED_OPTIONS                                                                                              \
+    {"db", required_argument, 0, O_DB}, {"csv", no_argument, 0, O_CSV}, {"json", no_argument, 0, O_JSON},           \
+        {"help", no_argument, 0, O_HELP}, {"object", required_argument, 0, O_OBJECT},                               \
+        {"user", required_argument, 0, O_USER}, {"since", required_argument, 0, O_SINCE},                           \
+        {"until", required_argument, 0, O_UNTIL}, {"region", required_argument, 0, O_REGION},                       \
+        {"limit", required_argument, 0, O_LIMIT}, {"svg", required_argument, 0, O_SVG}
+
 static const struct option options[] = {
-    {"db", required_argument, 0, O_DB},         {"csv", no_argument, 0, O_CSV},
-    {"json", no_argument, 0, O_JSON},           {"help", no_argument, 0, O_HELP},
-    {"version", no_argument, 0, O_VERSION},     {"object", required_argument, 0, O_OBJECT},
-    {"user", required_argument, 0, O_USER},     {"since", required_argument, 0, O_SINCE},
-    {"until", required_argument, 0, O_UNTIL},   {"region", required_argument, 0, O_REGION},
-    {"limit", required_argument, 0, O_LIMIT},   {"svg", required_argument, 0, O_SVG},
+    SHARED_OPTIONS,
+    {"version", no_argument, 0, O_VERSION},
     {0, 0, 0, 0},
 };
 
 /* map's options: the same, except that --version names an ECM version. */
 static const struct option map_options[] = {
-    {"db", required_argument, 0, O_DB},         {"csv", no_argument, 0, O_CSV},
-    {"json", no_argument, 0, O_JSON},           {"help", no_argument, 0, O_HELP},
-    {"version", required_argument, 0, O_MAPVERSION}, {"object", required_argument, 0, O_OBJECT},
-    {"user", required_argument, 0, O_USER},     {"since", required_argument, 0, O_SINCE},
-    {"until", required_argument, 0, O_UNTIL},   {"region", required_argument, 0, O_REGION},
-    {"limit", required_argument, 0, O_LIMIT},   {"svg", required_argument, 0, O_SVG},
+    SHARED_OPTIONS,
+    {"version", required_argument, 0, O_MAPVERSION},
     {0, 0, 0, 0},
 };
 

@@ -603,19 +603,9 @@ typedef struct reader {
     sqlite3_stmt *version, *nversions, *boxes, *run, *points, *mesh;
 } reader;
 
-static int fail(char *err, size_t errlen, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
-static int fail(char *err, size_t errlen, int code, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err, errlen, fmt, ap);
-    va_end(ap);
-    return code;
-}
-
 static int db_fail(reader *rd)
 {
-    return fail(rd->err, rd->errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(rd->s));
+    return query_fail(rd->err, rd->errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(rd->s));
 }
 
 static char *dup_text(sqlite3_stmt *st, int i)
@@ -675,7 +665,7 @@ static int read_object(reader *rd, mobj *o)
     if ((step != SQLITE_ROW && step != SQLITE_DONE) || nstep != SQLITE_ROW)
         return db_fail(rd);
     if (step == SQLITE_DONE)
-        return fail(rd->err, rd->errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
+        return query_fail(rd->err, rd->errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
                     oid, o->version, (long long)last);
     int rc = read_boxes(rd, o->id, o->version, &o->boxes, &o->nboxes);
     if (rc == QUERY_OK)
@@ -683,7 +673,7 @@ static int read_object(reader *rd, mobj *o)
     if (rc != QUERY_OK)
         return rc;
     if (o->nboxes != count)
-        return fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld version %u: %u boxes stored, box_count says %lld",
+        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld version %u: %u boxes stored, box_count says %lld",
                     oid, o->version, o->nboxes, (long long)count);
     /* The collisions the version answered (its parent's) if it has a
      * parent, else its own. */
@@ -739,7 +729,7 @@ static int cluster_object(mobj *o, char *err, size_t errlen)
         dbscan_result *res = NULL;
         int rc = dbscan_run(o->xyz, o->users, o->npts, &o->prm, o->labels, &res);
         if (rc < 0)
-            return fail(err, errlen, QUERY_ERROR, "object %lld: clustering with run %lld's parameters failed: %s",
+            return query_fail(err, errlen, QUERY_ERROR, "object %lld: clustering with run %lld's parameters failed: %s",
                         (long long)o->id, (long long)o->run_id, strerror(-rc));
         o->nclusters = dbscan_result_count(res);
         dbscan_result_free(res);
@@ -777,7 +767,7 @@ static int mesh_object(reader *rd, mobj *o, view *views, int nviews)
     }
     if (bytes != (size_t)o->tri_count * 36u) {
         sqlite3_reset(st);
-        return fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld: its mesh has %zu bytes, not %u triangles of 36",
+        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld: its mesh has %zu bytes, not %u triangles of 36",
                     oid, bytes, o->tri_count);
     }
     size_t nf = (size_t)o->tri_count * 9u;
@@ -801,7 +791,7 @@ static int mesh_object(reader *rd, mobj *o, view *views, int nviews)
     free(tris);
     if (rc < 0) {
         voxel_grid_free(&g);
-        return fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld: cannot digitize its mesh: %s", oid,
+        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld: cannot digitize its mesh: %s", oid,
                     strerror(-rc));
     }
     double sc3 = o->scale * o->scale * o->scale;
@@ -1234,13 +1224,13 @@ static int write_file(const char *path, const sbuf *b, char *err, size_t errlen)
 {
     FILE *f = fopen(path, "wb");
     if (!f)
-        return fail(err, errlen, QUERY_ERROR, "cannot write the picture %s: %s", path, strerror(errno));
+        return query_fail(err, errlen, QUERY_ERROR, "cannot write the picture %s: %s", path, strerror(errno));
     size_t n = fwrite(b->p, 1, b->len, f);
     int e = n == b->len ? 0 : errno;
     if (fclose(f) != 0 && !e)
         e = errno;
     if (n != b->len || e)
-        return fail(err, errlen, QUERY_ERROR, "cannot write the picture %s: %s", path, strerror(e ? e : EIO));
+        return query_fail(err, errlen, QUERY_ERROR, "cannot write the picture %s: %s", path, strerror(e ? e : EIO));
     return QUERY_OK;
 }
 
@@ -1258,7 +1248,7 @@ int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
     int rc = QUERY_OK, step;
 
     if (sqlite3_exec(s, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "cannot start a read transaction: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "cannot start a read transaction: %s", sqlite3_errmsg(s));
     int in_tx = 1;
     /* The run whose parameters label the points: the one that made the
      * version shown; else the latest with clusters over the collisions
@@ -1308,12 +1298,12 @@ int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
         for (int k = 0; k < 6; k++)
             o->mbr[k] = (float)sqlite3_column_double(objs, 9 + k);
         if (sqlite3_column_int(objs, 15)) {
-            rc = fail(err, errlen, QUERY_NOT_FOUND, "object %lld was removed from the world", (long long)o->id);
+            rc = query_fail(err, errlen, QUERY_NOT_FOUND, "object %lld was removed from the world", (long long)o->id);
             goto cleanup;
         }
         if (in_force < 1 || in_force > UINT32_MAX || tris < 0 || tris > UINT32_MAX / 9 ||
             !(o->scale > 0) || !isfinite(o->yaw)) {
-            rc = fail(err, errlen, QUERY_ERROR, "object %lld: stored placement or counts out of range",
+            rc = query_fail(err, errlen, QUERY_ERROR, "object %lld: stored placement or counts out of range",
                       (long long)o->id);
             goto cleanup;
         }
@@ -1326,7 +1316,7 @@ int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
         goto cleanup;
     }
     if (r->has_object && wd.n == 0) {
-        rc = fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", (long long)r->object);
+        rc = query_fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", (long long)r->object);
         goto cleanup;
     }
     for (size_t i = 0; i < wd.n && rc == QUERY_OK; i++) {
@@ -1377,7 +1367,7 @@ int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
         figures_table(&out, &wd);
     }
     if (fwrite(out.p, 1, out.len, stdout) != out.len || fflush(stdout) != 0)
-        rc = fail(err, errlen, QUERY_ERROR, "cannot write the output");
+        rc = query_fail(err, errlen, QUERY_ERROR, "cannot write the output");
     free(out.p);
 
 cleanup:

@@ -16,8 +16,7 @@
 
 #define LEN(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
-static int fail(char *err, size_t errlen, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
-static int fail(char *err, size_t errlen, int code, const char *fmt, ...)
+int query_fail(char *err, size_t errlen, int code, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -85,12 +84,12 @@ static int print_rows(sqlite3 *s, sqlite3_stmt *st, const out_column *cols, int 
         out_row(o, st);
     long rows = out_end(o);
     if (rc != SQLITE_DONE)
-        fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
     if (rc != SQLITE_DONE)
         return QUERY_ERROR;
     if (rows < 0)
-        return fail(err, errlen, QUERY_ERROR, "cannot write the output");
+        return query_fail(err, errlen, QUERY_ERROR, "cannot write the output");
     return QUERY_OK;
 }
 
@@ -100,7 +99,7 @@ static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     bind_filter(st, f, user_id, ranges);
     return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
 }
@@ -112,7 +111,7 @@ static int lookup(sqlite3 *s, const char *sql, const char *text, int64_t num, in
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     if (text)
         sqlite3_bind_text(st, 1, text, -1, SQLITE_STATIC);
     else
@@ -122,7 +121,7 @@ static int lookup(sqlite3 *s, const char *sql, const char *text, int64_t num, in
     if (*found)
         *out_id = sqlite3_column_int64(st, 0);
     else if (rc != SQLITE_DONE)
-        fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
     return rc == SQLITE_ROW || rc == SQLITE_DONE ? QUERY_OK : QUERY_ERROR;
 }
@@ -139,14 +138,14 @@ static int resolve(sqlite3 *s, const query_filter *f, int64_t *user_id, char *er
         if (rc != QUERY_OK)
             return rc;
         if (!found)
-            return fail(err, errlen, QUERY_NOT_FOUND, "no user named \"%s\"", f->user);
+            return query_fail(err, errlen, QUERY_NOT_FOUND, "no user named \"%s\"", f->user);
     }
     if (f->has_object) {
         rc = lookup(s, "SELECT id FROM objects WHERE id = ?1", NULL, f->object, &id, &found, err, errlen);
         if (rc != QUERY_OK)
             return rc;
         if (!found)
-            return fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", (long long)f->object);
+            return query_fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", (long long)f->object);
     }
     return QUERY_OK;
 }
@@ -156,7 +155,7 @@ static int resolve(sqlite3 *s, const query_filter *f, int64_t *user_id, char *er
 static int begin_snapshot(sqlite3 *s, char *err, size_t errlen)
 {
     if (sqlite3_exec(s, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "cannot start a read transaction: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "cannot start a read transaction: %s", sqlite3_errmsg(s));
     return QUERY_OK;
 }
 
@@ -304,7 +303,7 @@ static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f
                            -1, &sq, NULL) != SQLITE_OK ||
         sqlite3_prepare_v2(s, "SELECT id, object_id, ecm_version, g FROM collisions WHERE id >= ?1 ORDER BY id LIMIT 1",
                            -1, &p.st, NULL) != SQLITE_OK) {
-        rc = fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        rc = query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
         goto cleanup;
     }
     bind_filter(gq, f, user_id, NULL);
@@ -321,7 +320,7 @@ static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f
                     size_t cap = capseg ? capseg * 2 : 64;
                     void *t = realloc(seg, cap * sizeof *seg);
                     if (!t) {
-                        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+                        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
                         goto cleanup;
                     }
                     seg = t, capseg = cap;
@@ -345,7 +344,7 @@ static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f
         }
     }
     if (step != SQLITE_DONE || p.rc)
-        rc = fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        rc = query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
 cleanup:
     free(seg);
     sqlite3_finalize(gq);
@@ -364,7 +363,7 @@ static int segment_ranges(sqlite3 *s, const query_filter *f, int64_t stop_at, ra
     if (sqlite3_prepare_v2(s, "SELECT first_id, last_id, bucket FROM collision_segments "
                               "WHERE bucket BETWEEN :b0 AND :b1 ORDER BY bucket DESC, first_id DESC",
                            -1, &st, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     bind_filter(st, f, 0, NULL);
     int64_t b0 = f->has_since ? dblog_bucket(f->since) : -DBLOG_BUCKET_MAX;
     int64_t b1 = f->has_until ? dblog_bucket(f->until) : DBLOG_BUCKET_MAX;
@@ -382,7 +381,7 @@ static int segment_ranges(sqlite3 *s, const query_filter *f, int64_t stop_at, ra
     }
     int ok = step == SQLITE_DONE || step == SQLITE_ROW;
     if (!ok)
-        fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
     return ok ? QUERY_OK : QUERY_ERROR;
 }
@@ -455,7 +454,7 @@ int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, s
     }
     const char *text = ranges_end(&r);
     if (rc == QUERY_OK && !text)
-        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
     if (rc == QUERY_OK)
         rc = run(s, sql, f, user_id, text, cols, LEN(cols), 0, format, err, errlen);
     free(r.text);
@@ -494,7 +493,7 @@ int query_top_objects(sqlite3 *s, const query_filter *f, int format, char *err, 
         rc = segment_ranges(s, f, 0, &r, err, errlen);
     const char *text = ranges_end(&r);
     if (rc == QUERY_OK && !text)
-        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
     if (rc == QUERY_OK)
         rc = run(s, sql, f, 0, text, cols, LEN(cols), 0, format, err, errlen);
     free(r.text);
@@ -528,7 +527,7 @@ static int per_object(sqlite3 *s, int64_t id, const char *sql, const out_column 
         rc = object_ranges(s, &f, &r, err, errlen);
     const char *text = ranges_end(&r);
     if (rc == QUERY_OK && !text)
-        rc = fail(err, errlen, QUERY_ERROR, "out of memory");
+        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
     if (rc == QUERY_OK)
         rc = run(s, sql, &f, 0, text, cols, ncols, vertical, format, err, errlen);
     free(r.text);
@@ -594,7 +593,7 @@ static int run_ids(sqlite3 *s, const char *sql, int64_t object, int64_t a, int64
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     bind_int(st, ":object", object);
     bind_int(st, ":a", a);
     bind_int(st, ":b", b);
@@ -607,14 +606,14 @@ static int scalar2(sqlite3 *s, const char *sql, int64_t p1, int64_t p2, int64_t 
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_int64(st, 1, p1);
     if (sqlite3_bind_parameter_count(st) >= 2)
         sqlite3_bind_int64(st, 2, p2);
     int rc = sqlite3_step(st);
     *v = rc == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
     if (rc != SQLITE_ROW)
-        fail(err, errlen, QUERY_ERROR, "query failed: %s", rc == SQLITE_DONE ? "no row" : sqlite3_errmsg(s));
+        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", rc == SQLITE_DONE ? "no row" : sqlite3_errmsg(s));
     sqlite3_finalize(st);
     return rc == SQLITE_ROW ? QUERY_OK : QUERY_ERROR;
 }
@@ -632,7 +631,7 @@ static int has_version(sqlite3 *s, int64_t id, uint32_t v, char *err, size_t err
                  errlen);
     if (rc != QUERY_OK)
         return rc;
-    return fail(err, errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
+    return query_fail(err, errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
                 (long long)id, v, (long long)last);
 }
 
@@ -703,7 +702,7 @@ int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char 
     if (rc == QUERY_OK)
         rc = run_ids(s, boxes_sql, id, a, b, boxes, LEN(boxes), OUT_ROWS, format, err, errlen);
     if (rc == QUERY_OK && format == OUT_JSON && (fputs("}\n", stdout) < 0 || fflush(stdout) != 0))
-        rc = fail(err, errlen, QUERY_ERROR, "cannot write the output");
+        rc = query_fail(err, errlen, QUERY_ERROR, "cannot write the output");
     return end_snapshot(s, rc);
 }
 
@@ -718,18 +717,18 @@ int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force,
     rc = scalar2(s, "SELECT coalesce((SELECT removed_at IS NOT NULL FROM objects WHERE id = ?1), -1)", id, 0, &removed,
                  err, errlen);
     if (rc == QUERY_OK && removed < 0)
-        rc = fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", oid);
+        rc = query_fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", oid);
     if (rc == QUERY_OK && removed > 0)
-        rc = fail(err, errlen, QUERY_REFUSED, "object %lld was removed from the world: its collision map is not in use",
+        rc = query_fail(err, errlen, QUERY_REFUSED, "object %lld was removed from the world: its collision map is not in use",
                   oid);
     if (rc == QUERY_OK)
         rc = has_version(s, id, k, err, errlen);
     if (rc == QUERY_OK)
         rc = scalar2(s, "SELECT ecm_version FROM objects WHERE id = ?1", id, 0, &v, err, errlen);
     if (rc == QUERY_OK && (v < 1 || v > UINT32_MAX))
-        rc = fail(err, errlen, QUERY_ERROR, "object %lld: version in force %lld out of range", oid, (long long)v);
+        rc = query_fail(err, errlen, QUERY_ERROR, "object %lld: version in force %lld out of range", oid, (long long)v);
     if (rc == QUERY_OK && v == k)
-        rc = fail(err, errlen, QUERY_REFUSED, "version %u is already in force for object %lld: nothing to do", k, oid);
+        rc = query_fail(err, errlen, QUERY_REFUSED, "version %u is already in force for object %lld: nothing to do", k, oid);
     /* The same boxes in the same order (a rollback to k is in force, say). */
     if (rc == QUERY_OK)
         rc = scalar2(s,
@@ -743,7 +742,7 @@ int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force,
                      "OR y.max_z != x.max_z))",
                      id, k, &same, err, errlen);
     if (rc == QUERY_OK && same)
-        rc = fail(err, errlen, QUERY_REFUSED,
+        rc = query_fail(err, errlen, QUERY_REFUSED,
                   "version %lld in force for object %lld already has version %u's boxes: nothing to do", (long long)v,
                   oid, k);
     if (rc == QUERY_OK)
@@ -760,16 +759,16 @@ int query_rollback(db *d, int64_t id, uint32_t k, uint32_t in_force, int format,
     float(*boxes)[6];
     uint32_t n, version;
     if (db_ecm_boxes(d, id, k, &boxes, &n) < 0)
-        return fail(err, errlen, QUERY_ERROR, "cannot read version %u: %s", k, db_error(d));
+        return query_fail(err, errlen, QUERY_ERROR, "cannot read version %u: %s", k, db_error(d));
     db_ecm_change c = {.object_id = id, .parent_version = in_force, .reason = "rollback", .restores = k,
                        .detail = "cvre-admin rollback", .box_count = n, .boxes = (const float(*)[6])boxes};
     int rc = db_ecm_write(d, &c, db_now(), &version);
     free(boxes);
     if (rc == DB_ECM_STALE)
-        return fail(err, errlen, QUERY_REFUSED, "object %lld changed meanwhile (%s); nothing written: look again",
+        return query_fail(err, errlen, QUERY_REFUSED, "object %lld changed meanwhile (%s); nothing written: look again",
                     (long long)id, db_error(d));
     if (rc < 0)
-        return fail(err, errlen, QUERY_ERROR, "rollback failed, nothing written: %s%s", db_error(d),
+        return query_fail(err, errlen, QUERY_ERROR, "rollback failed, nothing written: %s%s", db_error(d),
                     db_busy(d) ? " (another process held the write lock)" : "");
     return run_ids(db_sqlite(d),
                    "SELECT object_id, version, parent_version, restores, reason, box_count, created_at, detail "

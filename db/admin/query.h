@@ -25,6 +25,10 @@
 
 enum { QUERY_OK = 0, QUERY_NOT_FOUND = 1, QUERY_REFUSED = 2, QUERY_ERROR = -1 };
 
+/* Writes the message into err (errlen bytes) and returns code: how query.c
+ * and map.c fail. */
+int query_fail(char *err, size_t errlen, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
+
 /* Filters; a subcommand uses the ones that make sense for it. */
 typedef struct query_filter {
     int has_object;

@@ -9,6 +9,7 @@ import os
 import select
 import shutil
 import socket
+import sqlite3
 import struct
 import subprocess
 import sys
@@ -275,6 +276,28 @@ def iso(t, digits=6):
     multiple of 1/4, so the two differ on about one time in four)."""
     secs, frac = divmod(math.floor(t * 10 ** digits + 0.5), 10 ** digits)
     return datetime.fromtimestamp(secs, timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.") + f"{frac:0{digits}d}Z"
+
+
+def admin(*argv, db=None, check=0, timeout=120):
+    """Runs cvre-admin from --bin; returns (exit code, stdout, stderr), decoded
+    from bytes so that CSV's \r\n survives. Asserts the exit code unless
+    check is None."""
+    cmd = [os.path.join(args().bin, "cvre-admin")] + (["--db", db] if db else []) + [str(a) for a in argv]
+    p = subprocess.run(cmd, capture_output=True, timeout=timeout)
+    out, err = p.stdout.decode(), p.stderr.decode()
+    if check is not None:
+        assert p.returncode == check, f"{argv}: exit {p.returncode}, stdout {out[:500]!r}, stderr {err!r}"
+    return p.returncode, out, err
+
+
+def copy_with_schema(src, dst, version):
+    """Copies the database src to dst and stamps it with another schema
+    version (PRAGMA user_version), for the tools' refusals."""
+    shutil.copy(src, dst)
+    db = sqlite3.connect(dst)
+    db.execute(f"PRAGMA user_version = {version}")
+    db.commit()
+    db.close()
 
 
 def close_to(a, b, tol=0.05):

@@ -13,27 +13,14 @@ import os
 import random
 import shutil
 import sqlite3
-import subprocess
 import tempfile
 import threading
 import time
 
-from harness import TEMP_DIRS, Server, args, iso, run
+from harness import TEMP_DIRS, Server, admin, args, copy_with_schema, iso, run
 
 A = args()
-ADMIN = os.path.join(A.bin, "cvre-admin")
 T0 = calendar.timegm((2026, 11, 22, 10, 0, 0))  # 2026-11-22T10:00:00Z
-
-
-def admin(*argv, db=None, check=0):
-    """Runs cvre-admin; returns (exit code, stdout, stderr). Asserts the exit
-    code when check is not None."""
-    cmd = [ADMIN] + (["--db", db] if db else []) + [str(a) for a in argv]
-    p = subprocess.run(cmd, capture_output=True, timeout=30)  # bytes: CSV's \r\n must survive
-    out, err = p.stdout.decode(), p.stderr.decode()
-    if check is not None:
-        assert p.returncode == check, f"{argv}: exit {p.returncode}, stderr {err!r}"
-    return p.returncode, out, err
 
 
 # ---- the known database ------------------------------------------------------
@@ -433,11 +420,7 @@ def test_unusable_databases():
     rc, _, err = admin("totals", db=other, check=3)
     assert "schema version 0" in err and "not a cvre database" in err, err
     newer = os.path.join(tmp, "newer.db")
-    shutil.copy(DB, newer)
-    db = sqlite3.connect(newer)
-    db.execute("PRAGMA user_version = 99")
-    db.commit()
-    db.close()
+    copy_with_schema(DB, newer, 99)
     rc, _, err = admin("collisions", db=newer, check=3)
     assert "schema version 99" in err, err
 

@@ -4,12 +4,11 @@ make none; the job runs beside a writing server, is deterministic, and
 refuses bad parameters and unusable databases with clear exit codes."""
 import json
 import os
-import shutil
 import sqlite3
 import subprocess
 import time
 
-from harness import Raw, Server, args, close_to, move, run
+from harness import Raw, Server, args, close_to, copy_with_schema, move, run
 
 A = args()
 WORLD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "room.world")
@@ -80,11 +79,7 @@ def test_bad_parameters_and_databases():
     rc, _, err = job(os.path.join(srv.tmp, "missing.db"))
     assert rc == 3 and "No such file" in err, err
     other = os.path.join(srv.tmp, "other.db")
-    shutil.copy(srv.db, other)
-    db = sqlite3.connect(other)
-    db.execute("PRAGMA user_version = 99")
-    db.commit()
-    db.close()
+    copy_with_schema(srv.db, other, 99)
     rc, _, err = job(other)
     assert rc == 3 and "schema version 99" in err, err
     # An object that does not exist, and a world without collisions: done, nothing found.

@@ -20,10 +20,9 @@ import time
 import xml.etree.ElementTree as ET
 import zlib
 
-from harness import MODELS, TEMP_DIRS, Raw, Server, args, move, run
+from harness import MODELS, TEMP_DIRS, Raw, Server, admin, args, copy_with_schema, move, run
 
 A = args()
-ADMIN = os.path.join(A.bin, "cvre-admin")
 SVG_NS = "{http://www.w3.org/2000/svg}"
 ROOM = os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl")
 CHAIR = os.path.join(MODELS, "openings", "homedecor_kitchen_chair.obj")
@@ -36,14 +35,6 @@ def tmpdir():
     d = tempfile.mkdtemp(prefix="cvre-map-")
     TEMP_DIRS.append(d)
     return d
-
-
-def admin(*argv, db, check=0):
-    p = subprocess.run([ADMIN, "--db", db] + [str(a) for a in argv], capture_output=True, timeout=120)
-    out, err = p.stdout.decode(), p.stderr.decode()
-    if check is not None:
-        assert p.returncode == check, f"{argv}: exit {p.returncode}, stdout {out[:500]!r}, stderr {err!r}"
-    return p.returncode, out, err
 
 
 def cluster_job(db, *flags):
@@ -396,11 +387,7 @@ def test_errors():
     rc, _, err = admin("map", "--json", db=os.path.join(d, "missing.db"), check=3)
     assert "No such file" in err, err
     other = os.path.join(d, "other.db")
-    shutil.copy(DB, other)
-    c = sqlite3.connect(other)
-    c.execute("PRAGMA user_version = 99")
-    c.commit()
-    c.close()
+    copy_with_schema(DB, other, 99)
     rc, _, err = admin("map", "--json", db=other, check=3)
     assert "schema version 99" in err or "99" in err, err
     junk = os.path.join(d, "junk.db")

@@ -14,16 +14,13 @@ import hashlib
 import io
 import json
 import os
-import shutil
 import sqlite3
 import struct
-import subprocess
 import tempfile
 
-from harness import MODELS, TEMP_DIRS, Raw, Server, args, close_to, iso, run
+from harness import MODELS, TEMP_DIRS, Raw, Server, admin, args, close_to, copy_with_schema, iso, run
 
 A = args()
-ADMIN = os.path.join(A.bin, "cvre-admin")
 ROOM = os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl")
 ROOM_POS = (10.0, 0.0, 0.0)
 T_REFINE = 1795000000.5  # exact in binary: created times compare exactly
@@ -45,14 +42,6 @@ def f32(x):
 
 def volume(b):
     return (b[3] - b[0]) * (b[4] - b[1]) * (b[5] - b[2])
-
-
-def admin(*argv, db, check=0):
-    p = subprocess.run([ADMIN, "--db", db] + [str(a) for a in argv], capture_output=True, timeout=30)
-    out, err = p.stdout.decode(), p.stderr.decode()
-    if check is not None:
-        assert p.returncode == check, f"{argv}: exit {p.returncode}, stdout {out!r}, stderr {err!r}"
-    return p.returncode, out, err
 
 
 def table(text):
@@ -292,11 +281,7 @@ def test_rollback_refusals():
     # Another schema version: refused, and never migrated.
     for v in (3, 99):
         other = os.path.join(tmp, f"v{v}.db")
-        shutil.copy(DB, other)
-        db = sqlite3.connect(other)
-        db.execute(f"PRAGMA user_version = {v}")
-        db.commit()
-        db.close()
+        copy_with_schema(DB, other, v)
         rc, _, err = admin("rollback", 1, 1, db=other, check=3)
         assert f"schema version {v}" in err, err
         assert query(other, "PRAGMA user_version") == [(v,)]
