@@ -512,8 +512,9 @@ static int rollback(db *ro, const char *path, int format, int64_t id, uint32_t k
     return exit_status(rc, err);
 }
 
-static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, const int64_t *pos)
+static int run_command(const struct command *cmd, db *d, struct args *a, const int64_t *pos)
 {
+    sqlite3 *s = db_sqlite(d);
     char err[512] = "";
     int rc;
     int64_t id = pos[0];
@@ -534,7 +535,7 @@ static int run_command(const struct command *cmd, sqlite3 *s, struct args *a, co
     else if (strcmp(cmd->name, "map") == 0) {
         map_request r = {.has_object = a->f.has_object, .object = a->f.object, .version = a->map_version,
                          .svg = a->svg, .json = a->format == OUT_JSON};
-        rc = map_run(s, &r, err, sizeof err);
+        rc = map_run(d, &r, err, sizeof err);
     }
     else
         rc = query_totals(s, a->format, err, sizeof err);
@@ -624,7 +625,7 @@ int main(int argc, char **argv)
     }
     if (strcmp(cmd->name, "rollback") == 0)
         return rollback(d, a.db, a.format, pos[0], (uint32_t)pos[1]);
-    rc = run_command(cmd, s, &a, pos);
+    rc = run_command(cmd, d, &a, pos);
     db_close(d);
     return rc;
 }

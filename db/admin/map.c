@@ -23,6 +23,7 @@
 
 #include "alloc.h"
 #include "dbscan.h"
+#include "ecm.h"
 #include "query.h"
 #include "voxel.h"
 
@@ -597,10 +598,11 @@ static double nice_length(double most)
 /* ---- reading ---- */
 
 typedef struct reader {
+    db *d;
     sqlite3 *s;
     char *err;
     size_t errlen;
-    sqlite3_stmt *version, *nversions, *boxes, *run, *points, *mesh;
+    sqlite3_stmt *version, *nversions, *run, *points;
 } reader;
 
 static int db_fail(reader *rd)
@@ -619,28 +621,6 @@ static char *dup_text(sqlite3_stmt *st, int i)
     return s;
 }
 
-/* The boxes of one version, in box_index order. */
-static int read_boxes(reader *rd, int64_t id, uint32_t version, float (**out)[6], uint32_t *n)
-{
-    sqlite3_stmt *st = rd->boxes;
-    int step;
-    size_t cap = 0;
-    *out = NULL, *n = 0;
-    sqlite3_bind_int64(st, 1, id);
-    sqlite3_bind_int64(st, 2, version);
-    while ((step = sqlite3_step(st)) == SQLITE_ROW) {
-        if (*n == cap) {
-            cap = cap ? cap * 2 : 16;
-            *out = xrealloc(*out, cap * sizeof **out);
-        }
-        for (int k = 0; k < 6; k++)
-            (*out)[*n][k] = (float)sqlite3_column_double(st, k);
-        (*n)++;
-    }
-    sqlite3_reset(st);
-    return step == SQLITE_DONE ? QUERY_OK : db_fail(rd);
-}
-
 /* The version shown, its boxes, version 1's, the run whose parameters
  * label the points, and the points. */
 static int read_object(reader *rd, mobj *o)
@@ -650,11 +630,10 @@ static int read_object(reader *rd, mobj *o)
     sqlite3_bind_int64(st, 1, o->id);
     sqlite3_bind_int64(st, 2, o->version);
     int step = sqlite3_step(st);
-    int64_t parent = 0, count = 0;
+    int64_t parent = 0;
     if (step == SQLITE_ROW) {
         o->reason = dup_text(st, 0);
         parent = sqlite3_column_int64(st, 1);
-        count = sqlite3_column_int64(st, 3);
     }
     sqlite3_reset(st);
     sqlite3_bind_int64(rd->nversions, 1, o->id);
@@ -667,14 +646,10 @@ static int read_object(reader *rd, mobj *o)
     if (step == SQLITE_DONE)
         return query_fail(rd->err, rd->errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
                     oid, o->version, (long long)last);
-    int rc = read_boxes(rd, o->id, o->version, &o->boxes, &o->nboxes);
-    if (rc == QUERY_OK)
-        rc = read_boxes(rd, o->id, 1, &o->orig, &o->norig);
-    if (rc != QUERY_OK)
-        return rc;
-    if (o->nboxes != count)
-        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld version %u: %u boxes stored, box_count says %lld",
-                    oid, o->version, o->nboxes, (long long)count);
+    /* The store's reader checks the boxes against the version's count. */
+    if (db_ecm_boxes(rd->d, o->id, o->version, &o->boxes, &o->nboxes) < 0 ||
+        db_ecm_boxes(rd->d, o->id, 1, &o->orig, &o->norig) < 0)
+        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "%s", db_error(rd->d));
     /* The collisions the version answered (its parent's) if it has a
      * parent, else its own. */
     o->points_version = parent > 0 && parent <= UINT32_MAX ? (uint32_t)parent : o->version;
@@ -740,41 +715,15 @@ static int cluster_object(mobj *o, char *err, size_t errlen)
     return QUERY_OK;
 }
 
-static float le_f32(const unsigned char *p)
-{
-    uint32_t u = (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-    float f;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
-
 /* Reads the mesh of o, digitizes it over the MBR (occupied cells and
  * their volume) and marks its outline in the views. */
 static int mesh_object(reader *rd, mobj *o, view *views, int nviews)
 {
-    sqlite3_stmt *st = rd->mesh;
     long long oid = (long long)o->id;
-    sqlite3_bind_int64(st, 1, o->id);
-    int step = sqlite3_step(st);
-    const unsigned char *blob = NULL;
-    size_t bytes = 0;
-    if (step == SQLITE_ROW) {
-        blob = sqlite3_column_blob(st, 0);
-        bytes = (size_t)sqlite3_column_bytes(st, 0);
-    } else if (step != SQLITE_DONE) {
-        sqlite3_reset(st);
-        return db_fail(rd);
-    }
-    if (bytes != (size_t)o->tri_count * 36u) {
-        sqlite3_reset(st);
-        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld: its mesh has %zu bytes, not %u triangles of 36",
-                    oid, bytes, o->tri_count);
-    }
-    size_t nf = (size_t)o->tri_count * 9u;
-    float *tris = xmalloc((nf ? nf : 1) * sizeof *tris);
-    for (size_t i = 0; i < nf; i++)
-        tris[i] = le_f32(blob + 4 * i);
-    sqlite3_reset(st);
+    db_ecm_object mesh; /* the store's reader checks the mesh against tri_count */
+    if (db_ecm_object_load(rd->d, o->id, &mesh) < 0)
+        return query_fail(rd->err, rd->errlen, QUERY_ERROR, "%s", db_error(rd->d));
+    const float *tris = mesh.tris;
 
     for (size_t t = 0; t < o->tri_count; t++) {
         double w[3][3];
@@ -788,7 +737,7 @@ static int mesh_object(reader *rd, mobj *o, view *views, int nviews)
     int rc = voxel_grid_init(&g, MAP_DEPTH, o->mbr, o->mbr + 3);
     if (rc == 0)
         rc = voxel_mark_threads(&g, tris, o->tri_count, 0);
-    free(tris);
+    db_ecm_object_free(&mesh);
     if (rc < 0) {
         voxel_grid_free(&g);
         return query_fail(rd->err, rd->errlen, QUERY_ERROR, "object %lld: cannot digitize its mesh: %s", oid,
@@ -1238,9 +1187,10 @@ static int write_file(const char *path, const sbuf *b, char *err, size_t errlen)
     "SELECT id, name, pos_x, pos_y, pos_z, yaw, scale, ecm_version, tri_count, min_x, min_y, min_z, max_x, " \
     "max_y, max_z, removed_at IS NOT NULL FROM objects "
 
-int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
+int map_run(db *d, const map_request *r, char *err, size_t errlen)
 {
-    reader rd = {.s = s, .err = err, .errlen = errlen};
+    sqlite3 *s = db_sqlite(d);
+    reader rd = {.d = d, .s = s, .err = err, .errlen = errlen};
     world wd = {.object_mode = r->has_object};
     view views[2] = {{0}, {0}};
     sqlite3_stmt *objs = NULL;
@@ -1256,12 +1206,10 @@ int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
     if (sqlite3_prepare_v2(s, r->has_object ? OBJECT_COLUMNS "WHERE id = ?1"
                                             : OBJECT_COLUMNS "WHERE removed_at IS NULL ORDER BY id",
                            -1, &objs, NULL) != SQLITE_OK ||
-        sqlite3_prepare_v2(s, "SELECT reason, parent_version, NULL, box_count FROM ecm_versions "
+        sqlite3_prepare_v2(s, "SELECT reason, parent_version FROM ecm_versions "
                               "WHERE object_id = ?1 AND version = ?2", -1, &rd.version, NULL) != SQLITE_OK ||
         sqlite3_prepare_v2(s, "SELECT count(*), coalesce(max(version), 0) FROM ecm_versions WHERE object_id = ?1", -1,
                            &rd.nversions, NULL) != SQLITE_OK ||
-        sqlite3_prepare_v2(s, "SELECT min_x, min_y, min_z, max_x, max_y, max_z FROM ecm_boxes "
-                              "WHERE object_id = ?1 AND version = ?2 ORDER BY box_index", -1, &rd.boxes, NULL) != SQLITE_OK ||
         sqlite3_prepare_v2(s, "SELECT id, eps, min_points, min_users FROM cluster_runs WHERE id = coalesce("
                               "(SELECT run_id FROM ecm_versions WHERE object_id = ?1 AND version = ?2), "
                               "(SELECT max(run_id) FROM clusters WHERE object_id = ?1 AND ecm_version = ?3), "
@@ -1276,8 +1224,7 @@ int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen)
                               "AND ecm_version = ?2) b JOIN collision_segments g ON g.bucket = b.bucket "
                               "JOIN collisions c ON c.id BETWEEN g.first_id AND g.last_id "
                               "WHERE c.object_id = ?1 AND c.ecm_version = ?2 ORDER BY c.id",
-                           -1, &rd.points, NULL) != SQLITE_OK ||
-        sqlite3_prepare_v2(s, "SELECT triangles FROM meshes WHERE object_id = ?1", -1, &rd.mesh, NULL) != SQLITE_OK) {
+                           -1, &rd.points, NULL) != SQLITE_OK) {
         rc = db_fail(&rd);
         goto cleanup;
     }
@@ -1376,10 +1323,8 @@ cleanup:
     sqlite3_finalize(objs);
     sqlite3_finalize(rd.version);
     sqlite3_finalize(rd.nversions);
-    sqlite3_finalize(rd.boxes);
     sqlite3_finalize(rd.run);
     sqlite3_finalize(rd.points);
-    sqlite3_finalize(rd.mesh);
     for (size_t i = 0; i < wd.n; i++)
         mobj_free(&wd.o[i]);
     free(wd.o);

@@ -15,9 +15,10 @@
 #ifndef CVRE_ADMIN_MAP_H
 #define CVRE_ADMIN_MAP_H
 
-#include <sqlite3.h>
 #include <stddef.h>
 #include <stdint.h>
+
+#include "db.h"
 
 typedef struct map_request {
     int has_object;   /* 0: the whole world */
@@ -27,12 +28,12 @@ typedef struct map_request {
     int json;         /* figures as JSON (else a table) on stdout */
 } map_request;
 
-/* Reads what r asks for from s (read-only), writes the picture (whole,
+/* Reads what r asks for from d (read-only), writes the picture (whole,
  * replacing the file) and prints the figures. Returns QUERY_OK,
  * QUERY_NOT_FOUND (no such object, the object was removed, no such
  * version) or QUERY_ERROR (a failed query, a stored value that does not
  * add up, the picture or the output could not be written), with a message
  * in err (query.h's codes). */
-int map_run(sqlite3 *s, const map_request *r, char *err, size_t errlen);
+int map_run(db *d, const map_request *r, char *err, size_t errlen);
 
 #endif
