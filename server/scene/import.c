@@ -37,7 +37,10 @@
  *   1 KB file of nodes listing the next one twice exhausted 24 GB),
  *   recurses per node level (a 20,000-deep chain overflowed the stack) and
  *   per JSON level (10^6 overflowed it), and copies an accessor once per
- *   primitive using it (3.6 MB took 17.6 GB). We parse the JSON first.
+ *   primitive using it (3.6 MB took 17.6 GB). We parse the JSON first,
+ *   with jansson (a hand-written tokenizer here let an object stand where
+ *   an array was expected and overflowed the heap), checking the type of
+ *   every value we read.
  * - OBJ and ASCII STL: a mesh and a node per named part, names looked up
  *   linearly: 200,000 `usemtl` lines took 54 s and 7 GB. We count them.
  * - Triangulation is quadratic in polygon size: we bound the sum of squares
@@ -70,6 +73,7 @@
 #include <assimp/cimport.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <jansson.h>
 
 #include "alloc.h"
 
@@ -81,8 +85,7 @@ _Static_assert(IMPORT_MAX_NODE_DEPTH >= 8 && IMPORT_MAX_NODE_DEPTH <= 4096,
                "deep enough for real files, shallow enough for a thread's stack");
 _Static_assert(IMPORT_MAX_JSON_DEPTH >= 16 && IMPORT_MAX_JSON_DEPTH <= 1024,
                "deep enough for glTF, shallow enough for rapidjson's recursion");
-_Static_assert(IMPORT_MAX_JSON_TOKENS >= 1024 && IMPORT_MAX_JSON_TOKENS <= UINT32_MAX / 2,
-               "room for real documents; token indices are 32-bit");
+_Static_assert(IMPORT_MAX_JSON_MEMORY >= (1u << 20), "room for real documents");
 _Static_assert(IMPORT_MAX_GLB_NODES >= 1, "a scene has a node");
 _Static_assert(IMPORT_GLB_ELEMENTS_PER_BYTE >= 1 && IMPORT_MAX_GLB_ELEMENTS >= 3,
                "an unshared triangle must pass");
@@ -826,364 +829,157 @@ static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
     return 0;
 }
 
-/* ---- GLB pre-check: the JSON chunk as tokens ---------------------------- */
+/* ---- GLB pre-check: the JSON chunk, parsed by jansson ------------------- */
 
-enum { J_OBJ, J_ARR, J_STR, J_PRIM };
+/* What jansson may still allocate on this thread while it parses a GLB's
+ * JSON; SIZE_MAX when no parse is under way (jansson's allocator is global,
+ * and other code may use the library unbudgeted). Counted per allocation,
+ * frees not given back: a bound, not a tally. jansson reports a failed
+ * allocation inside its lexer as a syntax error, so the allocator says
+ * which of the two ran out. */
+static _Thread_local size_t json_budget = SIZE_MAX;
+static _Thread_local enum { JSON_FITS, JSON_OVER_BUDGET, JSON_NOMEM } json_short;
 
-/* One JSON value. An object's members follow it as key and value tokens
- * in turn, an array's elements as values. */
-typedef struct jtok {
-    uint32_t start, end; /* its bytes; a string's without the quotes */
-    uint32_t next;       /* the token after it and everything inside it */
-    uint32_t type;
-} jtok;
-
-typedef struct jdoc {
-    const unsigned char *s;
-    uint32_t len, i; /* text and cursor */
-    jtok *t;
-    uint32_t n, cap;
-    const char *why; /* the first refusal, sticky */
-    int nomem;
-} jdoc;
-
-static void jfail(jdoc *d, const char *why)
+static void *json_budget_malloc(size_t size)
 {
-    if (!d->why)
-        d->why = why;
+    void *p;
+
+    if (json_budget != SIZE_MAX) {
+        if (size > json_budget) {
+            json_short = JSON_OVER_BUDGET;
+            return NULL;
+        }
+        json_budget -= size;
+    }
+    p = cvre_malloc(size);
+    if (!p)
+        json_short = JSON_NOMEM;
+    return p;
 }
 
-/* Appends a token; returns its index, or UINT32_MAX with d->why set. */
-static uint32_t jpush(jdoc *d, uint32_t type, uint32_t start)
+static pthread_once_t json_once = PTHREAD_ONCE_INIT;
+
+static void json_init(void) { json_set_alloc_funcs(json_budget_malloc, free); }
+
+/* Why the GLB is refused, or NULL; *nomem set when memory ran out. */
+typedef struct glb_check {
+    const char *why;
+    int nomem;
+} glb_check;
+
+static void glb_refuse(glb_check *c, const char *why)
 {
-    if (d->n == IMPORT_MAX_JSON_TOKENS) {
-        jfail(d, "too many JSON values");
+    if (!c->why)
+        c->why = why;
+}
+
+/* The member key of object v if it is of the wanted kind (or absent: NULL),
+ * else NULL and a refusal naming it. */
+static json_t *glb_member(glb_check *c, const json_t *v, const char *key, json_type kind,
+                          const char *why)
+{
+    json_t *m = json_object_get(v, key);
+
+    if (m && json_typeof(m) != kind) {
+        glb_refuse(c, why);
+        return NULL;
+    }
+    return m;
+}
+
+/* An index value: an integer in [0, limit); UINT32_MAX and a refusal
+ * otherwise. */
+static uint32_t glb_index(glb_check *c, const json_t *v, uint32_t limit, const char *range_why)
+{
+    json_int_t i;
+
+    if (!json_is_integer(v) || (i = json_integer_value(v)) < 0 || i > UINT32_MAX) {
+        glb_refuse(c, "index is not a non-negative integer");
         return UINT32_MAX;
     }
-    if (d->n == d->cap) {
-        uint32_t cap = d->cap ? d->cap * 2 : 256;
-        jtok *t;
-        if (cap > IMPORT_MAX_JSON_TOKENS)
-            cap = IMPORT_MAX_JSON_TOKENS;
-        t = cvre_realloc(d->t, cap * sizeof *t);
-        if (!t) {
-            d->nomem = 1;
-            jfail(d, "out of memory");
-            return UINT32_MAX;
-        }
-        d->t = t;
-        d->cap = cap;
+    if ((uint64_t)i >= limit) {
+        glb_refuse(c, range_why);
+        return UINT32_MAX;
     }
-    d->t[d->n] = (jtok){start, start, 0, type};
-    return d->n++;
+    return (uint32_t)i;
 }
 
-static void jws(jdoc *d)
+/* True if v and everything inside it nest at most IMPORT_MAX_JSON_DEPTH
+ * containers deep (v at depth). Recurses at most that deep. */
+static int json_depth_ok(const json_t *v, int depth)
 {
-    while (d->i < d->len &&
-           (d->s[d->i] == ' ' || d->s[d->i] == '\t' || d->s[d->i] == '\n' || d->s[d->i] == '\r'))
-        d->i++;
-}
+    const char *key;
+    json_t *item;
+    size_t i;
 
-static int jis(jdoc *d, unsigned char c) { return d->i < d->len && d->s[d->i] == c; }
-
-static int hexval(unsigned c)
-{
-    if (c >= '0' && c <= '9')
-        return (int)(c - '0');
-    if ((c | 32u) >= 'a' && (c | 32u) <= 'f') /* only A-F and a-f */
-        return (int)((c | 32u) - 'a' + 10);
-    return -1;
-}
-
-/* Reads \uXXXX at s (after the backslash and u); -1 if malformed. */
-static long jhex4(const unsigned char *s, uint32_t left)
-{
-    long v = 0;
-
-    if (left < 4)
-        return -1;
-    for (int k = 0; k < 4; k++) {
-        int h = hexval(s[k]);
-        if (h < 0)
-            return -1;
-        v = v * 16 + h;
-    }
-    return v;
-}
-
-/* A string, its opening quote next: no control characters, only JSON's
- * escapes, surrogates in pairs (rapidjson's rules). */
-static void jstring(jdoc *d)
-{
-    uint32_t tok = jpush(d, J_STR, d->i + 1);
-
-    if (tok == UINT32_MAX)
-        return;
-    for (d->i++;; d->i++) {
-        unsigned char c;
-        if (d->i >= d->len) {
-            jfail(d, "unterminated string");
-            return;
+    if (!json_is_object(v) && !json_is_array(v))
+        return 1;
+    if (depth == IMPORT_MAX_JSON_DEPTH)
+        return 0;
+    if (json_is_array(v)) {
+        json_array_foreach(v, i, item) {
+            if (!json_depth_ok(item, depth + 1))
+                return 0;
         }
-        c = d->s[d->i];
-        if (c == '"')
-            break;
-        if (c < 0x20) {
-            jfail(d, "control character in string");
-            return;
-        }
-        if (c != '\\')
-            continue;
-        if (++d->i >= d->len) {
-            jfail(d, "unterminated string");
-            return;
-        }
-        c = d->s[d->i];
-        if (c == 'u') {
-            long u = jhex4(d->s + d->i + 1, d->len - d->i - 1);
-            d->i += 4;
-            if (u >= 0xD800 && u <= 0xDBFF) {
-                long lo = d->i + 2 < d->len && d->s[d->i + 1] == '\\' && d->s[d->i + 2] == 'u'
-                              ? jhex4(d->s + d->i + 3, d->len - d->i - 3)
-                              : -1;
-                if (lo < 0xDC00 || lo > 0xDFFF) {
-                    jfail(d, "unpaired surrogate");
-                    return;
-                }
-                d->i += 6;
-            } else if (u < 0 || (u >= 0xDC00 && u <= 0xDFFF)) {
-                {
-                    jfail(d, "bad \\u escape");
-                    return;
-                }
-            }
-        } else if (!strchr("\"\\/bfnrt", c) || c == 0) {
-            {
-                jfail(d, "bad escape");
-                return;
-            }
-        }
-    }
-    d->t[tok].end = d->i++;
-    d->t[tok].next = d->n;
-}
-
-/* Consumes the digits at the cursor; returns how many. */
-static uint32_t jdigits(jdoc *d)
-{
-    uint32_t s = d->i;
-
-    while (d->i < d->len && d->s[d->i] >= '0' && d->s[d->i] <= '9')
-        d->i++;
-    return d->i - s;
-}
-
-/* A number, true, false or null, by JSON's grammar. */
-static void jprimitive(jdoc *d)
-{
-    static const char *const words[] = {"true", "false", "null"};
-    uint32_t tok = jpush(d, J_PRIM, d->i);
-
-    if (tok == UINT32_MAX)
-        return;
-    for (int k = 0; k < 3; k++) {
-        size_t wl = strlen(words[k]);
-        if (d->len - d->i >= wl && memcmp(d->s + d->i, words[k], wl) == 0) {
-            d->i += (uint32_t)wl;
-            goto done;
-        }
-    }
-    if (jis(d, '-'))
-        d->i++;
-    if (jis(d, '0'))
-        d->i++;
-    else if (!jdigits(d)) {
-        jfail(d, "value expected");
-        return;
-    }
-    if (jis(d, '.')) {
-        d->i++;
-        if (!jdigits(d)) {
-            jfail(d, "digits expected after '.'");
-            return;
-        }
-    }
-    if (jis(d, 'e') || jis(d, 'E')) {
-        d->i++;
-        if (jis(d, '+') || jis(d, '-'))
-            d->i++;
-        if (!jdigits(d)) {
-            jfail(d, "digits expected in exponent");
-            return;
-        }
-    }
-done:
-    d->t[tok].end = d->i;
-    d->t[tok].next = d->n;
-}
-
-/* Any value at the cursor, inside depth containers. */
-static void jvalue(jdoc *d, int depth)
-{
-    uint32_t tok;
-    unsigned char close;
-
-    jws(d);
-    if (d->why)
-        return;
-    if (d->i >= d->len) {
-        jfail(d, "value expected");
-        return;
-    }
-    if (jis(d, '"')) {
-        jstring(d);
-        return;
-    }
-    if (!jis(d, '{') && !jis(d, '[')) {
-        jprimitive(d);
-        return;
-    }
-    if (depth == IMPORT_MAX_JSON_DEPTH) {
-        jfail(d, "JSON nested too deep");
-        return;
-    }
-    close = jis(d, '{') ? '}' : ']';
-    tok = jpush(d, close == '}' ? J_OBJ : J_ARR, d->i++);
-    jws(d);
-    if (jis(d, close)) {
-        d->i++;
     } else {
-        while (!d->why) {
-            if (close == '}') {
-                jws(d);
-                if (!jis(d, '"')) {
-                    jfail(d, "object key expected");
-                    return;
-                }
-                jstring(d);
-                jws(d);
-                if (!jis(d, ':')) {
-                    jfail(d, "':' expected");
-                    return;
-                }
-                d->i++;
-            }
-            jvalue(d, depth + 1);
-            jws(d);
-            if (jis(d, ',')) {
-                d->i++;
-            } else if (jis(d, close)) {
-                d->i++;
-                break;
-            } else {
-                {
-                    jfail(d, "',' or closing bracket expected");
-                    return;
-                }
-            }
+        json_object_foreach((json_t *)v, key, item) {
+            if (!json_depth_ok(item, depth + 1))
+                return 0;
         }
     }
-    if (!d->why) {
-        d->t[tok].end = d->i;
-        d->t[tok].next = d->n;
-    }
-}
-
-/* True if string token k is key, as written. */
-static int jkey_is(const jdoc *d, uint32_t k, const char *key)
-{
-    size_t kl = strlen(key);
-
-    return d->t[k].end - d->t[k].start == kl && memcmp(d->s + d->t[k].start, key, kl) == 0;
-}
-
-/* The value of obj's first member named key (rapidjson's FindMember also
- * takes the first), or 0 if none. Members whose key holds an escape are
- * refused outright, since rapidjson would decode them into a name we
- * might be looking for. */
-static uint32_t jfind(jdoc *d, uint32_t obj, const char *key)
-{
-    if (d->t[obj].type != J_OBJ)
-        return 0;
-    for (uint32_t k = obj + 1; k < d->t[obj].next; k = d->t[k + 1].next) {
-        if (memchr(d->s + d->t[k].start, '\\', d->t[k].end - d->t[k].start)) {
-            jfail(d, "escaped object key");
-            return 0;
-        }
-        if (jkey_is(d, k, key))
-            return k + 1;
-    }
-    return 0;
-}
-
-/* Reads a non-negative integer token; 0 and d->why set otherwise. */
-static uint32_t jindex(jdoc *d, uint32_t k)
-{
-    uint32_t v;
-
-    if (d->t[k].type != J_PRIM ||
-        !parse_u32(d->s + d->t[k].start, d->t[k].end - d->t[k].start, &v)) {
-        jfail(d, "index is not a non-negative integer");
-        return 0;
-    }
-    return v;
-}
-
-/* Number of values in array token a (0 if it is not an array). */
-static uint32_t jlength(const jdoc *d, uint32_t a)
-{
-    uint32_t n = 0;
-
-    if (a == 0 || d->t[a].type != J_ARR)
-        return 0;
-    for (uint32_t k = a + 1; k < d->t[a].next; k = d->t[k].next)
-        n++;
-    return n;
+    return 1;
 }
 
 /*
  * Counts the nodes Assimp will create: one per path from a scene root.
  * Requires trees (each node one parent at most, no cycles, as glTF 2.0
  * does) no deeper than IMPORT_MAX_NODE_DEPTH; a node listed as a root and
- * also as a child, which exporters do, is counted once per path. Sets
- * d->why on refusal.
+ * also as a child, which exporters do, is counted once per path. The
+ * arrays have one entry per node. Refuses through c.
  */
-static uint64_t glb_node_paths(jdoc *d, uint32_t nodes, uint32_t scenes, uint32_t *parent,
-                               uint32_t *roots, uint64_t *paths, uint32_t *stack, uint32_t *level,
-                               uint32_t n)
+static uint64_t glb_node_paths(glb_check *c, const json_t *nodes, const json_t *scenes,
+                               uint32_t *parent, uint32_t *roots, uint64_t *paths,
+                               uint32_t *stack, uint32_t *level)
 {
+    uint32_t n = (uint32_t)json_array_size(nodes);
     uint64_t total = 0;
-    uint32_t i = 0;
+    json_t *node, *scene, *v;
+    size_t i, k;
 
-    for (uint32_t k = 0; k < n; k++)
-        parent[k] = UINT32_MAX, paths[k] = UINT64_MAX, roots[k] = 0;
-    for (uint32_t nd = nodes + 1; nd < d->t[nodes].next; nd = d->t[nd].next, i++) {
-        uint32_t ch = jfind(d, nd, "children");
-        for (uint32_t k = ch ? ch + 1 : 0; ch && k < d->t[ch].next; k = d->t[k].next) {
-            uint32_t c = jindex(d, k);
-            if (d->why)
-                return 0;
-            if (c >= n || parent[c] != UINT32_MAX) {
-                jfail(d, c >= n ? "node child out of range" : "node with two parents");
-                return 0;
-            }
-            parent[c] = i;
+    for (uint32_t x = 0; x < n; x++)
+        parent[x] = UINT32_MAX, paths[x] = UINT64_MAX, roots[x] = 0;
+    json_array_foreach(nodes, i, node) {
+        json_t *ch;
+        if (!json_is_object(node)) {
+            glb_refuse(c, "node is not an object");
+            return 0;
         }
-    }
-    for (uint32_t sc = scenes ? scenes + 1 : 0; scenes && sc < d->t[scenes].next;
-         sc = d->t[sc].next) {
-        uint32_t rl = jfind(d, sc, "nodes");
-        for (uint32_t k = rl ? rl + 1 : 0; rl && k < d->t[rl].next; k = d->t[k].next) {
-            uint32_t r = jindex(d, k);
-            if (d->why)
+        ch = glb_member(c, node, "children", JSON_ARRAY, "node children is not an array");
+        json_array_foreach(ch, k, v) {
+            uint32_t x = glb_index(c, v, n, "node child out of range");
+            if (c->why)
                 return 0;
-            if (r >= n) {
-                jfail(d, "scene root out of range");
+            if (parent[x] != UINT32_MAX) {
+                glb_refuse(c, "node with two parents");
                 return 0;
             }
+            parent[x] = (uint32_t)i;
+        }
+        if (c->why)
+            return 0;
+    }
+    json_array_foreach(scenes, i, scene) {
+        json_t *rl = glb_member(c, scene, "nodes", JSON_ARRAY, "scene nodes is not an array");
+        if (!json_is_object(scene))
+            glb_refuse(c, "scene is not an object");
+        json_array_foreach(rl, k, v) {
+            uint32_t r = glb_index(c, v, n, "scene root out of range");
+            if (c->why)
+                return 0;
             roots[r]++;
         }
+        if (c->why)
+            return 0;
     }
     /* paths[x] = roots on x's ancestor chain, x included, and level[x] its
      * length, by walking up to a known ancestor; UINT64_MAX - 1 marks a
@@ -1198,7 +994,7 @@ static uint64_t glb_node_paths(jdoc *d, uint32_t nodes, uint32_t scenes, uint32_
         }
         if (y != UINT32_MAX) {
             if (paths[y] == UINT64_MAX - 1) {
-                jfail(d, "node cycle");
+                glb_refuse(c, "node cycle");
                 return 0;
             }
             above = paths[y];
@@ -1211,7 +1007,7 @@ static uint64_t glb_node_paths(jdoc *d, uint32_t nodes, uint32_t scenes, uint32_
             level[y] = ++lv;
         }
         if (lv > IMPORT_MAX_NODE_DEPTH) { /* Assimp recurses once per level */
-            jfail(d, "node hierarchy too deep");
+            glb_refuse(c, "node hierarchy too deep");
             return 0;
         }
         total += paths[x];
@@ -1221,69 +1017,144 @@ static uint64_t glb_node_paths(jdoc *d, uint32_t nodes, uint32_t scenes, uint32_
     return total;
 }
 
-/* Adds the count of the accessor whose index is token k to *total. */
-static void glb_add_ref(jdoc *d, uint32_t k, const uint32_t *counts, uint32_t na, uint64_t *total)
+/* Adds the count of the accessor that index value v names to *total. */
+static void glb_add_ref(glb_check *c, const json_t *v, const uint32_t *counts, uint32_t na,
+                        uint64_t *total)
 {
-    uint32_t a = jindex(d, k);
+    uint32_t a = glb_index(c, v, na, "accessor index out of range");
 
-    if (!d->why && a >= na)
-        jfail(d, "accessor index out of range");
-    if (!d->why)
+    if (!c->why)
         *total += counts[a];
 }
 
-/* Adds the accessors named by the member values of object token obj. */
-static void glb_add_members(jdoc *d, uint32_t obj, const uint32_t *counts, uint32_t na,
+/* Adds the accessors named by the member values of object obj (may be NULL). */
+static void glb_add_members(glb_check *c, json_t *obj, const uint32_t *counts, uint32_t na,
                             uint64_t *total)
 {
-    if (obj == 0 || d->t[obj].type != J_OBJ)
-        return;
-    for (uint32_t k = obj + 1; k < d->t[obj].next && !d->why; k = d->t[k + 1].next)
-        glb_add_ref(d, k + 1, counts, na, total);
+    const char *key;
+    json_t *v;
+
+    json_object_foreach(obj, key, v) {
+        glb_add_ref(c, v, counts, na, total);
+        if (c->why)
+            return;
+    }
 }
 
 /* Sums, over every primitive of every mesh, the counts of the accessors it
  * uses (attributes, indices, morph targets): Assimp copies an accessor once
  * per primitive that uses it. counts[i] is accessor i's count. */
-static uint64_t glb_primitive_elements(jdoc *d, uint32_t meshes, const uint32_t *counts,
+static uint64_t glb_primitive_elements(glb_check *c, const json_t *meshes, const uint32_t *counts,
                                        uint32_t na)
 {
     uint64_t total = 0;
+    json_t *mesh, *prim, *target;
+    size_t i, k, t;
 
-    for (uint32_t m = meshes + 1; m < d->t[meshes].next && !d->why; m = d->t[m].next) {
-        uint32_t prims = jfind(d, m, "primitives");
-        if (prims == 0 || d->t[prims].type != J_ARR)
-            continue;
-        for (uint32_t p = prims + 1; p < d->t[prims].next && !d->why; p = d->t[p].next) {
-            uint32_t ix = jfind(d, p, "indices"), targets = jfind(d, p, "targets");
-            glb_add_members(d, jfind(d, p, "attributes"), counts, na, &total);
-            if (ix)
-                glb_add_ref(d, ix, counts, na, &total);
-            if (targets == 0 || d->t[targets].type != J_ARR)
-                continue;
-            for (uint32_t t = targets + 1; t < d->t[targets].next && !d->why; t = d->t[t].next)
-                glb_add_members(d, t, counts, na, &total);
+    json_array_foreach(meshes, i, mesh) {
+        json_t *prims = glb_member(c, mesh, "primitives", JSON_ARRAY,
+                                   "mesh primitives is not an array");
+        if (!json_is_object(mesh))
+            glb_refuse(c, "mesh is not an object");
+        json_array_foreach(prims, k, prim) {
+            json_t *ix = json_object_get(prim, "indices"),
+                   *attrs = glb_member(c, prim, "attributes", JSON_OBJECT,
+                                       "primitive attributes is not an object"),
+                   *targets = glb_member(c, prim, "targets", JSON_ARRAY,
+                                         "primitive targets is not an array");
+            if (!json_is_object(prim))
+                glb_refuse(c, "primitive is not an object");
+            glb_add_members(c, attrs, counts, na, &total);
+            if (ix && !c->why)
+                glb_add_ref(c, ix, counts, na, &total);
+            json_array_foreach(targets, t, target) {
+                if (!json_is_object(target))
+                    glb_refuse(c, "morph target is not an object");
+                glb_add_members(c, target, counts, na, &total);
+                if (c->why)
+                    return 0;
+            }
+            if (c->why)
+                return 0;
         }
+        if (c->why)
+            return 0;
     }
     return total;
+}
+
+/* Fills counts[i] with accessor i's count (0 if it has none). */
+static void glb_accessor_counts(glb_check *c, const json_t *accessors, uint32_t *counts)
+{
+    json_t *acc;
+    size_t i;
+
+    json_array_foreach(accessors, i, acc) {
+        json_t *count = json_object_get(acc, "count");
+        if (!json_is_object(acc)) {
+            glb_refuse(c, "accessor is not an object");
+            return;
+        }
+        counts[i] = count ? glb_index(c, count, UINT32_MAX, "accessor count too large") : 0;
+        if (c->why)
+            return;
+    }
+}
+
+/*
+ * The GLB's JSON chunk, parsed within IMPORT_MAX_JSON_MEMORY. rapidjson
+ * reads the chunk as a C string, so it ends at the first NUL, and Assimp
+ * takes the first of two members with one key: duplicates are refused.
+ * Returns the document, or NULL with a refusal.
+ */
+static json_t *glb_parse(glb_check *c, const unsigned char *s, size_t len, char *where,
+                         size_t wherelen)
+{
+    const unsigned char *nul = memchr(s, 0, len);
+    json_error_t e;
+    json_t *doc;
+
+    pthread_once(&json_once, json_init);
+    json_budget = IMPORT_MAX_JSON_MEMORY;
+    json_short = JSON_FITS;
+    doc = json_loadb((const char *)s, nul ? (size_t)(nul - s) : len, JSON_REJECT_DUPLICATES, &e);
+    json_budget = SIZE_MAX;
+    if (json_short != JSON_FITS) {
+        json_decref(doc);
+        c->nomem = json_short == JSON_NOMEM;
+        glb_refuse(c, c->nomem ? "out of memory" : "JSON takes too much memory to parse");
+        return NULL;
+    }
+    if (doc)
+        return doc;
+    if (json_error_code(&e) == json_error_stack_overflow) {
+        glb_refuse(c, "JSON nested too deep");
+    } else {
+        snprintf(where, wherelen, "%s (near byte %zu)", e.text, (size_t)e.position + 20);
+        glb_refuse(c, where);
+    }
+    return NULL;
 }
 
 /*
  * Checks a GLB's header and JSON chunk before Assimp sees them: version 2,
  * lengths that agree with the file, strict JSON no deeper than
  * IMPORT_MAX_JSON_DEPTH (so that Assimp's glTF reader, not a fallback
- * importer, takes it), asset.version 2.x, node trees no deeper than
- * IMPORT_MAX_NODE_DEPTH, at most IMPORT_MAX_GLB_NODES nodes once
- * expanded, and at most IMPORT_MAX_GLB_ELEMENTS accessor elements copied
- * into meshes (and IMPORT_GLB_ELEMENTS_PER_BYTE per byte of the file).
- * Returns 0, -EINVAL or -ENOMEM.
+ * importer, takes it), asset.version 2.x, the members read here of the
+ * types glTF gives them, node trees no deeper than IMPORT_MAX_NODE_DEPTH,
+ * at most IMPORT_MAX_GLB_NODES nodes once expanded, and at most
+ * IMPORT_MAX_GLB_ELEMENTS accessor elements copied into meshes (and
+ * IMPORT_GLB_ELEMENTS_PER_BYTE per byte of the file). Every loop walks an
+ * array or object jansson sized. Returns 0, -EINVAL or -ENOMEM.
  */
 static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
 {
-    jdoc d;
-    uint32_t json_len, nodes, scenes, meshes, accessors, asset, version, nn, na;
+    glb_check c = {NULL, 0};
+    char where[200];
+    json_t *doc, *nodes, *scenes, *meshes, *accessors, *version;
+    uint32_t json_len, nn, na;
     uint32_t *u32 = NULL;
-    uint64_t *paths = NULL, total, elements_max = (uint64_t)IMPORT_GLB_ELEMENTS_PER_BYTE * n;
+    uint64_t *paths = NULL, total = 0, elements_max = (uint64_t)IMPORT_GLB_ELEMENTS_PER_BYTE * n;
     int rc;
 
     if (elements_max > IMPORT_MAX_GLB_ELEMENTS)
@@ -1301,62 +1172,50 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
     if (get_u32le(p + 16) != 0x4E4F534Au || json_len > n - 20)
         return fail(err, errlen, -EINVAL, "GLB does not start with a whole JSON chunk");
 
-    memset(&d, 0, sizeof d);
-    d.s = p + 20;
-    d.len = json_len;
-    jvalue(&d, 0);
-    jws(&d);
-    /* rapidjson reads the chunk as a C string: it ends at a NUL */
-    if (!d.why && d.i < d.len && d.s[d.i] != 0)
-        jfail(&d, "text after the JSON document");
-    if (!d.why && d.t[0].type != J_OBJ)
-        jfail(&d, "JSON document is not an object");
-    asset = d.why ? 0 : jfind(&d, 0, "asset");
-    version = asset ? jfind(&d, asset, "version") : 0;
-    if (!d.why && (!version || d.t[version].type != J_STR ||
-                   d.t[version].start == d.t[version].end || d.s[d.t[version].start] != '2'))
-        jfail(&d, "asset.version is not 2.x");
-    if (d.why) {
-        rc = d.nomem ? fail(err, errlen, -ENOMEM, "out of memory")
-                     : fail(err, errlen, -EINVAL, "GLB JSON: %s (near byte %u)", d.why, 20 + d.i);
+    doc = glb_parse(&c, p + 20, json_len, where, sizeof where);
+    if (doc && !json_is_object(doc))
+        glb_refuse(&c, "JSON document is not an object");
+    if (doc && !c.why && !json_depth_ok(doc, 0))
+        glb_refuse(&c, "JSON nested too deep");
+    version = json_object_get(json_object_get(doc, "asset"), "version");
+    if (!c.why && (!json_is_string(version) || json_string_value(version)[0] != '2'))
+        glb_refuse(&c, "asset.version is not 2.x");
+    if (c.why) {
+        rc = c.nomem ? fail(err, errlen, -ENOMEM, "out of memory")
+                     : fail(err, errlen, -EINVAL, "GLB JSON: %s", c.why);
         goto cleanup;
     }
 
-    nodes = jfind(&d, 0, "nodes");
-    scenes = jfind(&d, 0, "scenes");
-    meshes = jfind(&d, 0, "meshes");
-    accessors = jfind(&d, 0, "accessors");
-    nodes = nodes && d.t[nodes].type == J_ARR ? nodes : 0;
-    scenes = scenes && d.t[scenes].type == J_ARR ? scenes : 0;
-    nn = jlength(&d, nodes);
-    na = jlength(&d, accessors);
+    nodes = glb_member(&c, doc, "nodes", JSON_ARRAY, "nodes is not an array");
+    scenes = glb_member(&c, doc, "scenes", JSON_ARRAY, "scenes is not an array");
+    meshes = glb_member(&c, doc, "meshes", JSON_ARRAY, "meshes is not an array");
+    accessors = glb_member(&c, doc, "accessors", JSON_ARRAY, "accessors is not an array");
+    if (c.why) {
+        rc = fail(err, errlen, -EINVAL, "GLB: %s", c.why);
+        goto cleanup;
+    }
+    nn = (uint32_t)json_array_size(nodes); /* under the JSON's length: 32 bits */
+    na = (uint32_t)json_array_size(accessors);
     /* parent, roots, stack and level for the nodes, then accessor counts */
-    u32 = cvre_malloc(((size_t)4 * nn + na + 1) * sizeof *u32);
+    u32 = cvre_calloc((size_t)4 * nn + na + 1, sizeof *u32);
     paths = cvre_malloc(((size_t)nn + 1) * sizeof *paths);
     if (!u32 || !paths) {
         rc = fail(err, errlen, -ENOMEM, "out of memory");
         goto cleanup;
     }
-    total = nodes ? glb_node_paths(&d, nodes, scenes, u32, u32 + nn, paths, u32 + 2 * nn,
-                                   u32 + 3 * nn, nn)
-                  : 0;
-    if (!d.why && total > IMPORT_MAX_GLB_NODES) {
+    if (nodes)
+        total = glb_node_paths(&c, nodes, scenes, u32, u32 + nn, paths, u32 + 2 * nn,
+                               u32 + 3 * nn);
+    if (!c.why && total > IMPORT_MAX_GLB_NODES) {
         rc = fail(err, errlen, -EINVAL, "GLB node hierarchy expands to over %u nodes",
                   (unsigned)IMPORT_MAX_GLB_NODES);
         goto cleanup;
     }
-    if (!d.why && accessors) {
-        uint32_t i = 0;
-        for (uint32_t a = accessors + 1; a < d.t[accessors].next && !d.why; a = d.t[a].next) {
-            uint32_t c = jfind(&d, a, "count");
-            u32[4 * nn + i++] = c ? jindex(&d, c) : 0;
-        }
-    }
-    total = !d.why && meshes && d.t[meshes].type == J_ARR
-                ? glb_primitive_elements(&d, meshes, u32 + 4 * nn, na)
-                : 0;
-    if (d.why)
-        rc = fail(err, errlen, -EINVAL, "GLB: %s", d.why);
+    if (!c.why)
+        glb_accessor_counts(&c, accessors, u32 + 4 * nn);
+    total = c.why ? 0 : glb_primitive_elements(&c, meshes, u32 + 4 * nn, na);
+    if (c.why)
+        rc = fail(err, errlen, -EINVAL, "GLB: %s", c.why);
     else if (total > elements_max)
         rc = fail(err, errlen, -EINVAL,
                   "GLB meshes copy %llu accessor elements, over the limit of %llu for its size",
@@ -1366,7 +1225,7 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
 cleanup:
     free(u32);
     free(paths);
-    free(d.t);
+    json_decref(doc);
     return rc;
 }
 

@@ -61,11 +61,12 @@
 #define IMPORT_MAX_JSON_DEPTH 64
 #endif
 
-/* Most values (tokens) in a GLB's JSON chunk. The JSON describes the
- * scene and bulk data lives in the binary chunk: large real files have
- * 10^5 values. The pre-check keeps 16 bytes per value. */
-#ifndef IMPORT_MAX_JSON_TOKENS
-#define IMPORT_MAX_JSON_TOKENS 4000000u
+/* Most bytes jansson may allocate parsing a GLB's JSON chunk. The JSON
+ * describes the scene and bulk data lives in the binary chunk: large real
+ * files have 10^5 values, which jansson keeps in about 10 MB. A chunk of
+ * 16 MiB of empty arrays would take over 500 MB. */
+#ifndef IMPORT_MAX_JSON_MEMORY
+#define IMPORT_MAX_JSON_MEMORY (128u << 20)
 #endif
 
 /* Most nodes a GLB may expand to. Assimp makes one aiNode (over 1 KiB:

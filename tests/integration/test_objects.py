@@ -32,6 +32,12 @@ def room_world_box(pos):
     return tuple(l + p for l, p in zip(lo, pos)) + tuple(h + p for h, p in zip(hi, pos))
 
 
+def glb(json):
+    """A GLB holding only the JSON chunk json (bytes), padded with spaces."""
+    json += b" " * (-len(json) % 4)
+    return b"glTF" + struct.pack("<III", 2, 20 + len(json), len(json)) + b"JSON" + json
+
+
 def upload(c, uid, data, name, **kw):
     c.send(upload_frames(uid, data, name, **kw))
     return c.expect("object", timeout=30, where=lambda m: m["upload"] == uid)
@@ -105,6 +111,11 @@ def test_bad_uploads_leave_everything_intact():
     spider = read(os.path.join(MODELS, "formats", "assimp_Spider_binary.stl"))
     c.send(upload_frames(6, spider[:len(spider) // 2], "half.stl", fmt="stl"))
     refused(c, 6, E["IMPORT"])
+    # GLB JSON with an object where glTF has an array: a heap overflow once.
+    for uid, accessors in ((13, b'{"a":{"count":5},"b":{"count":6}}'), (14, b'{"q":[1,2]}')):
+        c.send(upload_frames(uid, glb(b'{"asset":{"version":"2.0"},"accessors":' + accessors + b"}"),
+                             "hostile.glb", fmt="glb"))
+        assert "accessors is not an array" in refused(c, uid, E["IMPORT"])["message"]
     # ... or the upload ends before its announced size.
     begin = frame(T["UPLOAD_BEGIN"], struct.pack("<II", 8, len(room)) + s8("short") + s8("stl") +
                   struct.pack("<Bf", 1, 1.0))
