@@ -13,6 +13,7 @@
 
 #include "alloc.h"
 #include "log.h"
+#include "le.h"
 
 /* One read buffer shared by every conn of the process: a read lands here
  * and is parsed in place, and only the unfinished tail of a frame is copied
@@ -76,11 +77,6 @@ struct conn {
 };
 
 static ev_io_fn on_io;
-
-static uint32_t ld_le32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
 
 /* ---- context ----------------------------------------------------------- */
 
@@ -343,7 +339,7 @@ static void send_join(conn *c)
 static void find_own(conn *c, const proto_snapshot *s)
 {
     for (uint16_t i = 0; i < s->count; i++) {
-        if (ld_le32(s->entries + (size_t)i * PROTO_SNAPSHOT_ENTRY_SIZE) != c->view.avatar_id)
+        if (le_get_u32(s->entries + (size_t)i * PROTO_SNAPSHOT_ENTRY_SIZE) != c->view.avatar_id)
             continue;
         proto_avatar a;
         proto_snapshot_entry(s, i, &a);
@@ -426,7 +422,7 @@ static size_t pending_need(const conn *c)
 {
     if (c->in_len < PROTO_HEADER_SIZE)
         return PROTO_HEADER_SIZE;
-    return 4u + (size_t)ld_le32(c->in);
+    return 4u + (size_t)le_get_u32(c->in);
 }
 
 static void in_reserve(conn *c, size_t need)

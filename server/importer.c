@@ -10,7 +10,7 @@
 #include "db.h"
 #include "log.h"
 #include "mailbox.h"
-#include "scene/import.h"
+#include "scene/import_proc.h"
 
 /* Jobs waiting at once. Each holds a whole file (up to --max-upload), so the
  * queue bounds the memory that uploads can pin while they wait. */
@@ -25,6 +25,7 @@ struct importer {
     unsigned head, count;
     mailbox *results; /* import_result *, to the loop */
     db *db;
+    const import_proc *proc;
     uint32_t max_triangles;
 };
 
@@ -38,12 +39,19 @@ static void run_job(importer *im, import_job *job, import_result *r)
     import_options opt = {.z_up = job->z_up, .unit_scale = job->unit_scale, .max_triangles = im->max_triangles};
     import_mesh mesh = {0};
     char err[PROTO_MESSAGE_MAX + 1];
-    int rc = import_model(job->data, job->len, job->format[0] ? job->format : NULL, &opt, &mesh, err, sizeof err);
+    int rc = import_isolated(im->proc, job->data, job->len, job->format[0] ? job->format : NULL, &opt, &mesh, err,
+                             sizeof err);
     free(job->data);
     job->data = NULL;
     if (rc < 0) {
-        r->status = rc == -ENOMEM ? PROTO_ERR_INTERNAL : PROTO_ERR_IMPORT;
-        snprintf(r->message, sizeof r->message, "%s", rc == -ENOMEM ? "out of memory importing the model" : err);
+        /* the model's fault, or the parser's on its account: the uploader's
+         * answer; the server's own trouble (memory, starting the helper) is
+         * logged and answered as internal */
+        int theirs = rc == -EINVAL || rc == -EFBIG || rc == -ETIMEDOUT || rc == -ECHILD || rc == -EPROTO;
+        if (rc == -ECHILD || rc == -EPROTO || rc == -ETIMEDOUT || !theirs)
+            log_warn("import of \"%s\" for session %lld: %s", job->name, (long long)job->session, err);
+        r->status = theirs ? PROTO_ERR_IMPORT : PROTO_ERR_INTERNAL;
+        snprintf(r->message, sizeof r->message, "%s", theirs ? err : "the server could not import the model");
         return;
     }
     float box[1][6] = {{mesh.min[0], mesh.min[1], mesh.min[2], mesh.max[0], mesh.max[1], mesh.max[2]}};
@@ -94,9 +102,11 @@ static void *worker(void *arg)
     return NULL;
 }
 
-importer *importer_start(const char *db_path, uint32_t max_triangles, char *err, size_t errlen)
+importer *importer_start(const char *db_path, const import_proc *proc, uint32_t max_triangles, char *err,
+                         size_t errlen)
 {
     importer *im = xcalloc(1, sizeof *im);
+    im->proc = proc;
     im->max_triangles = max_triangles;
     im->results = mailbox_create();
     if (!im->results) {

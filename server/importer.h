@@ -3,7 +3,8 @@
  * large model (Sponza: about a second) never stalls the tick.
  *
  * The loop thread submits a job (it gives up the file's bytes); the worker
- * parses the model, stores the object, its mesh and ECM version 1 (its MBR)
+ * has the model parsed in the isolated importer (import_proc.h), which a
+ * hostile file can crash or exhaust without harm here, stores the object, its mesh and ECM version 1 (its MBR)
  * in the database through its own connection, and queues the result. The
  * worker signals an eventfd (importer_fd) that the loop watches; the loop
  * then takes results with importer_take.
@@ -15,6 +16,7 @@
 #include <stdint.h>
 
 #include "proto.h"
+#include "scene/import_proc.h"
 
 typedef struct importer importer;
 
@@ -45,9 +47,12 @@ typedef struct import_result {
     float min[3], max[3];         /* the MBR: ECM version 1's only box */
 } import_result;
 
-/* Starts the worker with its own connection to db_path. NULL with a message
- * in err on failure. max_triangles bounds one model. */
-importer *importer_start(const char *db_path, uint32_t max_triangles, char *err, size_t errlen);
+/* Starts the worker with its own connection to db_path; each model is
+ * parsed in the isolated importer proc describes (kept by pointer: it must
+ * outlive the importer). NULL with a message in err on failure.
+ * max_triangles bounds one model. */
+importer *importer_start(const char *db_path, const import_proc *proc, uint32_t max_triangles, char *err,
+                         size_t errlen);
 /* Finishes the job in progress, drops the queued ones (their uploads are
  * lost with the connections that sent them), joins the thread. */
 void importer_stop(importer *im);

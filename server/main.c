@@ -33,6 +33,10 @@ static const char usage[] =
     "  --world FILE              preload the objects a world file lists (see server/worlds/)\n"
     "  --max-upload BYTES        largest model file a client may upload (default 16777216)\n"
     "  --max-triangles N         most triangles in one model (default 4000000)\n"
+    "  --importer PATH           the isolated importer every model is parsed in\n"
+    "                            (default: cvre-import beside cvre-server)\n"
+    "  --import-memory MB        the importer's address space (default 4096)\n"
+    "  --import-cpu S            the importer's CPU seconds per model (default 30)\n"
     "  --refine-interval S       seconds between looks at new collisions for clusters\n"
     "                            and refinements; 0 turns the online loop off (default 10)\n"
     "  --refine-eps M            cluster radius in metres (default 0.5)\n"
@@ -90,7 +94,7 @@ int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
            O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
-           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY };
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -105,7 +109,9 @@ int main(int argc, char **argv)
         {"refine-interval", required_argument, 0, O_R_INT}, {"refine-eps", required_argument, 0, O_R_EPS},
         {"refine-min-points", required_argument, 0, O_R_MINP}, {"refine-min-users", required_argument, 0, O_R_MINU},
         {"refine-depth", required_argument, 0, O_R_DEPTH}, {"refine-max-boxes", required_argument, 0, O_R_BOXES},
-        {"refine-max-empty", required_argument, 0, O_R_EMPTY}, {0, 0, 0, 0}};
+        {"refine-max-empty", required_argument, 0, O_R_EMPTY}, {"importer", required_argument, 0, O_IMPORTER},
+        {"import-memory", required_argument, 0, O_IMP_MEM}, {"import-cpu", required_argument, 0, O_IMP_CPU},
+        {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
     int o;
@@ -127,6 +133,9 @@ int main(int argc, char **argv)
         case O_WORLD_FILE: cfg.world_file = optarg; break;
         case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, 1024.0 * 1024 * 1024); break;
         case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, 100000000); break;
+        case O_IMPORTER: cfg.importer.helper = optarg; break;
+        case O_IMP_MEM: cfg.importer.memory_mb = (uint32_t)integer("import-memory", optarg, 256, 1048576); break;
+        case O_IMP_CPU: cfg.importer.cpu_seconds = (uint32_t)integer("import-cpu", optarg, 1, 86400); break;
         case O_R_INT: cfg.refine_interval_s = number("refine-interval", optarg, 0, 86400); break;
         case O_R_EPS: cfg.refine_eps = number("refine-eps", optarg, 0.001, 1000); break;
         case O_R_MINP: cfg.refine_min_points = (uint32_t)integer("refine-min-points", optarg, 1, 1000000); break;

@@ -15,7 +15,7 @@
 #include "alloc.h"
 #include "ecm.h"
 #include "log.h"
-#include "scene/import.h"
+#include "scene/import_proc.h"
 #include "serverInt.h"
 #include "srv_limits.h"
 
@@ -362,7 +362,7 @@ static int preload(server *s, const char *path, const char *name, const import_o
         return -1;
     const char *dot = strrchr(path, '.');
     import_mesh mesh = {0};
-    int rc = import_model(data, len, dot ? dot + 1 : NULL, opt, &mesh, err, errlen);
+    int rc = import_isolated(&s->cfg.importer, data, len, dot ? dot + 1 : NULL, opt, &mesh, err, errlen);
     free(data);
     if (rc < 0)
         return -1;
@@ -495,7 +495,7 @@ int objects__start(server *s, char *err, size_t errlen)
         log_info("restored %u objects from %s", scene_count(s->scene), s->cfg.db_path);
     if (s->cfg.world_file && load_world_file(s, s->cfg.world_file, err, errlen) < 0)
         return -1;
-    s->importer = importer_start(s->cfg.db_path, s->cfg.max_triangles, err, errlen);
+    s->importer = importer_start(s->cfg.db_path, &s->cfg.importer, s->cfg.max_triangles, err, errlen);
     if (!s->importer)
         return -1;
     if (ev_io_add(s->loop, importer_fd(s->importer), EV_READ, on_import_results, s) < 0) {

@@ -26,6 +26,7 @@
 #include "refine.h"
 #include "serverInt.h"
 #include "world.h"
+#include "le.h"
 
 /* Connections accepted per wakeup of the listening socket. */
 #define ACCEPT_BUDGET 256
@@ -55,6 +56,7 @@ void server_config_defaults(server_config *cfg)
         .max_upload = SRV_MAX_UPLOAD_DEFAULT,
         .max_triangles = SRV_MAX_TRIANGLES_DEFAULT,
         .world_file = NULL,
+        .importer = {import_proc_default_helper(), IMPORT_PROC_MEMORY_MB, IMPORT_PROC_CPU_SECONDS},
         .refine_interval_s = SRV_REFINE_INTERVAL_DEFAULT,
         .refine_eps = CLUSTER_EPS_DEFAULT,
         .refine_min_points = CLUSTER_MIN_POINTS_DEFAULT,
@@ -368,11 +370,6 @@ static void on_message(server *s, client *c, const proto_msg *m)
     }
 }
 
-static uint32_t get_u32le(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 /* Handles every whole frame in c's input buffer, then drops them. */
 static void handle_input(server *s, client *c)
 {
@@ -384,7 +381,7 @@ static void handle_input(server *s, client *c)
         if (rc == PROTO_INCOMPLETE)
             break;
         if (rc != PROTO_OK) {
-            uint32_t len = get_u32le(c->c.in + off);
+            uint32_t len = le_get_u32(c->c.in + off);
             if (rc == PROTO_ERR_FRAME_TOO_LONG)
                 server__protocol_error(s, c, rc, "frame length %u over the limit of %u%s", len, max_len,
                                c->state == ST_JOINED ? "" : " before join");

@@ -9,6 +9,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "scene/import_proc.h"
+
 typedef struct server_config {
     const char *host;
     uint16_t port;   /* 0: any free port */
@@ -27,6 +29,7 @@ typedef struct server_config {
     uint32_t max_upload;    /* bytes of one model file */
     uint32_t max_triangles; /* of one model */
     const char *world_file; /* objects to preload; NULL: none */
+    import_proc importer;   /* the isolated importer every model goes through */
     /* The collision map's online loop (refiner.h). */
     double refine_interval_s;  /* 0: off (changes from other processes still arrive) */
     double refine_eps;         /* DBSCAN radius, m */

@@ -14,6 +14,7 @@ run() { # name, then cmake arguments
   echo "== $dir: test" >&2
   (cd "$dir" && ctest --output-on-failure -j "$jobs" --timeout 300)
 }
-run gcc -DCMAKE_C_COMPILER=gcc -DCMAKE_BUILD_TYPE=RelWithDebInfo
+run gcc -DCVRE_TEST_HOOKS=ON -DCMAKE_C_COMPILER=gcc -DCMAKE_BUILD_TYPE=RelWithDebInfo
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  run asan-clang -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Debug -DCVRE_SANITIZE=ON
+  run asan-clang -DCVRE_TEST_HOOKS=ON -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Debug \
+      "-DCMAKE_C_FLAGS_DEBUG=-g -O1" -DCVRE_SANITIZE=ON

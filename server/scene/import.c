@@ -76,6 +76,7 @@
 #include <jansson.h>
 
 #include "alloc.h"
+#include "le.h"
 
 _Static_assert(IMPORT_MAX_BYTES > 0 && IMPORT_MAX_BYTES <= UINT_MAX,
                "Assimp takes the length as unsigned int");
@@ -269,17 +270,12 @@ static int word_is(const unsigned char *w, size_t n, const char *s)
     return strlen(s) == n && starts_with(w, n, s);
 }
 
-static uint32_t get_u32le(const unsigned char *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 /* A binary STL is an 80-byte header, a triangle count and 50 bytes per
  * triangle, nothing more (Assimp's test too, checked before "solid"
  * because binary headers often start with that word). */
 static int is_binary_stl(const unsigned char *p, size_t n)
 {
-    return n >= 84 && (n - 84) % 50 == 0 && (n - 84) / 50 == get_u32le(p + 80);
+    return n >= 84 && (n - 84) % 50 == 0 && (n - 84) / 50 == le_get_u32(p + 80);
 }
 
 /* OBJ has no signature: the first line that is neither blank nor a
@@ -859,7 +855,15 @@ static void *json_budget_malloc(size_t size)
 
 static pthread_once_t json_once = PTHREAD_ONCE_INIT;
 
-static void json_init(void) { json_set_alloc_funcs(json_budget_malloc, free); }
+/* jansson seeds its hash function from /dev/urandom on first use: done
+ * here, before a sandbox may forbid opening files. */
+static void json_init(void)
+{
+    json_set_alloc_funcs(json_budget_malloc, free);
+    json_object_seed(0);
+}
+
+void import_prepare(void) { pthread_once(&json_once, json_init); }
 
 /* Why the GLB is refused, or NULL; *nomem set when memory ran out. */
 typedef struct glb_check {
@@ -1114,7 +1118,7 @@ static json_t *glb_parse(glb_check *c, const unsigned char *s, size_t len, char 
     json_error_t e;
     json_t *doc;
 
-    pthread_once(&json_once, json_init);
+    import_prepare();
     json_budget = IMPORT_MAX_JSON_MEMORY;
     json_short = JSON_FITS;
     doc = json_loadb((const char *)s, nul ? (size_t)(nul - s) : len, JSON_REJECT_DUPLICATES, &e);
@@ -1162,14 +1166,14 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
 
     if (n < 20)
         return fail(err, errlen, -EINVAL, "GLB shorter than its header");
-    if (get_u32le(p + 4) != 2)
+    if (le_get_u32(p + 4) != 2)
         return fail(err, errlen, -EINVAL, "GLB version %u (only glTF 2.0 is supported)",
-                    get_u32le(p + 4));
-    if (get_u32le(p + 8) != n)
+                    le_get_u32(p + 4));
+    if (le_get_u32(p + 8) != n)
         return fail(err, errlen, -EINVAL, "GLB length field says %u bytes, the file has %zu",
-                    get_u32le(p + 8), n);
-    json_len = get_u32le(p + 12);
-    if (get_u32le(p + 16) != 0x4E4F534Au || json_len > n - 20)
+                    le_get_u32(p + 8), n);
+    json_len = le_get_u32(p + 12);
+    if (le_get_u32(p + 16) != 0x4E4F534Au || json_len > n - 20)
         return fail(err, errlen, -EINVAL, "GLB does not start with a whole JSON chunk");
 
     doc = glb_parse(&c, p + 20, json_len, where, sizeof where);

@@ -154,6 +154,12 @@ typedef struct import_mesh {
 int import_model(const void *data, size_t len, const char *hint, const import_options *opt,
                  import_mesh *out, char *err, size_t errlen);
 
+/* Does the one-time set-up that needs more than memory (seeding the JSON
+ * parser's hash from /dev/urandom), so that import_model can then run in a
+ * process that may only read, write and allocate. import_model calls it
+ * too; calling it again does nothing. */
+void import_prepare(void);
+
 /* Frees m's triangles and zeroes it; a zeroed mesh may be freed again. */
 void import_mesh_free(import_mesh *m);
 

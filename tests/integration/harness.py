@@ -76,6 +76,21 @@ def upload_frames(upload_id, data, name, fmt="", up=0, units=1.0, pos=(0, 0, 0),
     return b"".join(out)
 
 
+def upload(c, uid, data, name, **kw):
+    """Uploads data as upload uid on c and returns the object message."""
+    c.send(upload_frames(uid, data, name, **kw))
+    return c.expect("object", timeout=30, where=lambda m: m["upload"] == uid)
+
+
+def refused(c, request, code):
+    """Expects request refused with code, and the connection still served."""
+    m = c.expect("rejected", timeout=30, where=lambda m: m["request"] == request)
+    assert m["code"] == code, m
+    c.send(ping(request))  # the connection is still served
+    c.expect("pong", where=lambda m: m["stamp"] == request)
+    return m
+
+
 def decode(t, p):
     """One server-to-client message as a dict (enough for the tests)."""
     if t == T["WELCOME"]:

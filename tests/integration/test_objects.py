@@ -11,8 +11,8 @@ import struct
 import subprocess
 import time
 
-from harness import (E, MODELS, T, Raw, Server, args, close_to, frame, move, ping, run, s8, transform,
-                     upload_frames)
+from harness import (E, MODELS, T, Raw, Server, args, close_to, frame, move, ping, refused, run, s8, transform,
+                     upload, upload_frames)
 
 A = args()
 ROOM = os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl")
@@ -36,19 +36,6 @@ def glb(json):
     """A GLB holding only the JSON chunk json (bytes), padded with spaces."""
     json += b" " * (-len(json) % 4)
     return b"glTF" + struct.pack("<III", 2, 20 + len(json), len(json)) + b"JSON" + json
-
-
-def upload(c, uid, data, name, **kw):
-    c.send(upload_frames(uid, data, name, **kw))
-    return c.expect("object", timeout=30, where=lambda m: m["upload"] == uid)
-
-
-def refused(c, request, code):
-    m = c.expect("rejected", timeout=30, where=lambda m: m["request"] == request)
-    assert m["code"] == code, m
-    c.send(ping(request))  # the connection is still served
-    c.expect("pong", where=lambda m: m["stamp"] == request)
-    return m
 
 
 def test_upload_place_remove_and_ownership():
