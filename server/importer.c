@@ -1,7 +1,6 @@
 #include "importer.h"
 
 #include <errno.h>
-#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -9,21 +8,15 @@
 #include "alloc.h"
 #include "db.h"
 #include "log.h"
-#include "mailbox.h"
 #include "scene/import_proc.h"
+#include "worker.h"
 
 /* Jobs waiting at once. Each holds a whole file (up to --max-upload), so the
  * queue bounds the memory that uploads can pin while they wait. */
 #define IMPORTER_QUEUE_MAX 8
 
 struct importer {
-    pthread_t thread;
-    pthread_mutex_t lock;
-    pthread_cond_t wake;
-    int stop;
-    import_job jobs[IMPORTER_QUEUE_MAX];
-    unsigned head, count;
-    mailbox *results; /* import_result *, to the loop */
+    worker *worker; /* import_job in, import_result * out */
     db *db;
     const import_proc *proc;
     uint32_t max_triangles;
@@ -31,7 +24,7 @@ struct importer {
 
 /* Parses, measures and stores one model; fills r (status and either the
  * object or a message). Runs on the worker thread. */
-static void run_job(importer *im, import_job *job, import_result *r)
+static void import_one(importer *im, import_job *job, import_result *r)
 {
     memset(r, 0, sizeof *r);
     r->session = job->session;
@@ -78,60 +71,17 @@ static void run_job(importer *im, import_job *job, import_result *r)
     memcpy(r->max, mesh.max, sizeof r->max);
 }
 
-static void *worker(void *arg)
+static void *run_job(void *ctx, void *arg)
 {
-    importer *im = arg;
-    pthread_mutex_lock(&im->lock);
-    for (;;) {
-        while (!im->stop && im->count == 0)
-            pthread_cond_wait(&im->wake, &im->lock);
-        if (im->stop)
-            break;
-        import_job job = im->jobs[im->head];
-        pthread_mutex_unlock(&im->lock);
+    importer *im = ctx;
+    import_job *job = arg;
+    import_result *r = xcalloc(1, sizeof *r);
 
-        import_result *r = xcalloc(1, sizeof *r);
-        run_job(im, &job, r);
-        mailbox_put(im->results, r);
-
-        pthread_mutex_lock(&im->lock);
-        im->head = (im->head + 1) % IMPORTER_QUEUE_MAX;
-        im->count--;
-    }
-    pthread_mutex_unlock(&im->lock);
-    return NULL;
+    import_one(im, job, r);
+    return r;
 }
 
-importer *importer_start(const char *db_path, const import_proc *proc, uint32_t max_triangles, char *err,
-                         size_t errlen)
-{
-    importer *im = xcalloc(1, sizeof *im);
-    im->proc = proc;
-    im->max_triangles = max_triangles;
-    im->results = mailbox_create();
-    if (!im->results) {
-        snprintf(err, errlen, "eventfd: %s", strerror(errno));
-        free(im);
-        return NULL;
-    }
-    im->db = db_open(db_path, DB_READWRITE, err, errlen);
-    if (!im->db) {
-        mailbox_destroy(im->results, NULL);
-        free(im);
-        return NULL;
-    }
-    pthread_mutex_init(&im->lock, NULL);
-    pthread_cond_init(&im->wake, NULL);
-    int rc = pthread_create(&im->thread, NULL, worker, im);
-    if (rc != 0) {
-        snprintf(err, errlen, "cannot start the import thread: %s", strerror(rc));
-        db_close(im->db);
-        mailbox_destroy(im->results, NULL);
-        free(im);
-        return NULL;
-    }
-    return im;
-}
+static void drop_job(void *job) { free(((import_job *)job)->data); }
 
 static void free_result(void *p)
 {
@@ -139,46 +89,52 @@ static void free_result(void *p)
     free(p);
 }
 
+importer *importer_start(const char *db_path, const import_proc *proc, uint32_t max_triangles, char *err,
+                         size_t errlen)
+{
+    importer *im = xcalloc(1, sizeof *im);
+    worker_ops ops = {sizeof(import_job), IMPORTER_QUEUE_MAX, run_job, im, drop_job, free_result};
+
+    im->proc = proc;
+    im->max_triangles = max_triangles;
+    im->db = db_open(db_path, DB_READWRITE, err, errlen);
+    if (!im->db) {
+        free(im);
+        return NULL;
+    }
+    im->worker = worker_start(&ops, err, errlen);
+    if (!im->worker) {
+        db_close(im->db);
+        free(im);
+        return NULL;
+    }
+    return im;
+}
+
 void importer_stop(importer *im)
 {
     if (!im)
         return;
-    pthread_mutex_lock(&im->lock);
-    im->stop = 1;
-    pthread_cond_signal(&im->wake);
-    pthread_mutex_unlock(&im->lock);
-    pthread_join(im->thread, NULL);
-    for (; im->count; im->count--, im->head = (im->head + 1) % IMPORTER_QUEUE_MAX)
-        free(im->jobs[im->head].data);
-    mailbox_destroy(im->results, free_result);
-    pthread_mutex_destroy(&im->lock);
-    pthread_cond_destroy(&im->wake);
+    worker_stop(im->worker);
     db_close(im->db);
     free(im);
 }
 
-int importer_fd(const importer *im) { return mailbox_fd(im->results); }
+int importer_fd(const importer *im) { return worker_fd(im->worker); }
 
 int importer_submit(importer *im, import_job *job)
 {
-    pthread_mutex_lock(&im->lock);
-    if (im->count == IMPORTER_QUEUE_MAX) {
-        pthread_mutex_unlock(&im->lock);
+    int rc = worker_submit(im->worker, job);
+
+    if (rc != 0)
         free(job->data);
-        job->data = NULL;
-        return -EBUSY;
-    }
-    im->jobs[(im->head + im->count) % IMPORTER_QUEUE_MAX] = *job;
-    im->count++;
     job->data = NULL;
-    pthread_cond_signal(&im->wake);
-    pthread_mutex_unlock(&im->lock);
-    return 0;
+    return rc;
 }
 
 int importer_take(importer *im, import_result *out)
 {
-    import_result *r = mailbox_take(im->results);
+    import_result *r = worker_take(im->worker);
     if (!r)
         return -EAGAIN;
     *out = *r;

@@ -1,0 +1,42 @@
+/*
+ * worker.h: one thread that runs jobs from a bounded queue, one at a time,
+ * and hands each result to the event loop through a mailbox, so that slow
+ * work (parsing a model, hashing a password) never stalls the tick.
+ *
+ * Jobs are copied in by value (job_size bytes each); the queue holds at most
+ * queue_max, so a flood is refused (-EBUSY) rather than held. The loop
+ * watches worker_fd and takes results with worker_take.
+ */
+#ifndef CVRE_WORKER_H
+#define CVRE_WORKER_H
+
+#include <stddef.h>
+
+typedef struct worker worker;
+
+/* Runs one job (a copy the worker owns, freed after the call) and returns
+ * its result, allocated (never NULL), which the loop will take. */
+typedef void *worker_fn(void *ctx, void *job);
+
+typedef struct worker_ops {
+    size_t job_size;
+    unsigned queue_max;
+    worker_fn *run;
+    void *ctx;
+    void (*drop_job)(void *job);       /* a job never run (at stop); may be NULL */
+    void (*free_result)(void *result); /* a result never taken (at stop); may be NULL: free() */
+} worker_ops;
+
+/* Starts the thread. NULL with a message in err on failure. */
+worker *worker_start(const worker_ops *ops, char *err, size_t errlen);
+/* Finishes the job in progress, drops the waiting ones and the results not
+ * taken, joins the thread. w may be NULL. */
+void worker_stop(worker *w);
+int worker_fd(const worker *w);
+/* Queues a copy of job. 0, or -EBUSY when queue_max jobs wait (then the
+ * job is the caller's still). */
+int worker_submit(worker *w, const void *job);
+/* The next result (the caller frees it), or NULL when none is waiting. */
+void *worker_take(worker *w);
+
+#endif
