@@ -1332,6 +1332,10 @@ static int emit_vertex(walk *w, const double m[16], const struct aiVector3D *v, 
             return fail(w->err, w->errlen, -EINVAL,
                         "coordinate not a finite float in triangle %llu",
                         (unsigned long long)w->ntris + 1);
+        if (fabs(s) > IMPORT_MAX_COORD)
+            return fail(w->err, w->errlen, -EINVAL,
+                        "coordinate %.3g m in triangle %llu is beyond %.0f km of the model's origin", s,
+                        (unsigned long long)w->ntris + 1, IMPORT_MAX_COORD / 1000.0);
         o[k] = (float)s;
         if (o[k] < w->min[k])
             w->min[k] = o[k];

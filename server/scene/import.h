@@ -54,6 +54,14 @@
 #define IMPORT_MAX_NODE_DEPTH 256
 #endif
 
+/* Farthest a vertex may lie from the model's origin, in metres after the
+ * unit scale: ten times the largest world (--world-size 100 km). A vertex
+ * at 1e38 m, finite as a float, overflowed to infinity once placed at a
+ * scale of 1000 and gave everyone a box of infinities. */
+#ifndef IMPORT_MAX_COORD
+#define IMPORT_MAX_COORD 1e6
+#endif
+
 /* Deepest JSON nesting accepted in a GLB. Assimp's JSON parser (rapidjson)
  * recurses per level and overflowed an 8 MiB stack at 10^6 levels; glTF
  * documents nest about ten deep, extensions included. */

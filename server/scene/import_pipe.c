@@ -166,9 +166,10 @@ int import_pipe_answer(const uint8_t *p, size_t n, uint32_t max_triangles, impor
     for (size_t i = 0; i < (size_t)ntris * 9u; i++, k += 4) {
         float v = le_get_f32(p + k);
         int axis = (int)(i % 3);
-        if (!isfinite(v)) {
+        if (!isfinite(v) || fabsf(v) > IMPORT_MAX_COORD) {
             free(tris);
-            return bad(err, errlen, "the importer answered a coordinate that is not finite");
+            return bad(err, errlen, "the importer answered a coordinate that is not finite or beyond %.0f km",
+                       IMPORT_MAX_COORD / 1000.0);
         }
         tris[i] = v;
         got[axis] = fminf(got[axis], v);

@@ -777,9 +777,18 @@ static void test_options_and_triangle_limit(void **state)
     assert_int_equal(run(b, "obj", &o, &m, err, sizeof err), -EFBIG);
     assert_non_null(strstr(err, "more than 6319 triangles"));
     o = (import_options)IMPORT_OPTIONS_DEFAULT;
-    o.unit_scale = 1e38f; /* 3.4 * 1e38 overflows a float */
+    o.unit_scale = 1e38f; /* 3.4 * 1e38 overflows a float; smaller ones are far out */
     assert_int_equal(run(b, "obj", &o, &m, err, sizeof err), -EINVAL);
-    assert_non_null(strstr(err, "not a finite float"));
+    assert_true(strstr(err, "not a finite float") || strstr(err, "beyond 1000 km"));
+    o.unit_scale = 1e6f; /* finite, but the teapot is then 3,400 km across */
+    assert_int_equal(run(b, "obj", &o, &m, err, sizeof err), -EINVAL);
+    assert_non_null(strstr(err, "beyond 1000 km"));
+    {   /* a vertex at 1e38, finite as a float: refused, not stored */
+        buf far = text("v 0 0 0\nv 1e38 0 0\nv 0 1 0\nf 1 2 3\n");
+        assert_int_equal(run(far, "obj", NULL, &m, err, sizeof err), -EINVAL);
+        assert_non_null(strstr(err, "beyond 1000 km"));
+        free(far.p);
+    }
 
     {
         const float bad_scales[] = {0.0f, -1.0f, NAN, INFINITY};

@@ -82,6 +82,9 @@ static void test_answers(void **state)
     le_put_f32(b + 14 + 28 + 4 * 4, NAN);
     assert_int_equal(decode(b, n, 2, err), -EPROTO);
     assert_non_null(strstr(err, "not finite"));
+    le_put_f32(b + 14 + 28 + 4 * 4, 1e30f); /* finite, but far beyond any world */
+    assert_int_equal(decode(b, n, 2, err), -EPROTO);
+    assert_non_null(strstr(err, "beyond"));
     le_put_f32(b + 14 + 28 + 4 * 4, 5.0f); /* finite, but outside the box */
     assert_int_equal(decode(b, n, 2, err), -EPROTO);
     assert_non_null(strstr(err, "box"));
