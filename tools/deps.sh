@@ -9,7 +9,7 @@
 # (libopenvdb-dev, with TBB) for bench-voxel.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
-          libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libseccomp-dev chromium)
+          libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev chromium)
 for arg in "$@"; do
   case "$arg" in
     --bench) packages+=(libopenvdb-dev) ;;
