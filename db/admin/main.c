@@ -1,7 +1,9 @@
 /* cvre-admin: read-only questions to a cvre database, safe while the server
- * runs, and one change: rolling a collision map back, which reopens the
- * database read-write for that command only. Flags, help texts and exit
- * codes live here; the SQL is in query.c, the output forms in out.c. */
+ * runs, and a few changes: rolling a collision map back, and adding,
+ * deleting and setting the password of accounts, which reopen the database
+ * read-write for that command only. Flags, help texts and exit codes live
+ * here; the SQL is in query.c, the accounts in user.c, the output forms in
+ * out.c. */
 #include <errno.h>
 #include <getopt.h>
 #include <math.h>
@@ -12,10 +14,12 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "account.h"
 #include "db.h"
 #include "map.h"
 #include "out.h"
 #include "query.h"
+#include "user.h"
 
 enum { EXIT_NOT_FOUND = 1, EXIT_USAGE = 2, EXIT_DB = 3, EXIT_REFUSED = 4 };
 
@@ -29,8 +33,9 @@ static const char usage[] =
     "usage: cvre-admin [--db FILE] [--csv | --json] COMMAND [options]\n"
     "\n"
     "Answers questions about a cvre database: the collision log, objects and\n"
-    "their collision maps (ECM), users and sessions. It opens the file read-only\n"
-    "and can run while the server writes to it; only rollback writes.\n"
+    "their collision maps (ECM), users and sessions, accounts. It opens the file\n"
+    "read-only and can run while the server writes to it; only rollback and\n"
+    "user add, del and passwd write.\n"
     "\n"
     "Commands:\n"
     "  collisions [filters]      collisions, newest first (--object, --user, --since,\n"
@@ -46,6 +51,10 @@ static const char usage[] =
     "  map --svg FILE            a picture of an object's collision map (--object ID,\n"
     "                            --version N) or of the whole world, and its figures\n"
     "  totals                    users, sessions, objects, collisions and the time span\n"
+    "  user add NAME [--admin]   add an account; asks for its password (--password-stdin)\n"
+    "  user del NAME             delete an account (its objects pass to the world account)\n"
+    "  user list                 the accounts (never their password hashes)\n"
+    "  user passwd NAME          set an account's password; asks for it (--password-stdin)\n"
     "  help [COMMAND]            this text, or a command's (same as COMMAND --help)\n"
     "\n"
     "Options (before or after the command):\n"
@@ -67,13 +76,15 @@ static const char usage[] =
     "\n"
     "Exit status:\n"
     "  0  success (also when no rows match)\n"
-    "  1  the object, version or user asked about does not exist\n"
-    "  2  bad arguments\n"
+    "  1  the object, version, user or account asked about does not exist\n"
+    "  2  bad arguments (also: an empty or mistyped password)\n"
     "  3  the database cannot be used: missing or unreadable file, not a cvre\n"
     "     database, a schema version this build does not know, or a failed query\n"
     "     or write (also: map's picture could not be written)\n"
     "  4  rollback refused, nothing written: the object was removed, the version\n"
-    "     is already in force, or another writer changed the object meanwhile\n";
+    "     is already in force, or another writer changed the object meanwhile;\n"
+    "     or a user command refused, nothing written: the name is taken, or the\n"
+    "     account is the reserved world account\n";
 
 struct command {
     const char *name;
@@ -86,7 +97,7 @@ struct command {
 #define ADMIN_POS_MAX 3
 
 enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32, OPT_SVG = 64,
-       OPT_MAPVERSION = 128 };
+       OPT_MAPVERSION = 128, OPT_ADMIN = 256, OPT_PASSWORD_STDIN = 512 };
 
 static const struct command commands[] = {
     {"collisions", OPT_OBJECT | OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_REGION | OPT_LIMIT, 0,
@@ -234,6 +245,43 @@ static const struct command commands[] = {
      "Counts of users, sessions (and open ones), objects (and those still in the\n"
      "world) and collisions, and the first and last moment the database knows\n"
      "of (session starts and ends, collisions).\n"},
+    {"user", OPT_ADMIN | OPT_PASSWORD_STDIN, 0,
+     "usage: cvre-admin user add NAME [--admin] [--password-stdin]\n"
+     "       cvre-admin user del NAME\n"
+     "       cvre-admin user list\n"
+     "       cvre-admin user passwd NAME [--password-stdin]\n"
+     "\n"
+     "Accounts: who may log in to the server, with a password (Argon2id; only\n"
+     "its hash is stored). A name is 1 to 32 bytes of UTF-8 without spaces,\n"
+     "control or invisible characters, unique ignoring ASCII case; \"world\"\n"
+     "is reserved: the account the world file's objects belong to, which\n"
+     "cannot log in and cannot be deleted.\n"
+     "\n"
+     "  add NAME          add an account and print it\n"
+     "  --admin           (add) the account is a world admin\n"
+     "  del NAME          delete an account and print how many of its objects in\n"
+     "                    the world now belong to the world account; its resume\n"
+     "                    tokens go with it, its sessions and collisions stay\n"
+     "  list              every account\n"
+     "  passwd NAME       set an account's password and print it; its resume\n"
+     "                    tokens are revoked (every device logs in again)\n"
+     "  --password-stdin  (add, passwd) read the password as one line of standard\n"
+     "                    input instead of asking twice on the terminal\n"
+     "\n"
+     "add and passwd ask for the password on the terminal, without echo, twice;\n"
+     "an empty password is refused. Standard input that is not a terminal needs\n"
+     "--password-stdin. A password is never printed, logged or stored.\n"
+     "\n"
+     "Columns: id, name, admin, can_log_in (has a password), created,\n"
+     "password_set (when its password was last set), tokens (resume tokens not\n"
+     "expired), objects (in the world, owned under its name).\n"
+     "\n"
+     "The three that write open the database read-write after the read-only\n"
+     "open has checked its schema version (they never migrate one); safe while\n"
+     "the server runs. Exit 1 if there is no such account (del, passwd); 2 for\n"
+     "a bad name or an empty, too long or mistyped password; 4, with nothing\n"
+     "written, if the name is taken (add) or the account is world (del, passwd);\n"
+     "3 if the database cannot be used or the write failed.\n"},
 };
 
 static const char *prog = "cvre-admin";
@@ -376,7 +424,7 @@ static const struct command *find_command(const char *name)
 }
 
 enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT, O_SVG,
-       O_MAPVERSION };
+       O_MAPVERSION, O_ADMIN, O_PASSWORD_STDIN };
 
 /* Every command's options but --version, whose meaning depends on it. */
 #define SHARED_OPTIONS                                                                                              \
@@ -384,7 +432,8 @@ enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, 
         {"help", no_argument, 0, O_HELP}, {"object", required_argument, 0, O_OBJECT},                               \
         {"user", required_argument, 0, O_USER}, {"since", required_argument, 0, O_SINCE},                           \
         {"until", required_argument, 0, O_UNTIL}, {"region", required_argument, 0, O_REGION},                       \
-        {"limit", required_argument, 0, O_LIMIT}, {"svg", required_argument, 0, O_SVG}
+        {"limit", required_argument, 0, O_LIMIT}, {"svg", required_argument, 0, O_SVG},                           \
+        {"admin", no_argument, 0, O_ADMIN}, {"password-stdin", no_argument, 0, O_PASSWORD_STDIN}
 
 static const struct option options[] = {
     SHARED_OPTIONS,
@@ -405,6 +454,7 @@ struct args {
     query_filter f;
     const char *svg;      /* map --svg */
     uint32_t map_version; /* map --version; 0: none given */
+    user_request user;    /* user: --admin, --password-stdin (the verb and name come later) */
 };
 
 /* Parses options from argv[1..] (argv[0] names the program or the command).
@@ -416,7 +466,8 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
     static const unsigned bit[] = {[O_OBJECT - O_OBJECT] = OPT_OBJECT, [O_USER - O_OBJECT] = OPT_USER,
                                    [O_SINCE - O_OBJECT] = OPT_SINCE,   [O_UNTIL - O_OBJECT] = OPT_UNTIL,
                                    [O_REGION - O_OBJECT] = OPT_REGION, [O_LIMIT - O_OBJECT] = OPT_LIMIT,
-                                   [O_SVG - O_OBJECT] = OPT_SVG,       [O_MAPVERSION - O_OBJECT] = OPT_MAPVERSION};
+                                   [O_SVG - O_OBJECT] = OPT_SVG,       [O_MAPVERSION - O_OBJECT] = OPT_MAPVERSION,
+                                   [O_ADMIN - O_OBJECT] = OPT_ADMIN,   [O_PASSWORD_STDIN - O_OBJECT] = OPT_PASSWORD_STDIN};
     const struct option *table = cmd && (cmd->opts & OPT_MAPVERSION) ? map_options : options;
     const char *where = cmd ? cmd->name : NULL;
     int o, li = 0;
@@ -477,6 +528,8 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
                                    optarg);
             a->map_version = (uint32_t)n;
             break;
+        case O_ADMIN: a->user.admin = 1; break;
+        case O_PASSWORD_STDIN: a->user.password_stdin = 1; break;
         }
     }
     return 0;
@@ -487,7 +540,9 @@ static int exit_status(int rc, const char *err)
     if (rc == QUERY_OK)
         return 0;
     fprintf(stderr, "%s: %s\n", prog, err);
-    return rc == QUERY_NOT_FOUND ? EXIT_NOT_FOUND : rc == QUERY_REFUSED ? EXIT_REFUSED : EXIT_DB;
+    return rc == QUERY_NOT_FOUND ? EXIT_NOT_FOUND : rc == QUERY_REFUSED ? EXIT_REFUSED
+           : rc == QUERY_USAGE   ? EXIT_USAGE
+                                 : EXIT_DB;
 }
 
 /* The one write. The read-only handle ro (whose open checked the schema
@@ -510,6 +565,36 @@ static int rollback(db *ro, const char *path, int format, int64_t id, uint32_t k
     rc = query_rollback(d, id, k, in_force, format, err, sizeof err);
     db_close(d);
     return exit_status(rc, err);
+}
+
+/* Checks the words after `user` (argv[0..argc)) into a->user: a verb, a
+ * name for all but list, the options that verb takes, a valid name for add,
+ * and a way to read the password. Returns 0 or the usage exit status. */
+static int user_arguments(int argc, char **argv, struct args *a)
+{
+    user_request *r = &a->user;
+    if (argc < 1)
+        return usage_error("user", "%s", "wants add, del, list or passwd");
+    r->verb = user_verb(argv[0]);
+    if (r->verb < 0)
+        return usage_error("user", "no user command \"%s\"", argv[0]);
+    int want = r->verb == USER_LIST ? 0 : 1;
+    if (argc - 1 < want)
+        return usage_error("user", "%s wants the account's name", argv[0]);
+    if (argc - 1 > want)
+        return usage_error("user", "unexpected argument \"%s\"", argv[1 + want]);
+    r->name = want ? argv[1] : NULL;
+    if (r->admin && r->verb != USER_ADD)
+        return usage_error("user", "%s", "--admin is an option of user add only");
+    if (r->password_stdin && r->verb != USER_ADD && r->verb != USER_PASSWD)
+        return usage_error("user", "%s", "--password-stdin is an option of user add and user passwd only");
+    char why[128];
+    if (r->verb == USER_ADD && db_account_name_check(r->name, why, sizeof why) < 0)
+        return usage_error("user", "not a name for an account: %s", why);
+    if ((r->verb == USER_ADD || r->verb == USER_PASSWD) && !r->password_stdin && !isatty(STDIN_FILENO))
+        return usage_error("user", "%s",
+                           "asks for the password on a terminal: give --password-stdin to read it from standard input");
+    return 0;
 }
 
 static int run_command(const struct command *cmd, db *d, struct args *a, const int64_t *pos)
@@ -580,6 +665,10 @@ int main(int argc, char **argv)
     }
     int64_t pos[ADMIN_POS_MAX] = {0};
     int positional = sub_argc - optind;
+    if (strcmp(cmd->name, "user") == 0 && (rc = user_arguments(positional, sub_argv + optind, &a)) != 0)
+        return rc;
+    if (strcmp(cmd->name, "user") == 0)
+        positional = 0; /* taken: a verb and a name, not numbers */
     if (positional > cmd->npos)
         return usage_error(cmd->name, "unexpected argument \"%s\"", sub_argv[optind + cmd->npos]);
     if (positional < cmd->npos)
@@ -625,6 +714,10 @@ int main(int argc, char **argv)
     }
     if (strcmp(cmd->name, "rollback") == 0)
         return rollback(d, a.db, a.format, pos[0], (uint32_t)pos[1]);
+    if (strcmp(cmd->name, "user") == 0) {
+        rc = user_run(d, a.db, &a.user, a.format, err, sizeof err);
+        return exit_status(rc, err);
+    }
     rc = run_command(cmd, d, &a, pos);
     db_close(d);
     return rc;

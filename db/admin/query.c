@@ -93,6 +93,12 @@ static int print_rows(sqlite3 *s, sqlite3_stmt *st, const out_column *cols, int 
     return QUERY_OK;
 }
 
+int query_print(sqlite3 *s, sqlite3_stmt *st, const struct out_column *cols, int ncols, int vertical, int format,
+                char *err, size_t errlen)
+{
+    return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
+}
+
 /* Runs sql with f's values and prints its rows as cols. */
 static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_id, const char *ranges,
                const out_column *cols, int ncols, int vertical, int format, char *err, size_t errlen)

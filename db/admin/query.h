@@ -24,10 +24,19 @@
 #include "db.h"
 
 enum { QUERY_OK = 0, QUERY_NOT_FOUND = 1, QUERY_REFUSED = 2, QUERY_ERROR = -1 };
+/* user.c's answer for input that is not an argument: an empty, too long or
+ * mistyped password (cvre-admin's bad-arguments exit status). */
+enum { QUERY_USAGE = 3 };
 
 /* Writes the message into err (errlen bytes) and returns code: how query.c
  * and map.c fail. */
 int query_fail(char *err, size_t errlen, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
+
+/* Prints the rows of the prepared statement st as cols (out.h; vertical:
+ * enum out_shape) in format, then finalizes st. */
+struct out_column;
+int query_print(sqlite3 *s, sqlite3_stmt *st, const struct out_column *cols, int ncols, int vertical, int format,
+                char *err, size_t errlen);
 
 /* Filters; a subcommand uses the ones that make sense for it. */
 typedef struct query_filter {
