@@ -23,9 +23,12 @@
  * write lock, so other writers wait only for the insert or update.
  *
  * Functions return 0 or -1 with the message in db_error(), except where a
- * DB_ACCOUNT_* answer is said. None leaves a transaction of its own open;
- * those that write must not be called inside a transaction (-1). Statements
- * are prepared per call (nothing here is on a hot path).
+ * DB_ACCOUNT_* answer is said. None leaves a transaction of its own open.
+ * add, delete, set_password, token_issue and token_redeem take a BEGIN
+ * IMMEDIATE transaction of their own and refuse to run inside one (-1);
+ * tokens_expire and tokens_revoke are one statement each and may run inside
+ * the caller's. Statements are prepared per call (nothing here is on a hot
+ * path).
  */
 #ifndef CVRE_ACCOUNT_H
 #define CVRE_ACCOUNT_H
