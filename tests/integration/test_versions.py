@@ -10,6 +10,7 @@ Objects come from a real server run (a world file); the refined versions a
 voxel job would write are written here with sqlite3, statement for
 statement as db/ecm.c's db_ecm_write writes them."""
 import csv
+import glob
 import hashlib
 import io
 import json
@@ -20,6 +21,8 @@ import tempfile
 
 from harness import MODELS, TEMP_DIRS, Raw, Server, admin, args, close_to, copy_with_schema, iso, run
 
+# The newest schema version: one migration a version.
+SCHEMA = len(glob.glob(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "db", "migrations", "*.sql")))
 A = args()
 ROOM = os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl")
 ROOM_POS = (10.0, 0.0, 0.0)
@@ -144,7 +147,7 @@ def make_db():
     srv = Server(A.bin, "--world", world)
     assert srv.stop() == 0
     db = sqlite3.connect(srv.db)
-    assert db.execute("PRAGMA user_version").fetchone()[0] == 4
+    assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA
     db.execute("UPDATE objects SET removed_at = 1795000000 WHERE name = 'gone'")
     db.commit()
     db.close()

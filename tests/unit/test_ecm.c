@@ -136,8 +136,8 @@ static void test_write_read_round_trip(void **state)
 {
     (void)state;
     db *d = open_rw();
-    assert_int_equal(db_schema_version(), 4);
-    assert_int_equal(scalar(d, "PRAGMA user_version"), 4);
+    assert_true(db_schema_version() >= 4); /* the ECM history's migration and those after it */
+    assert_int_equal(scalar(d, "PRAGMA user_version"), db_schema_version());
     int64_t id = make_object(d, "a");
     make_run(d, 7, id, 3);
     uint32_t ties[] = {2, 0, 2}; /* a duplicate counts once */
@@ -647,7 +647,7 @@ static void test_migration_from_3(void **state)
                      SQLITE_OK);
     sqlite3_close(raw);
     db *d = open_rw();
-    assert_int_equal(scalar(d, "PRAGMA user_version"), 4);
+    assert_int_equal(scalar(d, "PRAGMA user_version"), db_schema_version());
     assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_versions WHERE parent_version IS NULL AND run_id IS NULL "
                                "AND restores IS NULL AND detail IS NULL"),
                      1);
