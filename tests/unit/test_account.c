@@ -4,8 +4,9 @@
  * tokens, and the migration of a database at schema version 4.
  *
  * Each Argon2id hash costs ~64 MiB and 0.1-0.3 s, so the tests count them:
- * about a dozen in all. Accounts that need a password only to get tokens are
- * given a placeholder hash by SQL instead. */
+ * about twenty in all (the timing test takes the shortest of three runs).
+ * Accounts that need a password only to get tokens are given a placeholder
+ * hash by SQL instead. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -199,13 +200,19 @@ static void test_add_find_list(void **state)
     db_close(d);
 }
 
-/* db_account_verify with the length of password, timed: its answer, and
- * the seconds it took in *secs. */
-static int verify_timed(db *d, const char *name, const char *password, int64_t *id, double *secs)
+/* db_account_verify with the length of password, run `runs` times: its
+ * (last) answer, and the shortest time a run took in *secs (the one least
+ * disturbed by whatever else the machine was doing). */
+static int verify_timed(db *d, const char *name, const char *password, int64_t *id, int runs, double *secs)
 {
-    double t0 = seconds();
-    int rc = db_account_verify(d, name, password, strlen(password), id);
-    *secs = seconds() - t0;
+    int rc = -1;
+    *secs = 1e9;
+    for (int i = 0; i < runs; i++) {
+        double t0 = seconds();
+        rc = db_account_verify(d, name, password, strlen(password), id);
+        double t = seconds() - t0;
+        *secs = t < *secs ? t : *secs;
+    }
     return rc;
 }
 
@@ -217,29 +224,30 @@ static void test_verify(void **state)
     double right, wrong, unknown, world, t;
     assert_int_equal(db_account_add(d, "alice", "correct horse", 13, 0, 100.0, &alice), 0); /* hash 1 */
 
-    assert_int_equal(verify_timed(d, "alice", "correct horse", &id, &right), 0);
+    assert_int_equal(verify_timed(d, "alice", "correct horse", &id, 1, &right), 0);
     assert_int_equal(id, alice);
     id = 0;
-    assert_int_equal(verify_timed(d, "ALICE", "correct horse", &id, &t), 0); /* names ignore ASCII case */
+    assert_int_equal(verify_timed(d, "ALICE", "correct horse", &id, 1, &t), 0); /* names ignore ASCII case */
     assert_int_equal(id, alice);
 
     id = -7;
-    assert_int_equal(verify_timed(d, "alice", "correct horsf", &id, &wrong), DB_ACCOUNT_DENIED);
+    assert_int_equal(verify_timed(d, "alice", "correct horsf", &id, 3, &wrong), DB_ACCOUNT_DENIED);
     assert_string_equal(db_error(d), "wrong name or password");
-    assert_int_equal(verify_timed(d, "mallory", "correct horse", &id, &unknown), DB_ACCOUNT_DENIED);
+    assert_int_equal(verify_timed(d, "mallory", "correct horse", &id, 3, &unknown), DB_ACCOUNT_DENIED);
     assert_string_equal(db_error(d), "wrong name or password");
-    assert_int_equal(verify_timed(d, "world", "", &id, &world), DB_ACCOUNT_DENIED);
-    assert_int_equal(verify_timed(d, "alice", "correct hors", &id, &t), DB_ACCOUNT_DENIED); /* a prefix */
+    assert_int_equal(verify_timed(d, "world", "", &id, 3, &world), DB_ACCOUNT_DENIED);
+    assert_int_equal(verify_timed(d, "alice", "correct hors", &id, 1, &t), DB_ACCOUNT_DENIED); /* a prefix */
     assert_int_equal(id, -7); /* untouched on denial */
 
-    /* Every answer paid for one Argon2id run (~0.1 s or more), the unknown
+    /* Every answer costs one Argon2id run (~0.1 s or more), the unknown
      * name and the account without a password included: skipping it would
-     * make them ~10^4 times faster, so a loose bound is a firm test. */
-    print_message("verify: right %.3f s, wrong %.3f s, unknown name %.3f s, no password %.3f s\n", right, wrong,
-                  unknown, world);
+     * make them ~10^4 times faster, a second run twice as slow. The
+     * shortest of three runs keeps a busy machine from deciding. */
+    print_message("verify (shortest of 3): wrong %.3f s, unknown name %.3f s, no password %.3f s; right %.3f s\n",
+                  wrong, unknown, world, right);
     assert_true(wrong > 0.02);
-    assert_true(unknown > 0.3 * wrong && world > 0.3 * wrong);
-    assert_true(unknown < 3.0 * wrong + 0.05);
+    assert_true(unknown > 0.5 * wrong && unknown < 1.6 * wrong);
+    assert_true(world > 0.5 * wrong && world < 1.6 * wrong);
     db_close(d);
 }
 
