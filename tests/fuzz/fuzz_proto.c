@@ -7,12 +7,14 @@
  * must come back byte for byte and decode to the same message: the encoding
  * is canonical, so any difference is a codec bug. A failed check aborts.
  *
- * Built with -DCVRE_LIBFUZZER (clang -fsanitize=fuzzer) it is a plain
- * libFuzzer target. Otherwise main() below drives it, so the target runs
- * under any compiler and in ctest (see tests/fuzz/README.md):
- *   fuzz_proto --runs N [--seed S]   N generated inputs
+ * Inputs are made and changed frame-aware (fz.h): the generator writes one
+ * to three valid frames of random types and contents, then corrupts them
+ * (lengths at and past both caps, reserved types, NaN and infinity, noise);
+ * the mutator finds the frames of an input and replaces, inserts or
+ * corrupts one. Built with -DCVRE_LIBFUZZER (clang -fsanitize=fuzzer) the
+ * mutator is libFuzzer's custom mutator; otherwise fz.c's main() drives
+ * the target (see tests/fuzz/README.md), which also has
  *   fuzz_proto --write-seeds DIR     one valid frame per type, as a corpus
- *   fuzz_proto FILE...               replay inputs, e.g. a crash file
  */
 #include <math.h>
 #include <stdint.h>
@@ -20,18 +22,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fz.h"
 #include "proto.h"
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
-
-#define CHECK(cond)                                                                  \
-    do {                                                                             \
-        if (!(cond)) {                                                               \
-            fprintf(stderr, "fuzz_proto: check failed: %s (%s:%d)\n", #cond, __FILE__, \
-                    __LINE__);                                                       \
-            abort();                                                                 \
-        }                                                                            \
-    } while (0)
+#define CHECK FZ_CHECK
 
 /* What the target saw, reported by the standalone driver so a change that
  * stops inputs from reaching the decoder shows up. */
@@ -394,29 +388,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     return 0;
 }
 
-#ifndef CVRE_LIBFUZZER
+/* ---- generator and mutator ---------------------------------------------- */
 
-/* ---- standalone driver -------------------------------------------------- */
-
-/* Three frames of the largest size, plus room for inserted bytes. */
-#define INPUT_MAX (3u * (PROTO_MAX_LEN + 4u) + 256u)
 #define MAX_FRAMES 3
 
-static uint64_t rng;
+/* The shared random stream (fz.h) under the generator's short names. */
+static uint64_t rnd(void) { return fz_rnd(); }
 
-/* splitmix64: tiny, and the same sequence on every platform for a seed.
- * Callers never put two draws where C leaves their order to the compiler
- * (two arguments, two initializers of one struct), so that a seed makes
- * the same inputs whatever the compiler. */
-static uint64_t rnd(void)
-{
-    uint64_t z = (rng += 0x9e3779b97f4a7c15u);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9u;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebu;
-    return z ^ (z >> 31);
-}
-
-static uint32_t below(uint32_t n) { return (uint32_t)(rnd() % n); }
+static uint32_t below(uint32_t n) { return fz_below(n); }
 
 static float bits_f32(uint32_t b)
 {
@@ -717,19 +696,12 @@ static void gen_frame(proto_writer *w, uint16_t type)
     }
 }
 
-/* Puts an interesting u32 little-endian at p. */
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-
 /*
  * Applies one random mutation to in[0..*len). starts[] are the offsets
  * where the generated frames began, so that length and type corruption
- * hit real header fields. *len never exceeds INPUT_MAX.
+ * hit real header fields. *len never exceeds max.
  */
-static void mutate(uint8_t *in, size_t *len, const size_t *starts, size_t nstarts)
+static void mutate(uint8_t *in, size_t *len, size_t max, const size_t *starts, size_t nstarts)
 {
     static const uint8_t bytes[] = {0x00, 0x01, 0x1f, 0x20, 0x7f, 0x80, 0xbf, 0xc0, 0xff};
     size_t n = *len, s = nstarts ? starts[below((uint32_t)nstarts)] : 0;
@@ -757,7 +729,7 @@ static void mutate(uint8_t *in, size_t *len, const size_t *starts, size_t nstart
             const uint32_t lens[] = {0, 1, 2, cur - 1, cur + 1, PROTO_MAX_LEN_PREJOIN,
                                      PROTO_MAX_LEN_PREJOIN + 1, PROTO_MAX_LEN, PROTO_MAX_LEN + 1,
                                      0xffffffffu, 0x80000000u, (uint32_t)rnd()};
-            put_u32(in + s, lens[below(sizeof lens / sizeof lens[0])]);
+            fz_set_le(in + s, lens[below(sizeof lens / sizeof lens[0])], 4);
         }
         break;
     case 4: /* corrupt a frame's type */
@@ -771,7 +743,7 @@ static void mutate(uint8_t *in, size_t *len, const size_t *starts, size_t nstart
         if (n >= 4) {
             const uint32_t bad[] = {0x7fc00000u, 0x7f800000u, 0xff800000u, 0x7f800001u};
             size_t at = below((uint32_t)n - 3);
-            put_u32(in + at, bad[below(4)]);
+            fz_set_le(in + at, bad[below(4)], 4);
         }
         break;
     case 6: /* overwrite a span with noise */
@@ -782,7 +754,7 @@ static void mutate(uint8_t *in, size_t *len, const size_t *starts, size_t nstart
         }
         break;
     case 7: /* insert noise */
-        if (n + 16 <= INPUT_MAX) {
+        if (n + 16 <= max) {
             size_t at = below((uint32_t)n + 1), k = 1 + below(16);
             memmove(in + at + k, in + at, n - at);
             for (size_t i = at; i < at + k; i++)
@@ -800,38 +772,65 @@ static void mutate(uint8_t *in, size_t *len, const size_t *starts, size_t nstart
         }
         break;
     default: /* replace everything with noise */
-        *len = below(256);
+        *len = below(256) % (max + 1);
         for (size_t i = 0; i < *len; i++)
             in[i] = (uint8_t)rnd();
         break;
     }
 }
 
-static int run_random(unsigned long long runs, uint64_t seed)
+/* One to three valid frames of random types and contents, then zero to
+ * three corruptions. */
+static size_t proto_generate(uint8_t *out, size_t max)
 {
-    static uint8_t in[INPUT_MAX];
+    proto_writer w;
+    size_t starts[MAX_FRAMES], nstarts = 0, len;
+    uint32_t frames = 1 + below(MAX_FRAMES), muts = below(4);
 
-    rng = seed;
-    for (unsigned long long r = 0; r < runs; r++) {
-        proto_writer w;
-        size_t starts[MAX_FRAMES], nstarts = 0, len;
-        uint32_t frames = 1 + below(MAX_FRAMES), muts = below(4);
-
-        proto_writer_init(&w, in, sizeof in);
-        for (uint32_t i = 0; i < frames; i++) {
-            starts[nstarts++] = w.len;
-            gen_frame(&w, types[below(NTYPES)]);
-        }
-        len = w.len;
-        for (uint32_t i = 0; i < muts; i++)
-            mutate(in, &len, starts, nstarts);
-        LLVMFuzzerTestOneInput(in, len);
+    proto_writer_init(&w, out, max);
+    for (uint32_t i = 0; i < frames; i++) {
+        starts[nstarts++] = w.len;
+        gen_frame(&w, types[below(NTYPES)]);
     }
-    printf("fuzz_proto: %llu inputs, 0 crashes\n", runs);
-    fflush(stdout);
-    fprintf(stderr, "fuzz_proto: %lu frames parsed, %lu decoded and round-tripped\n", n_frames,
-            n_decoded);
-    return 0;
+    len = w.len;
+    for (uint32_t i = 0; i < muts; i++)
+        mutate(out, &len, max, starts, nstarts);
+    return len;
+}
+
+/* Where the frames of data[0..size) start, read as a connection reads
+ * them (headers only, lengths trusted up to the end). Returns how many. */
+static size_t frame_starts(const uint8_t *data, size_t size, size_t *starts, size_t max_starts)
+{
+    size_t n = 0, at = 0;
+
+    while (n < max_starts && at + PROTO_HEADER_SIZE <= size) {
+        starts[n++] = at;
+        at += 4 + (size_t)fz_get_u32le(data + at);
+    }
+    return n;
+}
+
+/* A frame replaced by a new one, a new one inserted, or one corrupted. */
+static size_t proto_mutate(uint8_t *data, size_t size, size_t max)
+{
+    static uint8_t frame[PROTO_MAX_LEN + 4];
+    size_t starts[64], n = frame_starts(data, size, starts, 64), len = size;
+    size_t k = n ? fz_below((uint32_t)n) : 0, at = n ? starts[k] : size;
+    size_t end = k + 1 < n ? starts[k + 1] : size;
+    proto_writer w;
+
+    switch (fz_below(3)) {
+    case 0: /* replaced */
+    case 1: /* inserted */
+        proto_writer_init(&w, frame, sizeof frame);
+        gen_frame(&w, types[below(NTYPES)]);
+        fz_splice(data, &len, max, at, fz_one_in(2) ? end : at, frame, w.len);
+        return len;
+    default:
+        mutate(data, &len, max, starts, n);
+        return len;
+    }
 }
 
 /* Writes one valid frame of each type to DIR/<type name>, a starting
@@ -840,7 +839,7 @@ static int write_seeds(const char *dir)
 {
     static uint8_t buf[PROTO_MAX_LEN + 4];
 
-    rng = 1;
+    fz_seed(1);
     for (size_t i = 0; i < NTYPES; i++) {
         const uint16_t t = types[i];
         char path[4096];
@@ -866,65 +865,20 @@ static int write_seeds(const char *dir)
     return 0;
 }
 
-/* Feeds each file to the target, whole. */
-static int replay(int nfiles, char **files)
+static int proto_command(int argc, char **argv)
 {
-    for (int i = 0; i < nfiles; i++) {
-        FILE *fp = fopen(files[i], "rb");
-        uint8_t *data = NULL;
-        long size;
-
-        if (!fp || fseek(fp, 0, SEEK_END) != 0 || (size = ftell(fp)) < 0 || fseek(fp, 0, SEEK_SET) != 0 ||
-            !(data = malloc((size_t)size + 1)) || fread(data, 1, (size_t)size, fp) != (size_t)size) {
-            perror(files[i]);
-            free(data);
-            if (fp)
-                fclose(fp);
-            return 1;
-        }
-        fclose(fp);
-        LLVMFuzzerTestOneInput(data, (size_t)size);
-        free(data);
-    }
-    printf("fuzz_proto: %d inputs, 0 crashes\n", nfiles);
-    return 0;
-}
-
-static int usage(void)
-{
-    fprintf(stderr, "usage: fuzz_proto --runs N [--seed S]\n"
-                    "       fuzz_proto --write-seeds DIR\n"
-                    "       fuzz_proto FILE...\n");
-    return 2;
-}
-
-/* Parses a whole decimal number; 0 on anything else. */
-static int parse_count(const char *s, unsigned long long *out)
-{
-    char *end;
-
-    if (s[0] < '0' || s[0] > '9')
-        return 0;
-    *out = strtoull(s, &end, 10);
-    return *end == 0;
-}
-
-int main(int argc, char **argv)
-{
-    unsigned long long runs, seed = 1;
-
     if (argc == 3 && strcmp(argv[1], "--write-seeds") == 0)
         return write_seeds(argv[2]);
-    if (argc >= 3 && strcmp(argv[1], "--runs") == 0) {
-        if (!parse_count(argv[2], &runs))
-            return usage();
-        if (argc == 5 && strcmp(argv[3], "--seed") == 0 && parse_count(argv[4], &seed))
-            return run_random(runs, seed);
-        return argc == 3 ? run_random(runs, seed) : usage();
-    }
-    if (argc >= 2 && argv[1][0] != '-')
-        return replay(argc - 1, argv + 1);
-    return usage();
+    return -1;
 }
 
-#endif
+/* If the second number drops to near zero, inputs no longer reach the
+ * decoder. */
+static void proto_report(void)
+{
+    fprintf(stderr, "fuzz_proto: %lu frames parsed, %lu decoded and round-tripped\n", n_frames,
+            n_decoded);
+}
+
+const fz_target fz_self = {"fuzz_proto", NULL,          proto_generate, proto_mutate,
+                           proto_command, proto_report, NULL};
