@@ -1,0 +1,480 @@
+#!/usr/bin/env python3
+"""Writes the seed corpora of the fuzz targets (tests/fuzz/README.md).
+
+For each model target, the sample models of ../shared/models cut under
+--max-file bytes (each file still a valid model), other encodings of them
+(binary PLY of the ASCII one, ASCII STL of the binary one), and the hostile
+inputs known: type confusion in a GLB's JSON, deep nesting, node cycles and
+shared children, 2^31-1 STL triangles, 4e9 PLY vertices, 1e39 and 1e38
+coordinates, indices out of range... For fuzz_proto, the seeds that
+`fuzz_proto --write-seeds` writes plus hostile frames. Files named known-*
+trigger bugs reported and not yet fixed (each target's known() skips them).
+
+Deterministic: the same models make the same files. Existing files of the
+same name are overwritten; others (crash files added by hand) are kept.
+
+usage: make_corpus.py [--models DIR] [--out DIR] [--fuzz-proto BINARY]
+"""
+import argparse
+import json
+import os
+import struct
+import subprocess
+import sys
+
+MAX_FILE = 32 * 1024
+
+
+def write(out, target, name, data):
+    d = os.path.join(out, target)
+    os.makedirs(d, exist_ok=True)
+    if isinstance(data, str):
+        data = data.encode()
+    with open(os.path.join(d, name), 'wb') as f:
+        f.write(data)
+
+
+def copy_models(models, out, target, folder, ext):
+    """Copies the sample models of one folder with the extension, whole."""
+    for name in sorted(os.listdir(os.path.join(models, folder))):
+        if name.endswith(ext):
+            with open(os.path.join(models, folder, name), 'rb') as f:
+                write(out, target, name, f.read())
+
+
+# ---- GLB -----------------------------------------------------------------
+
+def glb(doc, bin_=None, version=2, json_pad=b' '):
+    j = doc if isinstance(doc, bytes) else json.dumps(doc, separators=(',', ':')).encode()
+    j += json_pad * ((4 - len(j) % 4) % 4)
+    body = struct.pack('<I', len(j)) + b'JSON' + j
+    if bin_ is not None:
+        b = bin_ + b'\0' * ((4 - len(bin_) % 4) % 4)
+        body += struct.pack('<I', len(b)) + b'BIN\0' + b
+    return b'glTF' + struct.pack('<II', version, 12 + len(body)) + body
+
+
+def triangle_scene(positions=((0, 0, 0), (1, 0, 0), (0, 1, 0)), nodes=None, roots=(0,), extra=None):
+    """A GLB of one triangle mesh; nodes and roots as given."""
+    pos = b''.join(struct.pack('<3f', *p) for p in positions)
+    doc = {'asset': {'version': '2.0'}, 'scene': 0,
+           'buffers': [{'byteLength': len(pos)}],
+           'bufferViews': [{'buffer': 0, 'byteOffset': 0, 'byteLength': len(pos)}],
+           'accessors': [{'bufferView': 0, 'componentType': 5126, 'count': len(positions),
+                          'type': 'VEC3'}],
+           'meshes': [{'primitives': [{'attributes': {'POSITION': 0}}]}],
+           'nodes': nodes if nodes is not None else [{'mesh': 0}],
+           'scenes': [{'nodes': list(roots)}]}
+    doc.update(extra or {})
+    return doc, pos
+
+
+def glb_corpus(models, out):
+    t = 'fuzz_glb'
+    copy_models(models, out, t, 'openings', '.glb')
+    asset = {'asset': {'version': '2.0'}}
+    # The shapes that overflowed the heap: an object where glTF has an array.
+    write(out, t, 'accessors-object.glb', glb(dict(asset, accessors={'a': {'count': 5}})))
+    write(out, t, 'accessors-object-of-array.glb', glb(dict(asset, accessors={'q': [1, 2]})))
+    for key in ('nodes', 'meshes', 'scenes', 'bufferViews', 'buffers'):
+        write(out, t, f'{key}-object.glb', glb(dict(asset, **{key: {'a': {}}})))
+    doc, pos = triangle_scene()
+    doc['meshes'][0]['primitives'] = {'a': {'attributes': {'POSITION': 0}}}
+    write(out, t, 'primitives-object.glb', glb(doc, pos))
+    doc, pos = triangle_scene(nodes=[{'mesh': 0, 'children': {'a': 0}}])
+    write(out, t, 'children-object.glb', glb(doc, pos))
+    doc, pos = triangle_scene()
+    doc['meshes'][0]['primitives'][0]['attributes'] = [0]
+    write(out, t, 'attributes-array.glb', glb(doc, pos))
+    doc, pos = triangle_scene()
+    doc['accessors'][0]['count'] = '3'
+    write(out, t, 'count-string.glb', glb(doc, pos))
+    # Nesting: past IMPORT_MAX_JSON_DEPTH (64), past jansson's own limit.
+    for depth in (64, 65, 2049, 16000):
+        text = b'{"asset":{"version":"2.0"},"extras":' + b'[' * depth + b']' * depth + b'}'
+        write(out, t, f'nesting-{depth}.glb', glb(text))
+    # Node graphs: cycles, a child listed twice, two parents, deep chains,
+    # a root at every level of a chain.
+    graphs = {
+        'node-cycle': [{'mesh': 0, 'children': [1]}, {'children': [0]}],
+        'node-self-child': [{'mesh': 0, 'children': [0]}],
+        'node-child-twice': [{'children': [1, 1]}, {'mesh': 0}],
+        'node-two-parents': [{'children': [2]}, {'children': [2]}, {'mesh': 0}],
+        'node-child-out-of-range': [{'mesh': 0, 'children': [7]}],
+        'node-child-negative': [{'mesh': 0, 'children': [-1]}],
+        'node-mesh-out-of-range': [{'mesh': 5}],
+    }
+    for name, nodes in graphs.items():
+        doc, pos = triangle_scene(nodes=nodes)
+        write(out, t, name + '.glb', glb(doc, pos))
+    doc, pos = triangle_scene(nodes=[{'mesh': 0}], roots=(0, 0))
+    write(out, t, 'root-twice.glb', glb(doc, pos))
+    doc, pos = triangle_scene(nodes=[{'children': [1]}, {'mesh': 0}], roots=(0, 1))
+    write(out, t, 'root-and-child.glb', glb(doc, pos))
+    for depth in (256, 257):
+        nodes = [{'children': [i + 1]} for i in range(depth - 1)] + [{'mesh': 0}]
+        doc, pos = triangle_scene(nodes=nodes)
+        write(out, t, f'node-chain-{depth}.glb', glb(doc, pos))
+    nodes = [{'children': [i + 1]} for i in range(449)] + [{'mesh': 0}]
+    doc, pos = triangle_scene(nodes=nodes, roots=range(450))
+    write(out, t, 'node-root-every-level.glb', glb(doc, pos))
+    # Accessor elements copied once per primitive (the 17.6 GB file, small).
+    doc, pos = triangle_scene()
+    doc['meshes'][0]['primitives'] = [{'attributes': {'POSITION': 0}}] * 600
+    write(out, t, 'accessor-shared-600.glb', glb(doc, pos))
+    # Numbers: 1e38 (finite in float), past it, NaN, a huge scale.
+    write(out, t, 'vertex-1e38.glb', glb(*triangle_scene(positions=((1e38, 0, 0), (1, 0, 0), (0, 1, 0)))))
+    write(out, t, 'vertex-flt-max.glb',
+          glb(*triangle_scene(positions=((3.4028235e38, -3.4028235e38, 0), (1, 0, 0), (0, 1, 0)))))
+    pos = struct.pack('<3f', 0, 0, 0) + struct.pack('<3I', 0x7fc00000, 0x7f800000, 0xff800000) + \
+        struct.pack('<3f', 0, 1, 0)
+    doc, _ = triangle_scene()
+    write(out, t, 'vertex-nan-inf.glb', glb(doc, pos))
+    doc, pos = triangle_scene(nodes=[{'mesh': 0, 'scale': [1e38, 1e38, 1e38]}])
+    write(out, t, 'node-scale-1e38.glb', glb(doc, pos))
+    doc, pos = triangle_scene(nodes=[{'mesh': 0, 'matrix': [1e308] * 16}])
+    write(out, t, 'node-matrix-1e308.glb', glb(doc, pos))
+    # Counts, offsets and references out of range.
+    for name, change in {
+        'accessor-count-2e9': lambda d: d['accessors'][0].update(count=2147483647),
+        'accessor-count-4e9': lambda d: d['accessors'][0].update(count=4294967295),
+        'accessor-count-2e32': lambda d: d['accessors'][0].update(count=4294967296),
+        'accessor-count-negative': lambda d: d['accessors'][0].update(count=-1),
+        'accessor-count-real': lambda d: d['accessors'][0].update(count=3.5),
+        'accessor-type-mat4': lambda d: d['accessors'][0].update(type='MAT4'),
+        'accessor-component-int': lambda d: d['accessors'][0].update(componentType=5124),
+        'accessor-view-out-of-range': lambda d: d['accessors'][0].update(bufferView=1),
+        'view-length-huge': lambda d: d['bufferViews'][0].update(byteLength=4294967295),
+        'view-offset-huge': lambda d: d['bufferViews'][0].update(byteOffset=2147483647),
+        'view-stride-255': lambda d: d['bufferViews'][0].update(byteStride=255),
+        'view-buffer-out-of-range': lambda d: d['bufferViews'][0].update(buffer=3),
+        'buffer-length-huge': lambda d: d['buffers'][0].update(byteLength=4294967295),
+        'buffer-uri-etc-passwd': lambda d: d['buffers'][0].update(uri='/etc/passwd'),
+        'buffer-uri-data-bad': lambda d: d['buffers'][0].update(uri='data:application/octet-stream;base64,%%%'),
+        'indices-out-of-range': lambda d: d['meshes'][0]['primitives'][0].update(indices=9),
+        'mode-7': lambda d: d['meshes'][0]['primitives'][0].update(mode=7),
+        'scene-out-of-range': lambda d: d.update(scene=4),
+        'version-1': lambda d: d['asset'].update(version='1.0'),
+        'version-number': lambda d: d['asset'].update(version=2),
+        'draco': lambda d: d['meshes'][0]['primitives'][0].update(
+            extensions={'KHR_draco_mesh_compression': {'bufferView': 0, 'attributes': {'POSITION': 0}}}),
+    }.items():
+        doc, pos = triangle_scene()
+        change(doc)
+        write(out, t, name + '.glb', glb(doc, pos))
+    # The container: lengths that disagree, a NUL in the JSON, duplicate keys.
+    doc, pos = triangle_scene()
+    good = glb(doc, pos)
+    write(out, t, 'container-version-1.glb', glb(doc, pos, version=1))
+    write(out, t, 'container-length-short.glb', good[:8] + struct.pack('<I', len(good) - 4) + good[12:])
+    write(out, t, 'container-json-length-huge.glb', good[:12] + struct.pack('<I', 0x7fffffff) + good[16:])
+    write(out, t, 'container-truncated.glb', good[:len(good) - 7])
+    write(out, t, 'container-bin-length-huge.glb',
+          good[:-len(pos) - 8] + struct.pack('<I', 0xfffffff0) + good[-len(pos) - 4:])
+    write(out, t, 'json-nul-padding.glb', glb(doc, pos, json_pad=b'\0'))
+    text = json.dumps(doc, separators=(',', ':')).encode()
+    write(out, t, 'json-nul-inside.glb', glb(text[:20] + b'\0' + text[21:], pos))
+    write(out, t, 'json-duplicate-key.glb', glb(b'{"asset":{"version":"2.0"},' + text[1:], pos))
+    # Reported, unfixed (fuzz_glb.c glb_known).
+    doc, pos = triangle_scene()
+    doc['meshes'][0]['primitives'] = [{'mode': 5}]
+    write(out, t, 'known-strip-without-position-64gb.glb', glb(doc, pos))
+    doc, pos = triangle_scene()
+    doc['accessors'].append({'bufferView': 0, 'componentType': 5123, 'count': 18, 'type': 'SCALAR'})
+    doc['meshes'][0]['primitives'] = [{'mode': 2, 'indices': 1}]
+    write(out, t, 'known-line-loop-without-position-segv.glb', glb(doc, pos))
+    doc, pos = triangle_scene()
+    doc['accessors'][0]['byteOffset'] = 4
+    write(out, t, 'known-accessor-offset-overread.glb', glb(doc, pos))
+    doc, pos = triangle_scene()
+    doc['bufferViews'].append({'buffer': 0, 'byteOffset': 36, 'byteLength': 4})
+    doc['buffers'][0]['byteLength'] = 40
+    doc['accessors'][0]['sparse'] = {'count': 1000, 'indices': {'bufferView': 1, 'componentType': 5123},
+                                     'values': {'bufferView': 0}}
+    write(out, t, 'known-sparse-count-overflow.glb', glb(doc, pos + struct.pack('<2H', 0, 1)))
+    idx = struct.pack('<6H', 0, 1, 2, 0, 1, 2)
+    doc, pos = triangle_scene()
+    doc['buffers'][0]['byteLength'] = 48
+    doc['bufferViews'].append({'buffer': 0, 'byteOffset': 36, 'byteLength': 12, 'byteStride': 4})
+    doc['accessors'].append({'bufferView': 1, 'componentType': 5123, 'count': 6, 'type': 'SCALAR'})
+    doc['meshes'][0]['primitives'][0]['indices'] = 1
+    write(out, t, 'known-strided-indices-leak.glb', glb(doc, pos + idx))
+
+
+# ---- OBJ -----------------------------------------------------------------
+
+def cut_obj(text, max_bytes, max_vertices):
+    """The first max_vertices v/vt/vn lines of each kind, the statements
+    between them, and the faces that use only what was kept, until the file
+    reaches max_bytes."""
+    out, size, kept = [], 0, {'v': 0, 'vt': 0, 'vn': 0}
+    for line in text.splitlines():
+        words = line.split()
+        if not words:
+            continue
+        kw = words[0]
+        if kw in kept:
+            if kept[kw] >= max_vertices:
+                continue
+            kept[kw] += 1
+        elif kw in ('f', 'l', 'p'):
+            ok = True
+            for ref in words[1:]:
+                for part, kind in zip(ref.split('/'), ('v', 'vt', 'vn')):
+                    if part and (not part.lstrip('-').isdigit() or int(part) < 1 or int(part) > kept[kind]):
+                        ok = False
+            if not ok:
+                continue
+        if size + len(line) + 1 > max_bytes:
+            break
+        out.append(line)
+        size += len(line) + 1
+    return '\n'.join(out) + '\n'
+
+
+def obj_corpus(models, out):
+    t = 'fuzz_obj'
+    for folder in ('openings', 'classic', 'scenes'):
+        for name in sorted(os.listdir(os.path.join(models, folder))):
+            if not name.endswith('.obj'):
+                continue
+            with open(os.path.join(models, folder, name), encoding='latin-1') as f:
+                text = f.read()
+            if len(text) > MAX_FILE:
+                text = cut_obj(text, MAX_FILE - 1024, 400)
+            write(out, t, name, text)
+    tri = 'v 0 0 0\nv 1 0 0\nv 0 1 0\n'
+    cases = {
+        'coord-1e39.obj': 'v 1e39 0 0\nv 1 0 0\nv 0 1e39 0\nf 1 2 3\n',
+        'coord-neg-1e39.obj': 'v -1e39 -1e39 -1e39\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-1e38.obj': 'v 1e38 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-flt-max.obj': 'v 3.4028235e38 0 0\nv 3.4028236e38 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-nan.obj': 'v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-inf.obj': 'v inf -inf 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-1e309.obj': 'v 1e309 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-dot5.obj': 'v .5 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'vertex-two-numbers.obj': 'v 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'face-index-0.obj': tri + 'f 0 1 2\n',
+        'face-index-past-end.obj': tri + 'f 1 2 4\n',
+        'face-index-before-first.obj': tri + 'f -4 -2 -1\n',
+        'face-index-2e31.obj': tri + 'f 1 2 2147483648\n',
+        'face-index-10-digits.obj': tri + 'f 1 2 0000000003\n',
+        'face-texcoord-past-end.obj': tri + 'vt 0 0\nf 1/5 2/5 3/5\n',
+        'face-normal-past-end.obj': tri + 'vn 0 0 1\nf 1//9 2//9 3//9\n',
+        'face-four-parts.obj': tri + 'f 1/1/1/1 2 3\n',
+        'face-before-vertices.obj': 'f 1 2 3\n' + tri,
+        'polygon-10000.obj': tri + 'f' + ' 1 2 3' * 3333 + ' 1\n',
+        'polygon-10001.obj': tri + 'f' + ' 1 2 3' * 3333 + ' 1 2\n',
+        'groups-10001.obj': tri + 'f 1 2 3\n' + 'g\n' * 10001,
+        'line-continuation.obj': 'v 0 0 \\\n0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n',
+        'control-nul.obj': tri + 'f 1 2\0 3\n',
+        'cr-line-ends.obj': tri.replace('\n', '\r') + 'f 1 2 3\r',
+        'indented-vertex.obj': ' v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n',
+        'mtllib-etc-passwd.obj': 'mtllib /etc/passwd\nusemtl root\n' + tri + 'f 1 2 3\n',
+        'unknown-f-word.obj': tri + 'fo 1 2 3\nf 1 2 3\n',
+        'known-line-texcoord-leak.obj': tri + 'vn 0 0 1\nf 1 2 3\ng g0\nl 1/1/1 2/1/1\n',
+    }
+    for name, text in cases.items():
+        write(out, t, name, text)
+
+
+# ---- PLY -----------------------------------------------------------------
+
+def ply_parse(text):
+    head, body = text.split('end_header\n', 1)
+    return head + 'end_header\n', body.splitlines()
+
+
+def ply_corpus(models, out):
+    t = 'fuzz_ply'
+    with open(os.path.join(models, 'formats', 'assimp_Wuson_ascii.ply'), encoding='latin-1') as f:
+        head, lines = ply_parse(f.read())
+    nv = int(head.split('element vertex ')[1].split()[0])
+    verts, faces = lines[:nv], []
+    keep = 120
+    for line in lines[nv:]:
+        w = line.split()
+        if w and all(int(x) < keep for x in w[1:]):
+            faces.append(line)
+    head = head.replace(f'element vertex {nv}', f'element vertex {keep}')
+    nf = int(head.split('element face ')[1].split()[0])
+    head = head.replace(f'element face {nf}', f'element face {len(faces)}')
+    write(out, t, 'assimp_Wuson_ascii-cut.ply', head + '\n'.join(verts[:keep] + faces) + '\n')
+    # The same vertices and faces, binary, both byte orders.
+    for order, fmt in (('<', 'binary_little_endian'), ('>', 'binary_big_endian')):
+        body = b''.join(struct.pack(order + '8f', *map(float, v.split())) for v in verts[:keep])
+        for line in faces:
+            w = [int(x) for x in line.split()]
+            body += struct.pack(order + 'B', w[0]) + struct.pack(order + f'{w[0]}I', *w[1:])
+        write(out, t, f'assimp_Wuson_{fmt}-cut.ply', head.replace('format ascii', f'format {fmt}').encode() + body)
+
+    def ascii_ply(nv, nf, verts, faces, vtype='float', ctype='uchar', itype='int', extra=''):
+        return (f'ply\nformat ascii 1.0\n{extra}element vertex {nv}\nproperty {vtype} x\n'
+                f'property {vtype} y\nproperty {vtype} z\nelement face {nf}\n'
+                f'property list {ctype} {itype} vertex_indices\nend_header\n' + verts + faces)
+    v3 = '0 0 0\n1 0 0\n0 1 0\n'
+    f1 = '3 0 1 2\n'
+    cases = {
+        'vertices-4e9.ply': ascii_ply(4000000000, 1, v3, f1),
+        'vertices-2e32-minus-1.ply': ascii_ply(4294967295, 1, v3, f1),
+        'vertices-2e32.ply': ascii_ply(4294967296, 1, v3, f1),
+        'vertices-negative.ply': ascii_ply(-1, 1, v3, f1),
+        'faces-4e9.ply': ascii_ply(3, 4000000000, v3, f1),
+        'vertex-1e38.ply': ascii_ply(3, 1, '1e38 0 0\n1 0 0\n0 1 0\n', f1),
+        'vertex-1e39.ply': ascii_ply(3, 1, '1e39 0 0\n1 0 0\n0 1 0\n', f1),
+        'vertex-nan.ply': ascii_ply(3, 1, 'nan 0 0\n1 0 0\n0 1 0\n', f1),
+        'face-index-out-of-range.ply': ascii_ply(3, 1, v3, '3 0 1 7\n'),
+        'face-index-negative.ply': ascii_ply(3, 1, v3, '3 0 1 -1\n'),
+        'list-255-short.ply': ascii_ply(3, 1, v3, '255 0 1 2\n'),
+        'list-count-float.ply': ascii_ply(3, 1, v3, '3 0 1 2\n', ctype='float'),
+        'list-count-char-negative.ply': ascii_ply(3, 1, v3, '-3 0 1 2\n', ctype='char'),
+        'list-items-float.ply': ascii_ply(3, 1, v3, '3 0.5 1 2\n', itype='float'),
+        'vertex-type-uchar.ply': ascii_ply(3, 1, '0 0 0\n255 0 0\n0 255 0\n', f1, vtype='uchar'),
+        'value-missing.ply': ascii_ply(3, 1, '0 0 0\n1 0\n0 1 0\n', f1),
+        'value-extra.ply': ascii_ply(3, 1, '0 0 0 9\n1 0 0\n0 1 0\n', f1),
+        'data-short.ply': ascii_ply(3, 2, v3, f1),
+        'comment-obj-info.ply': ascii_ply(3, 1, v3, f1, extra='comment hi\nobj_info x\n'),
+        'cr-in-header.ply': ascii_ply(3, 1, v3, f1).replace('format ascii 1.0\n', 'format ascii 1.0\r'),
+        'no-end-header.ply': 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n',
+        'property-before-element.ply': 'ply\nformat ascii 1.0\nproperty float x\nend_header\n',
+        'element-no-properties.ply': 'ply\nformat ascii 1.0\nelement vertex 3\nend_header\n' + v3,
+        'known-empty-face-abort.ply': ascii_ply(3, 1, v3, '0\n'),
+        'known-quad-index-out-of-range-segv.ply': ascii_ply(4, 1, v3 + '0 0 1\n', '4 0 1 2 1000000000\n'),
+        'properties-257.ply': 'ply\nformat ascii 1.0\nelement vertex 1\n' +
+        ''.join(f'property float p{i}\n' for i in range(257)) + 'end_header\n' + '0 ' * 257 + '\n',
+    }
+    for name, text in cases.items():
+        write(out, t, name, text)
+    bhead = ('ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\n'
+             'property float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n')
+    vb = struct.pack('<9f', 0, 0, 0, 1, 0, 0, 0, 1, 0)
+    fb = struct.pack('<B3i', 3, 0, 1, 2)
+    write(out, t, 'binary-vertices-4e9.ply', bhead.format(4000000000, 1).encode() + vb + fb)
+    write(out, t, 'binary-vertex-1e38.ply', bhead.format(3, 1).encode() + struct.pack('<9f', 1e38, 0, 0, 1, 0, 0, 0, 1, 0) + fb)
+    write(out, t, 'binary-vertex-nan.ply', bhead.format(3, 1).encode() + struct.pack('<I8f', 0x7fc00000, 0, 0, 1, 0, 0, 0, 1, 0) + fb)
+    write(out, t, 'binary-list-255.ply', bhead.format(3, 1).encode() + vb + struct.pack('<B3i', 255, 0, 1, 2))
+    write(out, t, 'binary-truncated.ply', bhead.format(3, 1).encode() + vb + fb[:6])
+
+
+# ---- STL -----------------------------------------------------------------
+
+def stl_binary(tris, count=None, header=b'fuzz_stl'):
+    body = b''.join(struct.pack('<12fH', *([0.0, 0.0, 1.0] + list(t)), 0) for t in tris)
+    return header.ljust(80, b' ') + struct.pack('<I', len(tris) if count is None else count) + body
+
+
+def stl_ascii(tris, name='fuzz'):
+    out = [f'solid {name}']
+    for t in tris:
+        out.append(' facet normal 0 0 1\n  outer loop')
+        for k in range(3):
+            out.append('   vertex {} {} {}'.format(*t[3 * k:3 * k + 3]))
+        out.append('  endloop\n endfacet')
+    out.append(f'endsolid {name}\n')
+    return '\n'.join(out)
+
+
+def stl_corpus(models, out):
+    t = 'fuzz_stl'
+    copy_models(models, out, t, 'openings', '.stl')
+    with open(os.path.join(models, 'formats', 'assimp_Spider_binary.stl'), 'rb') as f:
+        spider = f.read()
+    n = (MAX_FILE - 1024 - 84) // 50
+    write(out, t, 'assimp_Spider_binary-cut.stl', spider[:80] + struct.pack('<I', n) + spider[84:84 + 50 * n])
+    tris = [struct.unpack('<9f', spider[84 + 50 * i + 12:84 + 50 * i + 48]) for i in range(40)]
+    write(out, t, 'assimp_Spider-ascii-cut.stl', stl_ascii([['%g' % x for x in tr] for tr in tris], 'spider'))
+    one = [(0, 0, 0, 1, 0, 0, 0, 1, 0)]
+    nan = float('nan')
+    cases = {
+        'binary-count-2e31-minus-1.stl': stl_binary(one, count=2 ** 31 - 1),
+        'binary-count-2e32-minus-1.stl': stl_binary(one, count=2 ** 32 - 1),
+        'binary-count-0-with-data.stl': stl_binary(one, count=0),
+        'binary-count-one-more.stl': stl_binary(one, count=2),
+        'binary-header-solid.stl': stl_binary(one, header=b'solid fooled you'),
+        'binary-vertex-1e38.stl': stl_binary([(1e38, 0, 0, 1, 0, 0, 0, 1e38, 0)]),
+        'binary-vertex-flt-max.stl': stl_binary([(3.4028235e38, -3.4028235e38, 0, 1, 0, 0, 0, 1, 0)]),
+        'binary-vertex-nan-inf.stl': stl_binary([(nan, float('inf'), float('-inf'), 1, 0, 0, 0, 1, 0)]),
+        'binary-empty.stl': stl_binary([]),
+        'binary-truncated.stl': stl_binary(one)[:100],
+        'ascii-vertex-1e39.stl': stl_ascii([('1e39', 0, 0, 1, 0, 0, 0, 1, 0)]),
+        'ascii-vertex-1e38.stl': stl_ascii([('1e38', 0, 0, 1, 0, 0, 0, 1, 0)]),
+        'ascii-vertex-nan.stl': stl_ascii([('nan', 0, 0, 1, 0, 0, 0, 1, 0)]),
+        'ascii-facet-cut.stl': stl_ascii([one[0]])[:60],
+        'ascii-no-endloop.stl': stl_ascii([one[0]]).replace('  endloop\n', ''),
+        'ascii-two-numbers.stl': stl_ascii([one[0]]).replace('vertex 1 0 0', 'vertex 1 0'),
+        'ascii-number-next-line.stl': stl_ascii([one[0]]).replace('vertex 1 0 0', 'vertex\n1 0 0'),
+        'ascii-solids-1000.stl': 'solid\nendsolid\n' * 1000,
+        'ascii-control.stl': stl_ascii([one[0]]).replace('outer', 'out\0er', 1),
+        'ascii-no-solid.stl': stl_ascii([one[0]]).replace('solid fuzz\n', '', 1),
+    }
+    for name, data in cases.items():
+        write(out, t, name, data)
+
+
+# ---- wire frames ---------------------------------------------------------
+
+def frame(ftype, payload, length=None):
+    return struct.pack('<IH', 2 + len(payload) if length is None else length, ftype) + payload
+
+
+def proto_corpus(out, fuzz_proto):
+    t = 'fuzz_proto'
+    d = os.path.join(out, t)
+    os.makedirs(d, exist_ok=True)
+    if fuzz_proto:
+        subprocess.run([fuzz_proto, '--write-seeds', d], check=True, stdout=subprocess.DEVNULL)
+    hello = struct.pack('<IH', 0x45525643, 1)
+    nan = struct.pack('<I', 0x7fc00000)
+    cases = {
+        'hostile-length-0': struct.pack('<I', 0) + b'\1\0',
+        'hostile-length-1': struct.pack('<I', 1) + b'\1',
+        'hostile-length-ffffffff': frame(1, hello, 0xffffffff),
+        'hostile-length-prejoin-plus-1': frame(3, b'\0' * 127),
+        'hostile-length-max-plus-1': struct.pack('<IH', 65537, 33) + b'\0' * 64,
+        'hostile-length-short-by-one': frame(1, hello, 7),
+        'hostile-header-cut': struct.pack('<I', 8)[:3],
+        'hostile-type-unknown': frame(0xffff, b''),
+        'hostile-type-reserved': frame(36, b'\0' * 8),
+        'hostile-type-zero': frame(0, b''),
+        'hostile-hello-bad-magic': frame(1, struct.pack('<IH', 0xdeadbeef, 1)),
+        'hostile-hello-trailing': frame(1, hello + b'x'),
+        'hostile-move-nan': frame(5, struct.pack('<I', 1) + nan * 3),
+        'hostile-move-inf': frame(5, struct.pack('<I3I', 1, 0x7f800000, 0xff800000, 0)),
+        'hostile-join-bad-utf8': frame(3, bytes([3]) + b'\xc3\x28\xff' + struct.pack('<3f', 1, 1, 1)),
+        'hostile-join-name-past-end': frame(3, bytes([200]) + b'ab'),
+        'hostile-snapshot-count-over': frame(6, struct.pack('<IIH', 1, 1, 60000)),
+        'hostile-object-info-boxes-over': frame(38, b'\0' * 38 + struct.pack('<H', 1025)),
+        'hostile-chunk-empty': frame(33, struct.pack('<II', 1, 0)),
+        'hostile-chunk-over': frame(33, struct.pack('<II', 1, 0) + b'\0' * 16385),
+        'hostile-upload-begin-scale-nan': frame(32, struct.pack('<II', 1, 10) + b'\1a\3obj\0' + nan),
+        'hostile-two-frames-second-cut': frame(10, b'\0' * 8) + frame(10, b'\0' * 8)[:9],
+        'hostile-ping-then-garbage': frame(10, b'\0' * 8) + b'\xff' * 16,
+    }
+    for name, data in cases.items():
+        write(out, t, name, data)
+
+
+def main():
+    here = os.path.dirname(os.path.abspath(__file__))
+    p = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    p.add_argument('--models', default=os.path.join(here, '..', '..', '..', 'shared', 'models'))
+    p.add_argument('--out', default=os.path.join(here, 'corpus'))
+    p.add_argument('--fuzz-proto', help='a built fuzz_proto, for its --write-seeds')
+    a = p.parse_args()
+    glb_corpus(a.models, a.out)
+    obj_corpus(a.models, a.out)
+    ply_corpus(a.models, a.out)
+    stl_corpus(a.models, a.out)
+    proto_corpus(a.out, a.fuzz_proto)
+    total = 0
+    for t in sorted(os.listdir(a.out)):
+        files = os.listdir(os.path.join(a.out, t))
+        size = sum(os.path.getsize(os.path.join(a.out, t, f)) for f in files)
+        big = max(os.path.getsize(os.path.join(a.out, t, f)) for f in files)
+        total += size
+        print(f'{t}: {len(files)} files, {size} bytes, largest {big}')
+    print(f'total {total} bytes')
+
+
+if __name__ == '__main__':
+    sys.exit(main())
