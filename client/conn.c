@@ -74,6 +74,7 @@ struct conn {
     conn_view view;
     float box[3];
     char name[PROTO_NAME_MAX + 1];
+    conn_credential cred;
 };
 
 static ev_io_fn on_io;
@@ -330,11 +331,16 @@ static void send_join(conn *c)
     uint8_t buf[PROTO_SIZE_JOIN_MAX];
     proto_writer w;
     proto_writer_init(&w, buf, sizeof buf);
-    proto_join j = {.name = {c->name, (uint32_t)strlen(c->name)}};
+    proto_join j = {.name = {c->name, (uint32_t)strlen(c->name)}, .credential = c->cred.kind,
+                    .secret = c->cred.secret, .secret_len = c->cred.len};
     memcpy(j.box, c->box, sizeof j.box);
     proto_put_join(&w, &j);
     send_frame(c, buf, w.len);
+    memset(buf, 0, sizeof buf);
+    memset(&c->cred, 0, sizeof c->cred);
 }
+
+void conn_set_credential(conn *c, const conn_credential *cred) { c->cred = *cred; }
 
 static void find_own(conn *c, const proto_snapshot *s)
 {

@@ -53,6 +53,14 @@ typedef struct conn_params {
     float box[3];
 } conn_params;
 
+/* What a join proves: nothing (a guest), an account's password, or a
+ * resume token from an earlier join_ok (enum proto_credential). */
+typedef struct conn_credential {
+    uint8_t kind;
+    uint8_t secret[PROTO_PASSWORD_MAX];
+    uint32_t len;
+} conn_credential;
+
 enum conn_state {
     CONN_CONNECTING, /* TCP connect in progress */
     CONN_HELLO_SENT, /* waiting for welcome */
@@ -127,6 +135,9 @@ const char *conn_ctx_peer(const conn_ctx *ctx);
  */
 conn *conn_open(conn_ctx *ctx, const char *name, const float box[3], const conn_handler *handler,
                 void *data);
+/* Sets what the join will carry (copied; wiped once sent). Call right after
+ * conn_open: the join goes out when the server's welcome arrives. */
+void conn_set_credential(conn *c, const conn_credential *cred);
 /* Closes the socket if still open and frees the conn; on_close is not called
  * if it had not run yet. Not from inside the conn's own on_msg. */
 void conn_free(conn *c);

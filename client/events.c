@@ -203,6 +203,12 @@ void events_message(const proto_msg *m, uint64_t now_us)
         printf(",\"id\":%" PRIu32, m->u.join_ok.avatar_id);
         put_vec3("pos", m->u.join_ok.pos);
         put_vec3("box", m->u.join_ok.box);
+        if (m->u.join_ok.has_token) { /* for CVRE_TOKEN on the next join */
+            fputs(",\"resume_token\":\"", stdout);
+            for (unsigned i = 0; i < PROTO_RESUME_TOKEN_SIZE; i++)
+                printf("%02x", m->u.join_ok.token[i]);
+            putchar('"');
+        }
         finish();
         break;
     case PROTO_AVATAR_JOINED:

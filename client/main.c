@@ -4,6 +4,7 @@
  * receives SIGINT and SIGTERM through a signalfd so that a signal ends the
  * session with a bye rather than killing it mid-frame.
  */
+#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -12,6 +13,7 @@
 #include <string.h>
 #include <sys/resource.h>
 #include <sys/signalfd.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include "avatar.h"
@@ -43,6 +45,7 @@ typedef struct options {
     double duration;
     double ramp;
     int no_handshake;
+    int login; /* ask for the password on the terminal if CVRE_PASSWORD is unset */
 } options;
 
 static void usage(FILE *f)
@@ -59,12 +62,17 @@ static void usage(FILE *f)
           "  --duration S       bots: seconds to run (default 10)\n"
           "  --ramp N           bots: connections started per second (default 1000)\n"
           "  --no-handshake     bots: skip hello and join, send only moves\n"
+          "  --login            join as the account --name; the password comes from\n"
+          "                     CVRE_PASSWORD, else it is asked for on the terminal\n"
           "  --help, --version\n"
           "Without --bots or --script, commands come from standard input\n"
           "(interactively on a terminal): move X Y Z, walk DX DZ SECONDS, wait MS,\n"
           "ping, import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z\n"
           "[--yaw DEGREES] [--size S], place ID X Y Z [--yaw DEGREES] [--size S],\n"
-          "remove ID, quit. Events are printed on stdout as JSON lines.\n",
+          "remove ID, quit. Events are printed on stdout as JSON lines.\n"
+          "Without --login a user joins as a guest (walk and look only), unless\n"
+          "CVRE_PASSWORD or CVRE_TOKEN (a resume_token from an earlier join_ok, hex)\n"
+          "is set in the environment. Bots are guests.\n",
           f);
 }
 
@@ -161,6 +169,10 @@ static int parse_args(int argc, char **argv, options *o)
             o->no_handshake = 1;
             continue;
         }
+        if (strcmp(arg, "--login") == 0) {
+            o->login = 1;
+            continue;
+        }
         /* Every other flag takes a value: --flag VALUE or --flag=VALUE. */
         char flag[32];
         const char *eq = strchr(arg, '='), *val;
@@ -230,6 +242,10 @@ static int parse_args(int argc, char **argv, options *o)
                 return bad(flag, val, "connections per second, more than 0 and at most 1000000");
         }
     }
+    if (o->login && o->bots) {
+        fprintf(stderr, "cvre-client: --login is for one user, not --bots (bots are guests)\n");
+        return 2;
+    }
     if (o->no_handshake && o->bots == 0) {
         fprintf(stderr, "cvre-client: --no-handshake needs --bots\n");
         return 2;
@@ -287,6 +303,89 @@ static void on_signal(ev_loop *loop, int fd, unsigned events, void *data)
     }
 }
 
+/* A password of 1..PROTO_PASSWORD_MAX bytes into cred. 0, or 2 with a
+ * message (never the password). */
+static int set_password(conn_credential *cred, const char *pw)
+{
+    size_t n = strlen(pw);
+
+    if (n < 1 || n > PROTO_PASSWORD_MAX) {
+        fprintf(stderr, "cvre-client: a password is 1 to %u bytes\n", PROTO_PASSWORD_MAX);
+        return 2;
+    }
+    cred->kind = PROTO_CRED_PASSWORD;
+    cred->len = (uint32_t)n;
+    memcpy(cred->secret, pw, n);
+    return 0;
+}
+
+/* Asks for the password of name on the terminal, without echo. */
+static int ask_password(const char *name, conn_credential *cred)
+{
+    char line[PROTO_PASSWORD_MAX + 2];
+    struct termios old, quiet;
+    FILE *tty = fopen("/dev/tty", "r+");
+    int fd, echo_off, rc;
+    char *got;
+
+    if (!tty) {
+        fprintf(stderr, "cvre-client: --login: no terminal to ask for the password; set CVRE_PASSWORD\n");
+        return 2;
+    }
+    fd = fileno(tty);
+    fprintf(tty, "password for %s: ", name);
+    fflush(tty);
+    echo_off = tcgetattr(fd, &old) == 0;
+    if (echo_off) {
+        quiet = old;
+        quiet.c_lflag &= ~(tcflag_t)ECHO;
+        tcsetattr(fd, TCSAFLUSH, &quiet);
+    }
+    got = fgets(line, sizeof line, tty);
+    if (echo_off)
+        tcsetattr(fd, TCSAFLUSH, &old);
+    fputc('\n', tty);
+    fclose(tty);
+    if (!got) {
+        fprintf(stderr, "cvre-client: --login: no password given\n");
+        return 2;
+    }
+    line[strcspn(line, "\r\n")] = 0;
+    rc = set_password(cred, line);
+    memset(line, 0, sizeof line);
+    return rc;
+}
+
+/* What the join carries: a resume token (CVRE_TOKEN), a password
+ * (CVRE_PASSWORD, or asked for with --login), or nothing (a guest).
+ * 0, or 2 with a message. */
+static int login_credential(const options *o, conn_credential *cred)
+{
+    const char *token = getenv("CVRE_TOKEN"), *pw = getenv("CVRE_PASSWORD");
+
+    memset(cred, 0, sizeof *cred);
+    if (token && *token) {
+        int ok = strlen(token) == 2 * PROTO_RESUME_TOKEN_SIZE;
+        for (unsigned i = 0; ok && i < PROTO_RESUME_TOKEN_SIZE; i++) {
+            unsigned v;
+            ok = sscanf(token + 2 * i, "%2x", &v) == 1 && isxdigit((unsigned char)token[2 * i]) &&
+                 isxdigit((unsigned char)token[2 * i + 1]);
+            cred->secret[i] = (uint8_t)v;
+        }
+        if (!ok) {
+            fprintf(stderr, "cvre-client: CVRE_TOKEN must be the %u hex digits of a resume_token\n",
+                    2 * PROTO_RESUME_TOKEN_SIZE);
+            return 2;
+        }
+        cred->kind = PROTO_CRED_TOKEN;
+        cred->len = PROTO_RESUME_TOKEN_SIZE;
+        return 0;
+    }
+    if (pw && *pw)
+        return set_password(cred, pw);
+    return o->login ? ask_password(o->net.name, cred) : 0;
+}
+
 int main(int argc, char **argv)
 {
     options o;
@@ -317,7 +416,10 @@ int main(int argc, char **argv)
         m.bots = bots_create(loop, &bo, &code);
     } else {
         script_opts so = {.net = o.net, .rate = o.rate, .file = o.script};
-        m.script = script_create(loop, &so, &code);
+        code = login_credential(&o, &so.login);
+        if (code == 0)
+            m.script = script_create(loop, &so, &code);
+        memset(&so.login, 0, sizeof so.login);
     }
     if (m.bots || m.script) {
         int rc = ev_io_add(loop, sfd, EV_READ, on_signal, &m);

@@ -1296,6 +1296,7 @@ script *script_create(ev_loop *loop, const script_opts *o, int *exit_code)
         return NULL;
     }
     s->c = conn_open(s->ctx, o->net.name, o->net.box, &handler, s);
+    conn_set_credential(s->c, &o->login);
     s->keepalive_timer = conn_timer_start(s->loop, KEEPALIVE_CHECK_NS, KEEPALIVE_CHECK_NS, on_keepalive, s);
     prompt(s);
     return s;

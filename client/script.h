@@ -59,6 +59,7 @@ typedef struct script_opts {
     conn_params net;
     double rate;      /* moves per second while walking */
     const char *file; /* NULL: standard input */
+    conn_credential login; /* what the join carries */
 } script_opts;
 
 typedef struct script script;

@@ -236,6 +236,27 @@ int64_t db_session_last_id(db *d)
     return id;
 }
 
+int db_owner_usage(db *d, const char *owner, uint32_t *count, uint64_t *triangles)
+{
+    sqlite3_stmt *st;
+    int rc;
+    *count = 0;
+    *triangles = 0;
+    if (sqlite3_prepare_v2(d->sql,
+                           "SELECT count(*), coalesce(sum(o.tri_count), 0) FROM objects o "
+                           "JOIN users u ON u.id = o.owner_id WHERE u.name = ?1 AND o.removed_at IS NULL",
+                           -1, &st, NULL) != SQLITE_OK)
+        return fail(d, "%s", sqlite3_errmsg(d->sql));
+    sqlite3_bind_text(st, 1, owner, -1, SQLITE_STATIC);
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) {
+        *count = (uint32_t)sqlite3_column_int64(st, 0);
+        *triangles = (uint64_t)sqlite3_column_int64(st, 1);
+    }
+    sqlite3_finalize(st);
+    return rc == SQLITE_ROW ? 0 : fail(d, "%s", sqlite3_errmsg(d->sql));
+}
+
 int db_sessions_close_stale(db *d, double now)
 {
     sqlite3_stmt *st;
@@ -260,18 +281,11 @@ int db_session_open(db *d, int64_t id, const char *token_hex, const char *peer, 
     return run(d, st);
 }
 
-int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id)
+int db_user_upsert(db *d, const char *name, double at, int64_t *user_id)
 {
     sqlite3_stmt *st = d->st[ST_USER_UPSERT];
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 2, at);
-    if (run(d, st) < 0)
-        return -1;
-    st = d->st[ST_SESSION_JOIN];
-    sqlite3_bind_int64(st, 1, id);
-    sqlite3_bind_text(st, 2, name, -1, SQLITE_STATIC);
-    sqlite3_bind_int64(st, 3, avatar_id);
-    sqlite3_bind_double(st, 4, at);
     if (run(d, st) < 0)
         return -1;
     st = d->st[ST_USER_ID];
@@ -281,6 +295,18 @@ int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, dou
     sqlite3_reset(st);
     sqlite3_clear_bindings(st);
     return rc == SQLITE_ROW ? 0 : fail(d, "user %s vanished", name);
+}
+
+int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id)
+{
+    if (db_user_upsert(d, name, at, user_id) < 0)
+        return -1;
+    sqlite3_stmt *st = d->st[ST_SESSION_JOIN];
+    sqlite3_bind_int64(st, 1, id);
+    sqlite3_bind_text(st, 2, name, -1, SQLITE_STATIC);
+    sqlite3_bind_int64(st, 3, avatar_id);
+    sqlite3_bind_double(st, 4, at);
+    return run(d, st);
 }
 
 int db_session_close(db *d, int64_t id, const char *reason, double at)

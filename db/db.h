@@ -46,6 +46,9 @@ int64_t db_session_last_id(db *d);
 /* Closes sessions a crashed run left open. Returns how many, or -1. */
 int db_sessions_close_stale(db *d, double now);
 int db_session_open(db *d, int64_t id, const char *token_hex, const char *peer, double at);
+/* Creates the user (a users row: who appears in the logs) if new, stamps
+ * last_seen_at and sets *user_id to its id. */
+int db_user_upsert(db *d, const char *name, double at, int64_t *user_id);
 /* Creates the user if new, stamps last_seen_at, ties it to the session and
  * sets *user_id to the user's id. */
 int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id);
@@ -71,6 +74,9 @@ typedef struct db_object {
  * "import"), creating the owner's user row if needed, in one transaction.
  * Sets o->id. */
 int db_object_create(db *d, db_object *o, double at);
+/* What the objects in the world (not removed) of the user named owner hold:
+ * *count objects of *triangles triangles in all (what upload quotas count). */
+int db_owner_usage(db *d, const char *owner, uint32_t *count, uint64_t *triangles);
 int db_object_place(db *d, int64_t id, const float pos[3], float yaw, float scale);
 int db_object_remove(db *d, int64_t id, double at);
 /* Calls fn for every object in the world (not removed) with its current

@@ -445,6 +445,28 @@ static void decode_collision(reader *r, proto_collision *m)
     get_vec3(r, m->normal);
 }
 
+/* A join and its optional credential: a kind, then 1..PROTO_PASSWORD_MAX
+ * password bytes (any bytes: the store hashes them) or a token of exactly
+ * PROTO_RESUME_TOKEN_SIZE. */
+static void decode_join(reader *r, proto_join *m)
+{
+    m->name = get_str(r, 1, PROTO_NAME_MAX);
+    get_box(r, m->box);
+    m->credential = PROTO_CRED_NONE;
+    m->secret = NULL;
+    m->secret_len = 0;
+    if (r->err != PROTO_OK || r->left == 0)
+        return;
+    m->credential = get_u8(r);
+    m->secret_len = get_u8(r);
+    if (r->err == PROTO_OK &&
+        (m->credential == PROTO_CRED_PASSWORD ? m->secret_len < 1 || m->secret_len > PROTO_PASSWORD_MAX
+         : m->credential == PROTO_CRED_TOKEN  ? m->secret_len != PROTO_RESUME_TOKEN_SIZE
+                                              : 1))
+        fail(r, PROTO_ERR_BAD_VALUE);
+    m->secret = take(r, m->secret_len);
+}
+
 int proto_decode(const proto_frame *f, proto_msg *m)
 {
     reader rd = {f->payload, f->payload_len, PROTO_OK};
@@ -459,13 +481,18 @@ int proto_decode(const proto_frame *f, proto_msg *m)
         decode_welcome(r, &m->u.welcome);
         break;
     case PROTO_JOIN:
-        m->u.join.name = get_str(r, 1, PROTO_NAME_MAX);
-        get_box(r, m->u.join.box);
+        decode_join(r, &m->u.join);
         break;
     case PROTO_JOIN_OK:
         m->u.join_ok.avatar_id = get_u32(r);
         get_vec3(r, m->u.join_ok.pos);
         get_box(r, m->u.join_ok.box);
+        m->u.join_ok.has_token = r->err == PROTO_OK && r->left > 0;
+        if (m->u.join_ok.has_token) {
+            const uint8_t *t = take(r, PROTO_RESUME_TOKEN_SIZE);
+            if (t)
+                memcpy(m->u.join_ok.token, t, PROTO_RESUME_TOKEN_SIZE);
+        }
         break;
     case PROTO_MOVE:
         m->u.move.seq = get_u32(r);
@@ -587,6 +614,10 @@ const char *proto_strerror(int status)
     case PROTO_ERR_IMPORT: return "model could not be imported";
     case PROTO_ERR_NO_OBJECT: return "no such object";
     case PROTO_ERR_NOT_OWNER: return "not the owner";
+    case PROTO_ERR_GUEST: return "not allowed for guests";
+    case PROTO_ERR_AUTH: return "login failed";
+    case PROTO_ERR_AUTH_REQUIRED: return "login required";
+    case PROTO_ERR_RATE_LIMITED: return "rate limited";
     default: return "unknown status";
     }
 }
@@ -736,24 +767,35 @@ void proto_put_welcome(proto_writer *w, const proto_welcome *m)
 void proto_put_join(proto_writer *w, const proto_join *m)
 {
     uint8_t n = str_len(m->name, PROTO_NAME_MAX);
-    uint8_t *p = frame_open(w, PROTO_JOIN, 1u + n + 12u);
+    uint32_t secret = m->credential == PROTO_CRED_NONE ? 0
+                      : m->secret_len > PROTO_PASSWORD_MAX ? PROTO_PASSWORD_MAX
+                                                           : m->secret_len;
+    uint8_t *p = frame_open(w, PROTO_JOIN, 1u + n + 12u + (m->credential ? 2u + secret : 0u));
 
     if (!p)
         return;
     p = st_u8(p, n);
     p = st_bytes(p, m->name.ptr, n);
-    st_vec3(p, m->box);
+    p = st_vec3(p, m->box);
+    if (m->credential == PROTO_CRED_NONE)
+        return;
+    p = st_u8(p, m->credential);
+    p = st_u8(p, (uint8_t)secret);
+    st_bytes(p, m->secret, secret);
 }
 
 void proto_put_join_ok(proto_writer *w, const proto_join_ok *m)
 {
-    uint8_t *p = frame_open(w, PROTO_JOIN_OK, PROTO_SIZE_JOIN_OK - PROTO_HEADER_SIZE);
+    uint8_t *p = frame_open(w, PROTO_JOIN_OK, PROTO_SIZE_JOIN_OK - PROTO_HEADER_SIZE +
+                                                  (m->has_token ? PROTO_RESUME_TOKEN_SIZE : 0u));
 
     if (!p)
         return;
     p = st_u32(p, m->avatar_id);
     p = st_vec3(p, m->pos);
-    st_vec3(p, m->box);
+    p = st_vec3(p, m->box);
+    if (m->has_token)
+        st_bytes(p, m->token, PROTO_RESUME_TOKEN_SIZE);
 }
 
 void proto_put_move(proto_writer *w, const proto_move *m)

@@ -28,14 +28,20 @@
 #ifndef PROTO_MAX_LEN
 #define PROTO_MAX_LEN 65536u
 #endif
-/* Before join only hello and join are legal; both fit in 64 bytes. A small
- * cap keeps unauthenticated peers cheap. */
+/* Before join only hello and join are legal; a join with a password of
+ * PROTO_PASSWORD_MAX bytes takes 179. A small cap keeps unauthenticated
+ * peers cheap. */
 #ifndef PROTO_MAX_LEN_PREJOIN
-#define PROTO_MAX_LEN_PREJOIN 128u
+#define PROTO_MAX_LEN_PREJOIN 256u
 #endif
 #define PROTO_NAME_MAX 32u    /* display name, bytes of UTF-8 */
 #define PROTO_MESSAGE_MAX 200u /* error text, bytes */
 #define PROTO_TOKEN_SIZE 16u
+/* Credentials a join may carry: a password of 1..PROTO_PASSWORD_MAX bytes
+ * (a passphrase; the store hashes any length), or a resume token that an
+ * earlier join_ok handed out. */
+#define PROTO_PASSWORD_MAX 128u
+#define PROTO_RESUME_TOKEN_SIZE 32u
 #define PROTO_BOX_MIN 0.1f /* avatar box edge, metres */
 #define PROTO_BOX_MAX 4.0f
 #define PROTO_SNAPSHOT_ENTRY_SIZE 16u /* u32 id + 3 x f32 */
@@ -53,8 +59,10 @@
 #define PROTO_SNAPSHOT_MAX_ENTRIES \
     ((PROTO_MAX_LEN - 2u - PROTO_SNAPSHOT_HEAD_SIZE) / PROTO_SNAPSHOT_ENTRY_SIZE)
 
-_Static_assert(PROTO_MAX_LEN_PREJOIN >= 2u + 1u + PROTO_NAME_MAX + 12u,
-               "a join must fit before join");
+_Static_assert(PROTO_MAX_LEN_PREJOIN >= 2u + 1u + PROTO_NAME_MAX + 12u + 2u + PROTO_PASSWORD_MAX,
+               "a join with a password must fit before join");
+_Static_assert(PROTO_PASSWORD_MAX <= 255u && PROTO_RESUME_TOKEN_SIZE <= PROTO_PASSWORD_MAX,
+               "a secret's length is a u8");
 _Static_assert(PROTO_MAX_LEN <= 16u * 1024u * 1024u, "frames stay small");
 _Static_assert(PROTO_SNAPSHOT_MAX_ENTRIES <= 0xffffu, "count is a u16");
 _Static_assert(PROTO_CHUNK_MAX + 16u <= PROTO_MAX_LEN, "a chunk fits a frame");
@@ -119,8 +127,16 @@ enum proto_status {
     PROTO_ERR_UPLOAD = 35,         /* upload refused: size, sequence, too many at once */
     PROTO_ERR_IMPORT = 36,         /* the file is not a model the importer can read */
     PROTO_ERR_NO_OBJECT = 37,      /* no such object */
-    PROTO_ERR_NOT_OWNER = 38       /* only the owner may place or remove it */
+    PROTO_ERR_NOT_OWNER = 38,      /* only the owner (or an admin) may place or remove it */
+    PROTO_ERR_GUEST = 39,          /* guests may walk and look, not change the world */
+    /* Sent in ERROR before a close. */
+    PROTO_ERR_AUTH = 40,           /* wrong name, password or token; or a guest took an account's name */
+    PROTO_ERR_AUTH_REQUIRED = 41,  /* this server admits accounts only */
+    PROTO_ERR_RATE_LIMITED = 42    /* too many logins or connections from this address */
 };
+
+/* What a join proves (proto_join.credential). */
+enum proto_credential { PROTO_CRED_NONE = 0, PROTO_CRED_PASSWORD = 1, PROTO_CRED_TOKEN = 2 };
 
 /* Why an avatar left a client's view (proto_avatar_left.reason). */
 enum proto_left_reason { PROTO_LEFT_OUT_OF_RANGE = 0, PROTO_LEFT_DISCONNECTED = 1 };
@@ -151,15 +167,25 @@ typedef struct proto_welcome {
     uint32_t idle_timeout_ms; /* the server closes a connection silent this long */
 } proto_welcome;
 
+/* A join: a guest's wanted display name, or an account's name with its
+ * password or a resume token. On the wire the credential is an optional
+ * tail (u8 kind, u8 length, the bytes), absent for a guest. */
 typedef struct proto_join {
     proto_str name;
-    float box[3]; /* avatar box size x, y, z in metres */
+    float box[3];       /* avatar box size x, y, z in metres */
+    uint8_t credential; /* enum proto_credential */
+    const uint8_t *secret; /* password or token bytes, into the payload */
+    uint32_t secret_len;   /* 1..PROTO_PASSWORD_MAX; PROTO_RESUME_TOKEN_SIZE for a token */
 } proto_join;
 
 typedef struct proto_join_ok {
     uint32_t avatar_id;
     float pos[3]; /* spawn position: centre of the box's bottom face */
     float box[3];
+    /* An account's join: a new resume token for the next one (tokens are
+     * used once). On the wire an optional tail; absent for a guest. */
+    uint8_t has_token;
+    uint8_t token[PROTO_RESUME_TOKEN_SIZE];
 } proto_join_ok;
 
 typedef struct proto_move {
@@ -387,8 +413,9 @@ void proto_put_snapshot_end(proto_writer *w, size_t frame_at);
 /* Exact encoded sizes, for reserving output space. */
 #define PROTO_SIZE_HELLO (PROTO_HEADER_SIZE + 6u)
 #define PROTO_SIZE_WELCOME (PROTO_HEADER_SIZE + 2u + 8u + PROTO_TOKEN_SIZE + 2u + 4u + 4u + 24u + 4u)
-#define PROTO_SIZE_JOIN_MAX (PROTO_HEADER_SIZE + 1u + PROTO_NAME_MAX + 12u)
+#define PROTO_SIZE_JOIN_MAX (PROTO_HEADER_SIZE + 1u + PROTO_NAME_MAX + 12u + 2u + PROTO_PASSWORD_MAX)
 #define PROTO_SIZE_JOIN_OK (PROTO_HEADER_SIZE + 4u + 12u + 12u)
+#define PROTO_SIZE_JOIN_OK_MAX (PROTO_SIZE_JOIN_OK + PROTO_RESUME_TOKEN_SIZE)
 #define PROTO_SIZE_MOVE (PROTO_HEADER_SIZE + 4u + 12u)
 #define PROTO_SIZE_AVATAR_JOINED_MAX (PROTO_HEADER_SIZE + 4u + 1u + PROTO_NAME_MAX + 24u)
 #define PROTO_SIZE_AVATAR_LEFT (PROTO_HEADER_SIZE + 5u)

@@ -19,7 +19,7 @@ struct importer {
     worker *worker; /* import_job in, import_result * out */
     db *db;
     const import_proc *proc;
-    uint32_t max_triangles;
+    importer_limits limits;
 };
 
 /* Parses, measures and stores one model; fills r (status and either the
@@ -29,7 +29,7 @@ static void import_one(importer *im, import_job *job, import_result *r)
     memset(r, 0, sizeof *r);
     r->session = job->session;
     r->upload_id = job->upload_id;
-    import_options opt = {.z_up = job->z_up, .unit_scale = job->unit_scale, .max_triangles = im->max_triangles};
+    import_options opt = {.z_up = job->z_up, .unit_scale = job->unit_scale, .max_triangles = im->limits.max_triangles};
     import_mesh mesh = {0};
     char err[PROTO_MESSAGE_MAX + 1];
     int rc = import_isolated(im->proc, job->data, job->len, job->format[0] ? job->format : NULL, &opt, &mesh, err,
@@ -45,6 +45,24 @@ static void import_one(importer *im, import_job *job, import_result *r)
             log_warn("import of \"%s\" for session %lld: %s", job->name, (long long)job->session, err);
         r->status = theirs ? PROTO_ERR_IMPORT : PROTO_ERR_INTERNAL;
         snprintf(r->message, sizeof r->message, "%s", theirs ? err : "the server could not import the model");
+        return;
+    }
+    uint32_t count;
+    uint64_t tris;
+    if (db_owner_usage(im->db, job->owner, &count, &tris) < 0) {
+        log_error("importer: quota of %s: %s", job->owner, db_error(im->db));
+        r->status = PROTO_ERR_INTERNAL;
+        snprintf(r->message, sizeof r->message, "the server could not check your quota");
+        import_mesh_free(&mesh);
+        return;
+    }
+    if (count + 1 > im->limits.quota_objects || (tris + mesh.ntris) * 36u > im->limits.quota_bytes) {
+        r->status = PROTO_ERR_UPLOAD;
+        snprintf(r->message, sizeof r->message,
+                 "over your quota: you have %u objects of %.1f MB of mesh; the limit is %u objects, %.1f MB",
+                 count, (double)tris * 36.0 / 1e6, im->limits.quota_objects,
+                 (double)im->limits.quota_bytes / 1e6);
+        import_mesh_free(&mesh);
         return;
     }
     float box[1][6] = {{mesh.min[0], mesh.min[1], mesh.min[2], mesh.max[0], mesh.max[1], mesh.max[2]}};
@@ -89,14 +107,14 @@ static void free_result(void *p)
     free(p);
 }
 
-importer *importer_start(const char *db_path, const import_proc *proc, uint32_t max_triangles, char *err,
+importer *importer_start(const char *db_path, const import_proc *proc, const importer_limits *limits, char *err,
                          size_t errlen)
 {
     importer *im = xcalloc(1, sizeof *im);
     worker_ops ops = {sizeof(import_job), IMPORTER_QUEUE_MAX, run_job, im, drop_job, free_result};
 
     im->proc = proc;
-    im->max_triangles = max_triangles;
+    im->limits = *limits;
     im->db = db_open(db_path, DB_READWRITE, err, errlen);
     if (!im->db) {
         free(im);

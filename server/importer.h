@@ -47,11 +47,19 @@ typedef struct import_result {
     float min[3], max[3];         /* the MBR: ECM version 1's only box */
 } import_result;
 
+/* What one account may put in the world: max_triangles in one model, and
+ * at most quota_objects objects of quota_bytes of mesh (36 bytes a
+ * triangle) at once, counted from the store when an import is stored. */
+typedef struct importer_limits {
+    uint32_t max_triangles;
+    uint32_t quota_objects;
+    uint64_t quota_bytes;
+} importer_limits;
+
 /* Starts the worker with its own connection to db_path; each model is
  * parsed in the isolated importer proc describes (kept by pointer: it must
- * outlive the importer). NULL with a message in err on failure.
- * max_triangles bounds one model. */
-importer *importer_start(const char *db_path, const import_proc *proc, uint32_t max_triangles, char *err,
+ * outlive the importer). NULL with a message in err on failure. */
+importer *importer_start(const char *db_path, const import_proc *proc, const importer_limits *limits, char *err,
                          size_t errlen);
 /* Finishes the job in progress, drops the queued ones (their uploads are
  * lost with the connections that sent them), joins the thread. */

@@ -19,6 +19,17 @@ static const char usage[] =
     "sessions in an SQLite database.\n"
     "\n"
     "  --host HOST               address to listen on (default 127.0.0.1)\n"
+    "  --auth MODE               guests: anyone may walk and look, accounts may also\n"
+    "                            upload, place and remove objects (default);\n"
+    "                            required: accounts only (for any public address)\n"
+    "  --login-burst N           logins (password or token) an address may make at\n"
+    "                            once, then one every 2 s (default 5)\n"
+    "  --quota-objects N         objects one account may have in the world (default 100)\n"
+    "  --quota-mb N              megabytes of mesh one account may have (default 128)\n"
+    "  --max-per-address N       connections open from one address; 0: no limit\n"
+    "                            (default 64)\n"
+    "  --joins-per-second N      joins per address per second, bursts of twice that;\n"
+    "                            0: no limit (default 10)\n"
     "  --port PORT               TCP port; 0 picks a free one (default 7878)\n"
     "  --db FILE                 SQLite database, created if missing (default cvre.db)\n"
     "  --tick-hz N               simulation ticks per second, 1..240 (default 20)\n"
@@ -94,7 +105,7 @@ int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
            O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
-           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU };
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -111,6 +122,9 @@ int main(int argc, char **argv)
         {"refine-depth", required_argument, 0, O_R_DEPTH}, {"refine-max-boxes", required_argument, 0, O_R_BOXES},
         {"refine-max-empty", required_argument, 0, O_R_EMPTY}, {"importer", required_argument, 0, O_IMPORTER},
         {"import-memory", required_argument, 0, O_IMP_MEM}, {"import-cpu", required_argument, 0, O_IMP_CPU},
+        {"auth", required_argument, 0, O_AUTH}, {"login-burst", required_argument, 0, O_LOGIN_BURST},
+        {"max-per-address", required_argument, 0, O_PER_ADDR}, {"joins-per-second", required_argument, 0, O_JOINS},
+        {"quota-objects", required_argument, 0, O_Q_OBJ}, {"quota-mb", required_argument, 0, O_Q_MB},
         {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
@@ -134,6 +148,18 @@ int main(int argc, char **argv)
         case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, 1024.0 * 1024 * 1024); break;
         case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, 100000000); break;
         case O_IMPORTER: cfg.importer.helper = optarg; break;
+        case O_LOGIN_BURST: cfg.login_burst = integer("login-burst", optarg, 1, 1000000); break;
+        case O_Q_OBJ: cfg.quota_objects = (uint32_t)integer("quota-objects", optarg, 0, 100000000); break;
+        case O_Q_MB: cfg.quota_bytes = (uint64_t)integer("quota-mb", optarg, 0, 1048576) << 20; break;
+        case O_PER_ADDR: cfg.max_per_address = (uint32_t)integer("max-per-address", optarg, 0, 1000000); break;
+        case O_JOINS: cfg.joins_per_second = number("joins-per-second", optarg, 0, 1000000); break;
+        case O_AUTH:
+            if (strcmp(optarg, "required") != 0 && strcmp(optarg, "guests") != 0) {
+                fprintf(stderr, "cvre-server: --auth wants required or guests, not \"%s\"\n", optarg);
+                return 2;
+            }
+            cfg.auth_required = strcmp(optarg, "required") == 0;
+            break;
         case O_IMP_MEM: cfg.importer.memory_mb = (uint32_t)integer("import-memory", optarg, 256, 1048576); break;
         case O_IMP_CPU: cfg.importer.cpu_seconds = (uint32_t)integer("import-cpu", optarg, 1, 86400); break;
         case O_R_INT: cfg.refine_interval_s = number("refine-interval", optarg, 0, 86400); break;

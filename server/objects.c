@@ -165,6 +165,7 @@ static void on_upload_end(server *s, client *c, const proto_upload_end *m)
     u->data = NULL; /* the job owns it now */
     uint32_t id = u->id;
     drop_upload(s, c);
+    server__events_flush(s);
     if (importer_submit(s->importer, &job) < 0)
         reject(s, c, id, PROTO_ERR_UPLOAD, "the importer is busy; try again later");
 }
@@ -235,7 +236,9 @@ static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *dat
 
 /* ---- placement and removal -------------------------------------------- */
 
-/* The object named by a request, if c may change it; otherwise rejects. */
+/* The object named by a request, if c may change it: its owner (an
+ * account's objects carry its name, which only that account can join
+ * under) or an admin. Otherwise rejects. */
 static const scene_object *owned(server *s, client *c, uint32_t id)
 {
     const scene_object *o = scene_get(s->scene, id);
@@ -244,7 +247,7 @@ static const scene_object *owned(server *s, client *c, uint32_t id)
         reject(s, c, id, PROTO_ERR_NO_OBJECT, "no object %u", id);
         return NULL;
     }
-    if (strcmp(o->owner, me->name) != 0) {
+    if (!c->is_admin && strcmp(o->owner, me->name) != 0) {
         reject(s, c, id, PROTO_ERR_NOT_OWNER, "object %u belongs to %s", id, o->owner);
         return NULL;
     }
@@ -278,8 +281,24 @@ static void on_remove(server *s, client *c, uint32_t id)
     }
 }
 
+/* The request id a refusal of m names. */
+static uint32_t request_of(const proto_msg *m)
+{
+    switch (m->type) {
+    case PROTO_OBJECT_UPLOAD_BEGIN: return m->u.upload_begin.upload_id;
+    case PROTO_OBJECT_UPLOAD_CHUNK: return m->u.upload_chunk.upload_id;
+    case PROTO_OBJECT_UPLOAD_END: return m->u.upload_end.upload_id;
+    case PROTO_OBJECT_PLACE: return m->u.object_place.object_id;
+    default: return m->u.object_id;
+    }
+}
+
 void objects__on_message(server *s, client *c, const proto_msg *m)
 {
+    if (c->account_id == 0) {
+        reject(s, c, request_of(m), PROTO_ERR_GUEST, "guests may walk and look: log in to change the world");
+        return;
+    }
     switch (m->type) {
     case PROTO_OBJECT_UPLOAD_BEGIN: on_upload_begin(s, c, &m->u.upload_begin); break;
     case PROTO_OBJECT_UPLOAD_CHUNK: on_upload_chunk(s, c, &m->u.upload_chunk); break;
@@ -495,7 +514,8 @@ int objects__start(server *s, char *err, size_t errlen)
         log_info("restored %u objects from %s", scene_count(s->scene), s->cfg.db_path);
     if (s->cfg.world_file && load_world_file(s, s->cfg.world_file, err, errlen) < 0)
         return -1;
-    s->importer = importer_start(s->cfg.db_path, &s->cfg.importer, s->cfg.max_triangles, err, errlen);
+    importer_limits lim = {s->cfg.max_triangles, s->cfg.quota_objects, s->cfg.quota_bytes};
+    s->importer = importer_start(s->cfg.db_path, &s->cfg.importer, &lim, err, errlen);
     if (!s->importer)
         return -1;
     if (ev_io_add(s->loop, importer_fd(s->importer), EV_READ, on_import_results, s) < 0) {

@@ -10,15 +10,19 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/random.h>
 #include <sys/signalfd.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <sodium.h>
+
 #include "alloc.h"
 #include "conn.h"
 #include "db.h"
 #include "ev.h"
+#include "moderation.h"
 #include "srv_limits.h"
 #include "log.h"
 #include "proto.h"
@@ -57,6 +61,11 @@ void server_config_defaults(server_config *cfg)
         .max_triangles = SRV_MAX_TRIANGLES_DEFAULT,
         .world_file = NULL,
         .importer = {import_proc_default_helper(), IMPORT_PROC_MEMORY_MB, IMPORT_PROC_CPU_SECONDS},
+        .login_burst = SRV_LOGIN_BURST,
+        .max_per_address = SRV_MAX_PER_ADDRESS_DEFAULT,
+        .quota_objects = SRV_QUOTA_OBJECTS_DEFAULT,
+        .quota_bytes = (uint64_t)SRV_QUOTA_MB_DEFAULT << 20,
+        .joins_per_second = SRV_JOINS_PER_SECOND_DEFAULT,
         .refine_interval_s = SRV_REFINE_INTERVAL_DEFAULT,
         .refine_eps = CLUSTER_EPS_DEFAULT,
         .refine_min_points = CLUSTER_MIN_POINTS_DEFAULT,
@@ -98,7 +107,7 @@ store_event *server__event_push(server *s, int kind, int64_t session)
 /* Writes the queued session events in one transaction. A database error is
  * logged and the batch dropped: the world goes on without its history rather
  * than stopping. */
-static void events_flush(server *s)
+void server__events_flush(server *s)
 {
     if (!s->nevents)
         return;
@@ -139,6 +148,9 @@ static void events_flush(server *s)
 /* ---- output ----------------------------------------------------------- */
 
 static void kill_client(server *s, client *c, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void watch(server *s, client *c);
+static void handle_input(server *s, client *c);
+static db_admin_event_fn on_admin_event;
 
 static void want_write(server *s, client *c)
 {
@@ -264,34 +276,102 @@ static void on_hello(server *s, client *c, const proto_hello *m)
     c->state = ST_JOIN;
 }
 
+/* A join: refused at once when this server admits accounts only and it
+ * carries no credential, or when its address is over its login rate;
+ * otherwise the auth worker decides (on_auth_results). */
 static void on_join(server *s, client *c, const proto_join *m)
 {
-    if (m->name.len == sizeof WORLD_OWNER - 1 && memcmp(m->name.ptr, WORLD_OWNER, m->name.len) == 0) {
+    auth_job job = {.session = c->session_id, .credential = m->credential, .secret_len = m->secret_len};
+
+    if (m->name.len == sizeof WORLD_OWNER - 1 && strncasecmp(m->name.ptr, WORLD_OWNER, m->name.len) == 0) {
         server__protocol_error(s, c, PROTO_ERR_BAD_VALUE, "the name \"%s\" is reserved", WORLD_OWNER);
         return;
     }
-    const world_avatar *a = world_add(s->world, m->name.ptr, m->name.len, m->box);
+    if (m->credential == PROTO_CRED_NONE && s->cfg.auth_required) {
+        server__protocol_error(s, c, PROTO_ERR_AUTH_REQUIRED,
+                               "this server admits accounts only: join with your password");
+        return;
+    }
+    if (s->joins && !ratelimit_take(s->joins, c->addr, server__now(s))) {
+        server__protocol_error(s, c, PROTO_ERR_RATE_LIMITED, "too many joins from your address: wait a second");
+        return;
+    }
+    if (m->credential != PROTO_CRED_NONE) {
+        if (!ratelimit_take(s->logins, c->addr, server__now(s))) {
+            server__protocol_error(s, c, PROTO_ERR_RATE_LIMITED,
+                                   "too many logins from your address: wait a few seconds");
+            return;
+        }
+    }
+    memcpy(job.name, m->name.ptr, m->name.len);
+    if (m->secret_len)
+        memcpy(job.secret, m->secret, m->secret_len);
+    memcpy(c->join_box, m->box, sizeof c->join_box);
+    if (auth_submit(s->auth, &job) != 0) {
+        server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "too many joins at once: try again in a moment");
+        return;
+    }
+    c->state = ST_AUTH;
+    watch(s, c);
+}
+
+/* The avatar of a join the auth worker accepted: from its first tick on,
+ * its collisions carry its users row (r->user_id). */
+static void admit(server *s, client *c, const auth_result *r)
+{
+    const world_avatar *a = world_add(s->world, r->name, (uint32_t)strlen(r->name), c->join_box);
     if (!a) {
         server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "the world is full (%u avatars)", world_count(s->world));
         return;
     }
     c->avatar_id = a->id;
+    c->user_id = r->user_id;
+    c->account_id = r->account_id;
+    c->is_admin = r->is_admin;
     c->state = ST_JOINED;
     s->by_slot[world_slot(a->id)] = c;
     store_event *e = server__event_push(s, EVT_JOIN, c->session_id);
     e->avatar = a->id;
-    memcpy(e->text, a->name, sizeof a->name);
-    log_info("%s (session %lld) joined as \"%s\", avatar %u", c->peer, (long long)c->session_id, a->name, a->id);
+    snprintf(e->text, sizeof e->text, "%s", r->user);
+    log_info("%s (session %lld) joined as \"%s\" (%s), avatar %u", c->peer, (long long)c->session_id, a->name,
+             !r->account_id ? "guest" : r->is_admin ? "account, admin" : "account", a->id);
 
-    proto_join_ok ok = {.avatar_id = a->id};
+    proto_join_ok ok = {.avatar_id = a->id, .has_token = (uint8_t)r->has_token};
     memcpy(ok.pos, a->pos, sizeof ok.pos);
     memcpy(ok.box, a->box, sizeof ok.box);
+    memcpy(ok.token, r->token, sizeof ok.token);
     proto_writer w;
-    if (server__out_begin(s, c, PROTO_SIZE_JOIN_OK, &w) < 0)
+    if (server__out_begin(s, c, PROTO_SIZE_JOIN_OK_MAX, &w) < 0)
         return;
     proto_put_join_ok(&w, &ok);
     server__out_end(s, c, &w);
+    sodium_memzero(ok.token, sizeof ok.token);
     objects__send_all(s, c);
+}
+
+static void on_auth_results(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)loop;
+    (void)fd;
+    (void)events;
+    server *s = data;
+    auth_result r;
+    while (auth_take(s->auth, &r) == 0) {
+        client *c = server__client_by_session(s, r.session);
+        if (c && c->state == ST_AUTH && !c->closing) {
+            c->state = ST_JOIN;
+            if (r.status == PROTO_ERR_AUTH)
+                log_warn("%s (session %lld): join as \"%s\" refused: %s", c->peer, (long long)c->session_id, r.name,
+                         r.message);
+            if (r.status != 0)
+                server__protocol_error(s, c, r.status, "%s", r.message);
+            else
+                admit(s, c, &r);
+            watch(s, c);
+            handle_input(s, c); /* the frames that came behind the join */
+        }
+        sodium_memzero(r.token, sizeof r.token);
+    }
 }
 
 static void on_move(server *s, client *c, const proto_move *m)
@@ -303,6 +383,18 @@ static void on_move(server *s, client *c, const proto_move *m)
     c->has_seq = 1;
     c->last_seq = m->seq;
     s->st.moves_in++;
+    uint64_t now = server__now(s);
+    if (now - c->moves_window_ns >= 1000 * NS_PER_MS) {
+        c->moves_window_ns = now;
+        c->moves_in_window = c->moves_dropped_in_window = 0;
+    }
+    if (++c->moves_in_window > SRV_MOVES_PER_TICK * (uint32_t)s->cfg.tick_hz) {
+        s->st.moves_dropped++;
+        if (++c->moves_dropped_in_window > SRV_MOVE_FLOOD_DROPS * (uint32_t)s->cfg.tick_hz)
+            server__protocol_error(s, c, PROTO_ERR_RATE_LIMITED, "over %u moves a second: flooding",
+                                   (SRV_MOVES_PER_TICK + SRV_MOVE_FLOOD_DROPS) * (uint32_t)s->cfg.tick_hz);
+        return;
+    }
     world_request_move(s->world, c->avatar_id, m->seq, m->pos);
 }
 
@@ -329,7 +421,8 @@ static int from_client(uint16_t type)
  * only join (or bye); after join everything a client may send but those. */
 static void on_message(server *s, client *c, const proto_msg *m)
 {
-    static const char *const state_names[] = {"before hello", "before join", "after join"};
+    static const char *const state_names[] = {"before hello", "before join", "while the join is checked",
+                                              "after join"};
     int legal;
     switch (m->type) {
     case PROTO_HELLO: legal = c->state == ST_HELLO; break;
@@ -375,7 +468,7 @@ static void handle_input(server *s, client *c)
 {
     uint32_t max_len = c->state == ST_JOINED ? PROTO_MAX_LEN : PROTO_MAX_LEN_PREJOIN;
     size_t off = 0;
-    while (!c->closing) {
+    while (!c->closing && c->state != ST_AUTH) {
         proto_frame f;
         int rc = proto_frame_parse(c->c.in + off, c->c.in_len - off, max_len, &f);
         if (rc == PROTO_INCOMPLETE)
@@ -423,12 +516,20 @@ static void on_peer_eof(server *s, client *c)
     c->dead = 1;
 }
 
+/* What the loop watches c for: reads, except while its join is checked
+ * (frames behind the join wait in the socket until it is settled), and
+ * writes while output is pending. */
+static void watch(server *s, client *c)
+{
+    ev_io_mod(s->loop, c->c.fd, (c->state == ST_AUTH ? 0u : (unsigned)EV_READ) | (c->writing ? (unsigned)EV_WRITE : 0u));
+}
+
 static void set_writing(server *s, client *c, int on)
 {
     if (c->writing == on)
         return;
     c->writing = on;
-    ev_io_mod(s->loop, c->c.fd, EV_READ | (on ? (unsigned)EV_WRITE : 0u));
+    watch(s, c);
 }
 
 /* Writes what c has pending. Arms EV_WRITE only when bytes remain; once a
@@ -629,7 +730,7 @@ static void on_tick(ev_loop *loop, void *data)
     uint64_t us = (ev_clock(loop) - t0) / 1000u;
     if (s->st.nticks < s->st.tick_cap)
         s->st.tick_us[s->st.nticks++] = us > UINT32_MAX ? UINT32_MAX : (uint32_t)us;
-    events_flush(s);
+    server__events_flush(s);
 }
 
 /* ---- connections ------------------------------------------------------ */
@@ -648,6 +749,8 @@ static void reap(server *s, client *c)
     }
     ev_io_del(s->loop, c->c.fd);
     conn_free(&c->c);
+    if (s->cfg.max_per_address)
+        addrcount_add(s->per_address, c->addr, -1);
     s->clients[c->index] = s->clients[--s->nclients];
     s->clients[c->index]->index = c->index;
     s->st.closed++;
@@ -695,11 +798,18 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
                 log_warn("accept: %s", strerror(errno));
             return;
         }
-        char peer[80];
+        char peer[80], addr[80];
         peer_name(&sa, len, peer, sizeof peer);
+        ratelimit_address(peer, addr, sizeof addr);
         if (s->nclients >= s->cfg.max_clients || cfd >= s->max_fd) {
             log_warn("%s refused: server full (%u clients)", peer, s->nclients);
             refuse(cfd, "server full");
+            continue;
+        }
+        if (s->cfg.max_per_address && addrcount_add(s->per_address, addr, +1) > s->cfg.max_per_address) {
+            addrcount_add(s->per_address, addr, -1);
+            log_warn("%s refused: over %u connections from this address", peer, s->cfg.max_per_address);
+            refuse(cfd, "too many connections from your address");
             continue;
         }
         int one = 1, sndbuf = SRV_SOCKET_SNDBUF;
@@ -708,12 +818,15 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
         client *c = xcalloc(1, sizeof *c);
         if (conn_init(&c->c, cfd) < 0 || ev_io_add(loop, cfd, EV_READ, on_client_io, c) < 0) {
             log_error("%s refused: cannot register the connection", peer);
+            if (s->cfg.max_per_address)
+                addrcount_add(s->per_address, addr, -1);
             conn_free(&c->c);
             free(c);
             continue;
         }
         c->srv = s;
         memcpy(c->peer, peer, sizeof c->peer);
+        memcpy(c->addr, addr, sizeof c->addr);
         c->connected_ns = c->last_frame_ns = server__now(s);
         c->index = s->nclients;
         s->clients[s->nclients++] = c;
@@ -729,6 +842,8 @@ static void on_housekeeping(ev_loop *loop, void *data)
     (void)loop;
     server *s = data;
     uint64_t now = server__now(s);
+    if (db_admin_events(s->db, s->admin_feed_last, on_admin_event, s, &s->admin_feed_last) < 0 && !db_busy(s->db))
+        log_warn("admin feed: %s", db_error(s->db));
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
         if (c->dead)
@@ -771,11 +886,11 @@ static void on_stats(ev_loop *loop, void *data)
     free(sorted);
     if (s->nclients || st->frames_in)
         log_info("stats: clients=%u ticks=%u tick_p50=%.2fms p99=%.2fms max=%.2fms moves/s=%.0f in=%.0fB/s "
-                 "out=%.0fB/s closed=%llu errors=%llu timeouts=%llu slow=%llu",
+                 "out=%.0fB/s closed=%llu errors=%llu timeouts=%llu slow=%llu moves_dropped=%llu",
                  s->nclients, st->nticks, p50, p99, mx, (double)st->moves_in / secs, (double)st->bytes_in / secs,
                  (double)st->bytes_out / secs, (unsigned long long)st->closed,
                  (unsigned long long)st->protocol_errors, (unsigned long long)st->timeouts,
-                 (unsigned long long)st->slow_readers);
+                 (unsigned long long)st->slow_readers, (unsigned long long)st->moves_dropped);
     if (s->cfg.stats_file) {
         FILE *f = fopen(s->cfg.stats_file, "a");
         if (!f) {
@@ -784,11 +899,12 @@ static void on_stats(ev_loop *loop, void *data)
             fprintf(f,
                     "{\"seconds\":%.3f,\"clients\":%u,\"moves_in\":%llu,\"frames_in\":%llu,\"bytes_in\":%llu,"
                     "\"bytes_out\":%llu,\"closed\":%llu,\"protocol_errors\":%llu,\"timeouts\":%llu,"
-                    "\"slow_readers\":%llu,\"tick_us\":[",
+                    "\"slow_readers\":%llu,\"moves_dropped\":%llu,\"tick_us\":[",
                     secs, s->nclients, (unsigned long long)st->moves_in, (unsigned long long)st->frames_in,
                     (unsigned long long)st->bytes_in, (unsigned long long)st->bytes_out,
                     (unsigned long long)st->closed, (unsigned long long)st->protocol_errors,
-                    (unsigned long long)st->timeouts, (unsigned long long)st->slow_readers);
+                    (unsigned long long)st->timeouts, (unsigned long long)st->slow_readers,
+                    (unsigned long long)st->moves_dropped);
             for (uint32_t i = 0; i < st->nticks; i++)
                 fprintf(f, i ? ",%u" : "%u", st->tick_us[i]);
             fprintf(f, "]}\n");
@@ -801,6 +917,17 @@ static void on_stats(ev_loop *loop, void *data)
 
 /* ---- shutdown --------------------------------------------------------- */
 
+/* Says bye (reason) to c and closes it; why goes to the session record. */
+static void say_bye(server *s, client *c, uint8_t reason, const char *why)
+{
+    proto_writer w;
+    if (c->closing || server__out_begin(s, c, PROTO_SIZE_BYE, &w) < 0)
+        return;
+    proto_put_bye(&w, reason);
+    server__out_end(s, c, &w);
+    begin_close(s, c, why);
+}
+
 static void begin_shutdown(server *s, const char *why)
 {
     log_info("%s: shutting down, saying bye to %u clients", why, s->nclients);
@@ -809,14 +936,28 @@ static void begin_shutdown(server *s, const char *why)
     ev_io_del(s->loop, s->listen_fd);
     close(s->listen_fd);
     s->listen_fd = -1;
+    for (uint32_t i = 0; i < s->nclients; i++)
+        say_bye(s, s->clients[i], PROTO_BYE_SHUTDOWN, "shutdown");
+}
+
+/* One admin action from the store's feed: a kick ends one session, a ban
+ * every session joined under the name (the auth worker refuses its joins
+ * from now on). */
+static void on_admin_event(void *ctx, const char *kind, int64_t session_id, const char *name)
+{
+    server *s = ctx;
+    int ban = strcmp(kind, "ban") == 0;
+    if (!ban && strcmp(kind, "kick") != 0) {
+        log_info("admin: %s %s", kind, name);
+        return;
+    }
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
-        proto_writer w;
-        if (c->closing || server__out_begin(s, c, PROTO_SIZE_BYE, &w) < 0)
+        const world_avatar *a = c->avatar_id ? world_get(s->world, c->avatar_id) : NULL;
+        if (ban ? !(a && strcasecmp(a->name, name) == 0) : c->session_id != session_id)
             continue;
-        proto_put_bye(&w, PROTO_BYE_SHUTDOWN);
-        server__out_end(s, c, &w);
-        begin_close(s, c, "shutdown");
+        log_info("%s (session %lld): %s by an admin", c->peer, (long long)c->session_id, ban ? "banned" : "kicked");
+        say_bye(s, c, PROTO_BYE_KICKED, ban ? "banned" : "kicked");
     }
 }
 
@@ -963,11 +1104,23 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     s->log = dblog_open(cfg->db_path, &lc, err, errlen);
     if (!s->log || objects__start(s, err, errlen) < 0 || listen_on(s, err, errlen) < 0)
         goto fail;
+    s->logins = ratelimit_create(SRV_LOGIN_SLOTS, SRV_LOGIN_PER_SECOND, cfg->login_burst);
+    s->per_address = addrcount_create(SRV_LOGIN_SLOTS);
+    if (cfg->joins_per_second > 0)
+        s->joins = ratelimit_create(SRV_LOGIN_SLOTS, cfg->joins_per_second, 2 * cfg->joins_per_second);
+    if (db_admin_events_head(s->db, &s->admin_feed_last) < 0) {
+        snprintf(err, errlen, "database %s: %s", cfg->db_path, db_error(s->db));
+        goto fail;
+    }
+    s->auth = auth_start(cfg->db_path, err, errlen);
+    if (!s->logins || !s->per_address || (cfg->joins_per_second > 0 && !s->joins) || !s->auth)
+        goto fail;
     /* From now on this connection is the tick's: it must never wait. */
     db_set_busy_timeout(s->db, 0);
     uint64_t tick_ns = (uint64_t)1000000000 / (uint64_t)cfg->tick_hz;
     if (ev_io_add(s->loop, s->listen_fd, EV_READ, on_accept, s) < 0 ||
         ev_io_add(s->loop, s->signal_fd, EV_READ, on_signal, s) < 0 ||
+        ev_io_add(s->loop, auth_fd(s->auth), EV_READ, on_auth_results, s) < 0 ||
         ev_timer_start(s->loop, tick_ns, tick_ns, on_tick, s) < 0 ||
         ev_timer_start(s->loop, HOUSEKEEPING_MS * NS_PER_MS, HOUSEKEEPING_MS * NS_PER_MS, on_housekeeping, s) < 0 ||
         ev_timer_start(s->loop, cfg->stats_interval_ms * NS_PER_MS, cfg->stats_interval_ms * NS_PER_MS, on_stats,
@@ -996,7 +1149,7 @@ int server_run(server *s)
     while (s->nclients)
         reap(s, s->clients[0]);
     db_set_busy_timeout(s->db, SRV_DB_BUSY_SHUTDOWN_MS); /* the last flush may wait */
-    events_flush(s);
+    server__events_flush(s);
     dblog_stats ls;
     dblog_stop(s->log, &ls);
     s->log = NULL;
@@ -1013,6 +1166,10 @@ void server_destroy(server *s)
     while (s->nclients)
         reap(s, s->clients[0]);
     objects__stop(s);
+    auth_stop(s->auth);
+    ratelimit_destroy(s->logins);
+    ratelimit_destroy(s->joins);
+    addrcount_destroy(s->per_address);
     if (s->log)
         dblog_stop(s->log, NULL);
     if (s->loop)

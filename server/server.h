@@ -30,6 +30,12 @@ typedef struct server_config {
     uint32_t max_triangles; /* of one model */
     const char *world_file; /* objects to preload; NULL: none */
     import_proc importer;   /* the isolated importer every model goes through */
+    int auth_required;      /* 1: accounts only; 0: guests may walk and look */
+    double login_burst;     /* logins an address may make at once (then SRV_LOGIN_PER_SECOND) */
+    uint32_t quota_objects;    /* objects one account may have in the world */
+    uint64_t quota_bytes;      /* bytes of mesh (36 a triangle) one account may have */
+    uint32_t max_per_address;  /* connections open from one address; 0: no limit */
+    double joins_per_second;   /* joins per address per second (burst: twice); 0: no limit */
     /* The collision map's online loop (refiner.h). */
     double refine_interval_s;  /* 0: off (changes from other processes still arrive) */
     double refine_eps;         /* DBSCAN radius, m */

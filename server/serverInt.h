@@ -11,16 +11,18 @@
 #include "db.h"
 #include "dblog.h"
 #include "ev.h"
+#include "auth.h"
 #include "importer.h"
 #include "proto.h"
+#include "ratelimit.h"
 #include "refiner.h"
 #include "scene/scene.h"
 #include "server.h"
 #include "world.h"
 
 #define NS_PER_MS ((uint64_t)1000000)
-/* The user that owns the objects of the world file; no client may join
- * under this name (ownership goes by name). */
+/* The user that owns the objects of the world file: the reserved account
+ * of that name (db/account.h), which cannot log in. */
 #define WORLD_OWNER "world"
 
 /* An upload in progress: the file grows chunk by chunk up to its size. */
@@ -34,7 +36,8 @@ typedef struct client_upload {
     float unit_scale;
 } client_upload;
 
-typedef enum { ST_HELLO, ST_JOIN, ST_JOINED } client_state;
+/* ST_AUTH: the join waits for the auth worker (auth.h). */
+typedef enum { ST_HELLO, ST_JOIN, ST_AUTH, ST_JOINED } client_state;
 
 typedef struct client {
     conn c;
@@ -49,8 +52,14 @@ typedef struct client {
     int64_t session_id; /* 0 before hello */
     uint8_t token[PROTO_TOKEN_SIZE];
     char peer[80];
+    char addr[80];      /* peer without its port: the key of the per-address limits */
     uint32_t avatar_id; /* 0 before join */
-    int64_t user_id;    /* users.id once the join is stored; 0 before */
+    int64_t user_id;    /* users.id, known before the avatar's first tick; 0 before */
+    int64_t account_id; /* accounts.id; 0 for a guest */
+    int is_admin;       /* the account may place and remove anyone's objects */
+    float join_box[3];  /* the avatar box asked for, kept while the join is checked */
+    uint64_t moves_window_ns;  /* start of the second the move counts are for */
+    uint32_t moves_in_window, moves_dropped_in_window;
     int has_seq;
     uint32_t last_seq;
     uint32_t sent_ack;
@@ -80,7 +89,7 @@ typedef struct store_event {
 
 typedef struct stats {
     uint64_t frames_in, moves_in, bytes_in, bytes_out;
-    uint64_t accepted, closed, protocol_errors, timeouts, slow_readers, collisions;
+    uint64_t accepted, closed, protocol_errors, timeouts, slow_readers, collisions, moves_dropped;
     uint32_t *tick_us; /* durations of this interval's ticks */
     uint32_t nticks, tick_cap;
     uint64_t interval_start_ns;
@@ -113,6 +122,11 @@ struct server {
     /* Objects (objects.c). */
     scene *scene;
     importer *importer;
+    auth *auth;          /* joins' credentials, checked off the loop */
+    ratelimit *logins;   /* logins per address */
+    ratelimit *joins;    /* joins per address; NULL: no limit */
+    addrcount *per_address; /* connections open per address */
+    int64_t admin_feed_last;  /* the last admin action applied (db/moderation.h) */
     refiner *refiner;    /* new collision maps from the online loop and the store */
     size_t upload_bytes; /* held by unfinished uploads, all clients */
 };
@@ -120,6 +134,9 @@ struct server {
 uint64_t server__now(const server *s);
 /* Queues a change for the next flush (see store_event). */
 store_event *server__event_push(server *s, int kind, int64_t session);
+/* Writes the queued changes now (each tick does; an import first, so that
+ * the quota it checks counts the removals before it). */
+void server__events_flush(server *s);
 /* Reserves need bytes of c's output (disconnecting it at the hard limit:
  * -1) and appends what w holds; see server.c. */
 int server__out_begin(server *s, client *c, size_t need, proto_writer *w);

@@ -92,6 +92,37 @@
 /* At shutdown the last session records may wait this long for the lock. */
 #define SRV_DB_BUSY_SHUTDOWN_MS 5000
 
+/* Logins (a password or a token) per client address: a burst of 5, then one
+ * every 2 s. A person mistyping a password never notices; a guesser gets
+ * 1,800 tries an hour instead of the 36,000 one Argon2id worker could
+ * verify. LOGIN_SLOTS buckets: addresses beyond share them. */
+#define SRV_LOGIN_BURST 5.0
+#define SRV_LOGIN_PER_SECOND 0.5
+#define SRV_LOGIN_SLOTS 4096u
+
+/* Defaults of --max-per-address and --joins-per-second: a household or an
+ * office behind one address has a few dozen people, each with a
+ * connection or two; nobody joins ten times a second. The bot swarm and
+ * benchmarks, many connections from one address, lift them (0: no limit).
+ * Joins may come in a burst of twice the rate. */
+#define SRV_MAX_PER_ADDRESS_DEFAULT 64u
+#define SRV_JOINS_PER_SECOND_DEFAULT 10.0
+
+/* Upload quotas per account (--quota-objects, --quota-mb): a person
+ * furnishing a place needs tens of objects; the demo world's largest model
+ * (Sponza) is 9.5 MB of mesh. Without them one account filled a world with
+ * 16,000 objects in 26 s, and six 16 MiB uploads took 454 MB of database. */
+#define SRV_QUOTA_OBJECTS_DEFAULT 100u
+#define SRV_QUOTA_MB_DEFAULT 128u
+
+/* Moves a connection may send per second: twice the tick rate (a client
+ * ahead of the server's clock by a tick still fits). Moves past it are
+ * dropped and counted; a connection that has more than
+ * SRV_MOVE_FLOOD_DROPS times the tick rate dropped within one second is
+ * flooding, not lagging, and is disconnected. */
+#define SRV_MOVES_PER_TICK 2u
+#define SRV_MOVE_FLOOD_DROPS 8u
+
 /* listen(2) backlog: the bot swarm connects 1,000 per second. */
 #define SRV_LISTEN_BACKLOG 4096
 

@@ -112,7 +112,8 @@ def run_cvre(bindir, n, ramp, seconds, objects):
         extra = ["--world", os.path.join(tmp, "bench.world")]
     srv, port = start([os.path.join(bindir, "cvre-server"), "--port", "0", "--db", os.path.join(tmp, "b.db"),
                        "--max-clients", str(n + 100), "--world-size", "1000", "--spawn-radius", "500",
-                       "--stats-file", stats, "--stats-interval", "1", "--log-level", "warn", *extra])
+                       "--stats-file", stats, "--stats-interval", "1", "--log-level", "warn",
+                       "--max-per-address", "0", "--joins-per-second", "0", *extra])
     sw = swarm(bindir, port, n, ramp + seconds + 1)
     t_start = time.time()
     cpu, wall, peak = measure_window(srv.pid, ramp, seconds)

@@ -88,11 +88,14 @@ static int same_msg(const proto_msg *a, const proto_msg *b)
                x->idle_timeout_ms == y->idle_timeout_ms;
     }
     case PROTO_JOIN:
-        return same_str(a->u.join.name, b->u.join.name) && same_floats(a->u.join.box, b->u.join.box, 3);
+        return same_str(a->u.join.name, b->u.join.name) && same_floats(a->u.join.box, b->u.join.box, 3) &&
+               a->u.join.credential == b->u.join.credential && a->u.join.secret_len == b->u.join.secret_len &&
+               (a->u.join.secret_len == 0 || memcmp(a->u.join.secret, b->u.join.secret, a->u.join.secret_len) == 0);
     case PROTO_JOIN_OK:
         return a->u.join_ok.avatar_id == b->u.join_ok.avatar_id &&
                same_floats(a->u.join_ok.pos, b->u.join_ok.pos, 3) &&
-               same_floats(a->u.join_ok.box, b->u.join_ok.box, 3);
+               same_floats(a->u.join_ok.box, b->u.join_ok.box, 3) && a->u.join_ok.has_token == b->u.join_ok.has_token &&
+               (!a->u.join_ok.has_token || memcmp(a->u.join_ok.token, b->u.join_ok.token, PROTO_RESUME_TOKEN_SIZE) == 0);
     case PROTO_MOVE:
         return a->u.move.seq == b->u.move.seq && same_floats(a->u.move.pos, b->u.move.pos, 3);
     case PROTO_SNAPSHOT: {
@@ -527,10 +530,18 @@ static void gen_frame(proto_writer *w, uint16_t type)
     }
     case PROTO_JOIN: {
         proto_join m;
+        static uint8_t secret[PROTO_PASSWORD_MAX];
         m.name.ptr = text;
         m.name.len = (uint32_t)rnd_text(text, PROTO_NAME_MAX);
         for (int i = 0; i < 3; i++)
             m.box[i] = rnd_box();
+        m.credential = (uint8_t)below(3);
+        m.secret_len = m.credential == PROTO_CRED_PASSWORD ? 1 + below(PROTO_PASSWORD_MAX)
+                       : m.credential == PROTO_CRED_TOKEN  ? PROTO_RESUME_TOKEN_SIZE
+                                                           : 0;
+        for (uint32_t i = 0; i < m.secret_len; i++)
+            secret[i] = (uint8_t)rnd();
+        m.secret = secret;
         proto_put_join(w, &m);
         break;
     }
@@ -540,6 +551,9 @@ static void gen_frame(proto_writer *w, uint16_t type)
         rnd_vec3(m.pos);
         for (int i = 0; i < 3; i++)
             m.box[i] = rnd_box();
+        m.has_token = (uint8_t)below(2);
+        for (unsigned i = 0; i < PROTO_RESUME_TOKEN_SIZE; i++)
+            m.token[i] = (uint8_t)rnd();
         proto_put_join_ok(w, &m);
         break;
     }

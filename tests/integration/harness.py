@@ -26,7 +26,9 @@ T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINE
 E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
          BAD_STRING=21, NOT_FINITE=22, BAD_VALUE=23, BAD_MAGIC=24, VERSION=25, UNEXPECTED=26,
          ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, BAD_SEQ=32, INTERNAL=34,
-         UPLOAD=35, IMPORT=36, NO_OBJECT=37, NOT_OWNER=38)
+         UPLOAD=35, IMPORT=36, NO_OBJECT=37, NOT_OWNER=38, GUEST=39, AUTH=40, AUTH_REQUIRED=41,
+         RATE_LIMITED=42)
+PREJOIN_CAP = 256  # PROTO_MAX_LEN_PREJOIN
 MODELS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "shared", "models")
 
 
@@ -49,8 +51,15 @@ def hello(version=1, magic=MAGIC):
     return frame(T["HELLO"], struct.pack("<IH", magic, version))
 
 
-def join(name, box=(0.6, 1.8, 0.6)):
-    return frame(T["JOIN"], s8(name) + struct.pack("<3f", *box))
+def join(name, box=(0.6, 1.8, 0.6), password=None, token=None):
+    """A join: a guest's, or an account's with its password (str) or a
+    resume token (32 bytes from an earlier join_ok)."""
+    tail = b""
+    if password is not None:
+        tail = bytes([1, len(password.encode())]) + password.encode()
+    elif token is not None:
+        tail = bytes([2, len(token)]) + token
+    return frame(T["JOIN"], s8(name) + struct.pack("<3f", *box) + tail)
 
 
 def move(seq, pos):
@@ -98,7 +107,7 @@ def decode(t, p):
         return dict(type="welcome", version=v, session=sid)
     if t == T["JOIN_OK"]:
         i, x, y, z = struct.unpack_from("<I3f", p)
-        return dict(type="join_ok", id=i, pos=(x, y, z))
+        return dict(type="join_ok", id=i, pos=(x, y, z), token=p[28:60] if len(p) >= 60 else None)
     if t == T["SNAPSHOT"]:
         tick, ack, n = struct.unpack_from("<IIH", p)
         ents = {}
@@ -185,6 +194,16 @@ class Server:
         assert rest == "", f"server printed more on stdout: {rest!r}"
         return rc
 
+    def account(self, name, password=None, admin=False):
+        """Adds an account with cvre-admin (the server may be running);
+        returns its password (by default "pw-" + name)."""
+        password = password or "pw-" + name
+        p = subprocess.run([os.path.join(self.bindir, "cvre-admin"), "--db", self.db, "user", "add", name,
+                            "--password-stdin"] + (["--admin"] if admin else []),
+                           input=password + "\n", capture_output=True, text=True, timeout=60)
+        assert p.returncode == 0, p
+        return password
+
     def logtext(self):
         self.log.flush()
         self.log.seek(0)
@@ -203,8 +222,8 @@ class Raw:
     def send(self, data):
         self.s.sendall(data)
 
-    def handshake(self, name):
-        self.send(hello() + join(name))
+    def handshake(self, name, password=None, token=None):
+        self.send(hello() + join(name, password=password, token=token))
         w = self.expect("welcome")
         ok = self.expect("join_ok")
         return w, ok

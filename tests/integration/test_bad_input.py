@@ -5,7 +5,7 @@ import math
 import struct
 import time
 
-from harness import E, T, Client, Raw, Server, args, frame, hello, join, move, ping, run, s8
+from harness import PREJOIN_CAP, E, T, Client, Raw, Server, args, frame, hello, join, move, ping, run, s8
 
 A = args()
 srv = Server(A.bin, "--handshake-timeout", "600", "--idle-timeout", "2500", "--max-speed", "100")
@@ -51,7 +51,7 @@ def test_length_zero():
 
 
 def test_length_over_cap():
-    rejected(struct.pack("<IH", 129, T["JOIN"]) + b"x" * 10, E["FRAME_TOO_LONG"], words="before join")
+    rejected(struct.pack("<IH", PREJOIN_CAP + 1, T["JOIN"]) + b"x" * 10, E["FRAME_TOO_LONG"], words="before join")
     rejected(struct.pack("<IH", 65537, T["MOVE"]), E["FRAME_TOO_LONG"], joined=True, words="65537")
 
 

@@ -191,7 +191,7 @@ def real_log(build):
     db = os.path.join(tempfile.mkdtemp(prefix="cvre-reallog-"), "log.db")
     srv = subprocess.Popen([os.path.join(build, "cvre-server"), "--port", "0", "--db", db, "--world",
                             os.path.join(here, "..", "..", "server", "worlds", "demo.world"), "--spawn-radius",
-                            "25", "--log-level", "warn"], stdout=subprocess.PIPE, text=True)
+                            "25", "--log-level", "warn", "--max-per-address", "0", "--joins-per-second", "0"], stdout=subprocess.PIPE, text=True)
     port = srv.stdout.readline().rsplit(":", 1)[1].strip()
     subprocess.run([os.path.join(build, "cvre-client"), "--port", port, "--bots", "100", "--rate", "20",
                     "--duration", "4"], stdout=subprocess.DEVNULL, timeout=60)

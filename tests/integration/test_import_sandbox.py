@@ -52,7 +52,7 @@ def test_misbehaving_parser_hurts_nobody():
     w = Witness(srv.port)
     w.start()
     c = Raw(srv.port)
-    c.handshake("mallory")
+    c.handshake("mallory", srv.account("mallory"))
     cases = ((1, b"crash", "parser crashed"), (2, b"loop", "timed out"), (3, b"alloc", "too large"),
              (4, b"flood", "too large"), (5, b"nan", "bad answer from the importer"))
     for uid, word, why in cases:

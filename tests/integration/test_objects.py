@@ -41,8 +41,8 @@ def glb(json):
 def test_upload_place_remove_and_ownership():
     srv = Server(A.bin)
     ann, bob = Raw(srv.port), Raw(srv.port)
-    ann.handshake("ann")
-    bob.handshake("bob")
+    ann.handshake("ann", srv.account("ann"))
+    bob.handshake("bob", srv.account("bob"))
     obj = upload(ann, 7, read(ROOM), "room.stl", fmt="stl", up=1, pos=(10, 0, 0))
     assert obj["owner"] == "ann" and obj["name"] == "room.stl" and obj["triangles"] == 54, obj
     assert obj["ecm_version"] == 1 and len(obj["boxes"]) == 1
@@ -77,7 +77,7 @@ def test_upload_place_remove_and_ownership():
 def test_bad_uploads_leave_everything_intact():
     srv = Server(A.bin, "--max-upload", "1000000")
     c = Raw(srv.port)
-    c.handshake("mallory")
+    c.handshake("mallory", srv.account("mallory"))
     room = read(ROOM)
     c.send(upload_frames(1, b"x" * 10, "big", total=1000001))
     assert "over the upload limit" in refused(c, 1, E["UPLOAD"])["message"]
@@ -120,7 +120,7 @@ def test_bad_uploads_leave_everything_intact():
     refused(c, 11, E["UPLOAD"])
     # An abandoned upload: its sender leaves mid-way.
     quitter = Raw(srv.port)
-    quitter.handshake("quitter")
+    quitter.handshake("quitter", srv.account("quitter"))
     quitter.send(begin + frame(T["UPLOAD_CHUNK"], struct.pack("<II", 8, 0) + room[:1000]))
     quitter.close()
     # A good upload still works, then invalid transforms are frame errors.
@@ -129,7 +129,7 @@ def test_bad_uploads_leave_everything_intact():
     for bad, code in ((transform((0, 0, 0), math.nan), E["NOT_FINITE"]), (transform((0, 0, 0), 0, 0.0), E["BAD_VALUE"]),
                       (transform((0, 0, 0), 0, 1e6), E["BAD_VALUE"])):
         v = Raw(srv.port)
-        v.handshake("mallory")
+        v.handshake("mallory", "pw-mallory")
         v.send(frame(T["OBJECT_PLACE"], struct.pack("<I", good["id"]) + bad))
         errors = [m for m in v.wait_closed() if m["type"] == "error"]
         assert errors and errors[0]["code"] == code, errors
@@ -147,7 +147,7 @@ def test_bad_uploads_leave_everything_intact():
 def test_restart_restores_the_scene():
     srv = Server(A.bin)
     c = Raw(srv.port)
-    c.handshake("ann")
+    c.handshake("ann", srv.account("ann"))
     a = upload(c, 1, read(ROOM), "a.stl", fmt="stl", up=1, pos=(5, 0, 5))
     b = upload(c, 2, read(ROOM), "b.stl", fmt="stl", up=1, pos=(-5, 0, -5))
     c.send(frame(T["OBJECT_PLACE"], struct.pack("<I", a["id"]) + transform((7, 1, 7), 0.5, 1.5)))
@@ -198,7 +198,7 @@ def test_log_complete_after_sigterm_under_load():
     """200 bots spawned around a wall collide all the time; SIGTERM in the
     middle must still leave every pushed row in the database."""
     world = os.path.join(os.path.dirname(os.path.abspath(__file__)), "room.world")
-    srv = Server(A.bin, "--world", world, "--spawn-radius", "12", "--max-speed", "5")
+    srv = Server(A.bin, "--world", world, "--spawn-radius", "12", "--max-speed", "5", "--max-per-address", "0", "--joins-per-second", "0")
     bots = subprocess.Popen([os.path.join(A.bin, "cvre-client"), "--port", str(srv.port), "--bots", "200",
                              "--rate", "20", "--pattern", "random-walk", "--duration", "30"],
                             stdout=subprocess.DEVNULL)

@@ -179,7 +179,7 @@ def test_archway_opens_and_stays_solid_at_its_sides():
 def test_moved_object_keeps_its_boxes_and_rollback_reaches_clients():
     srv = Server(A.bin, "--refine-interval", "1", *FAST)
     owner = Raw(srv.port)
-    owner.handshake("owner")
+    owner.handshake("owner", srv.account("owner"))
     stl = open(os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl"), "rb").read()
     owner.send(upload_frames(1, stl, "room.stl", up=1, pos=(10, 0, 0)))
     room = owner.expect("object", timeout=20, where=lambda m: m["upload"] == 1)["id"]

@@ -2,6 +2,7 @@
 joins, moves and departures; the area of interest is exact; moves are
 clamped; sessions survive a restart in SQLite."""
 import os
+import re
 import sqlite3
 import time
 
@@ -45,6 +46,9 @@ def test_clients_see_each_other():
     db = sqlite3.connect(srv.db)
     rows = db.execute("SELECT u.name, s.end_reason, s.joined_at IS NOT NULL, s.ended_at >= s.started_at "
                       "FROM sessions s JOIN users u ON u.id = s.user_id ORDER BY u.name").fetchall()
+    # guests: one users row each, "guest<session>:<name>"
+    assert all(re.fullmatch(r"guest\d+:\w+", r[0]) for r in rows), rows
+    rows = sorted((r[0].split(":", 1)[1],) + r[1:] for r in rows)
     assert rows == [("alice", "quit", 1, 1), ("bob", "quit", 1, 1), ("carol", "quit", 1, 1)], rows
     db.close()
 
@@ -63,7 +67,7 @@ def test_clients_see_each_other():
 def test_area_of_interest_is_exact():
     """25 avatars on a line 10 m apart: each must know exactly those within
     the 64 m radius, through joins and leaves as they walk into place."""
-    srv = Server(A.bin, "--max-speed", "1000", "--spawn-radius", "0")
+    srv = Server(A.bin, "--max-speed", "1000", "--spawn-radius", "0", "--joins-per-second", "0")
     n = 25
     cs = [Raw(srv.port) for _ in range(n)]
     ids = [c.handshake(f"p{i}")[1]["id"] for i, c in enumerate(cs)]

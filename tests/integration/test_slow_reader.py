@@ -20,7 +20,7 @@ def rss_kib(pid):
 def test_non_reader_is_cut_off():
     # 100 Hz ticks and 200 busy neighbours make about 320 KB/s of snapshots
     # for the one client that never reads.
-    srv = Server(A.bin, "--tick-hz", "100", "--spawn-radius", "3", "--max-speed", "20")
+    srv = Server(A.bin, "--tick-hz", "100", "--spawn-radius", "3", "--max-speed", "20", "--max-per-address", "0", "--joins-per-second", "0")
     lazy = Raw(srv.port)
     lazy.s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     lazy.handshake("lazy")

@@ -152,8 +152,8 @@ static size_t build_samples(sample *s)
     uint8_t b[SAMPLE_MAX + PROTO_HEADER_SIZE];
     proto_writer w;
     const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
-    const proto_join join = {{"ann", 3}, {0.5f, 1.8f, 0.5f}};
-    const proto_join_ok jok = {7, {1.0f, 0.0f, 2.0f}, {0.5f, 1.8f, 0.5f}};
+    const proto_join join = {.name = {"ann", 3}, .box = {0.5f, 1.8f, 0.5f}};
+    const proto_join_ok jok = {.avatar_id = 7, .pos = {1.0f, 0.0f, 2.0f}, .box = {0.5f, 1.8f, 0.5f}};
     const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
     const proto_avatar e0 = {7, {1.0f, 2.0f, 3.0f}}, e1 = {8, {-1.0f, -2.0f, -3.0f}};
     const proto_avatar_joined aj = {8, {"bob", 3}, {4.0f, 0.0f, 4.0f}, {1.0f, 1.0f, 1.0f}};
@@ -377,8 +377,8 @@ static void test_join_roundtrip(void **state)
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
         proto_writer w;
         proto_msg m;
-        const proto_join in = {{names[i], (uint32_t)strlen(names[i])},
-                               {PROTO_BOX_MIN, 1.8f, PROTO_BOX_MAX}};
+        const proto_join in = {.name = {names[i], (uint32_t)strlen(names[i])},
+                               .box = {PROTO_BOX_MIN, 1.8f, PROTO_BOX_MAX}};
 
         proto_writer_init(&w, big, BIG);
         proto_put_join(&w, &in);
@@ -390,14 +390,74 @@ static void test_join_roundtrip(void **state)
         /* The name points into the frame, not into a copy. */
         assert_ptr_equal(m.u.join.name.ptr, (const char *)big + PROTO_HEADER_SIZE + 1);
         assert_same_floats(m.u.join.box, in.box, 3);
+        assert_int_equal(m.u.join.credential, PROTO_CRED_NONE);
     }
+}
+
+/* A join's credential: a password of 1..PROTO_PASSWORD_MAX bytes (any
+ * bytes) or a token of exactly PROTO_RESUME_TOKEN_SIZE; anything else is a
+ * bad value, and the whole join must fit the pre-join cap. */
+static void test_join_credentials(void **state)
+{
+    static uint8_t secret[PROTO_PASSWORD_MAX + 1];
+    static const struct {
+        uint8_t kind;
+        uint32_t len;
+        int status;
+    } cases[] = {
+        {PROTO_CRED_PASSWORD, 1, PROTO_OK},
+        {PROTO_CRED_PASSWORD, PROTO_PASSWORD_MAX, PROTO_OK},
+        {PROTO_CRED_TOKEN, PROTO_RESUME_TOKEN_SIZE, PROTO_OK},
+        {PROTO_CRED_PASSWORD, 0, PROTO_ERR_BAD_VALUE},
+        {PROTO_CRED_TOKEN, PROTO_RESUME_TOKEN_SIZE - 1, PROTO_ERR_BAD_VALUE},
+        {PROTO_CRED_NONE, 4, PROTO_ERR_BAD_VALUE},
+        {7, 4, PROTO_ERR_BAD_VALUE},
+    };
+    (void)state;
+    for (size_t i = 0; i < sizeof secret; i++)
+        secret[i] = (uint8_t)(i * 37u); /* NUL and high bytes included */
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        uint8_t b[512];
+        size_t n = 0;
+        proto_frame f;
+        proto_msg m;
+        /* written by hand: the writer only writes valid joins */
+        b[n++] = 0, b[n++] = 0, b[n++] = 0, b[n++] = 0; /* length, below */
+        b[n++] = PROTO_JOIN, b[n++] = 0;
+        b[n++] = 3, memcpy(b + n, "ann", 3), n += 3;
+        for (int k = 0; k < 3; k++) {
+            float one = 1.0f;
+            memcpy(b + n, &one, 4), n += 4;
+        }
+        b[n++] = cases[i].kind, b[n++] = (uint8_t)cases[i].len;
+        memcpy(b + n, secret, cases[i].len), n += cases[i].len;
+        b[0] = (uint8_t)(n - 4);
+        assert_int_equal(proto_frame_parse(b, n, PROTO_MAX_LEN_PREJOIN, &f), PROTO_OK);
+        assert_int_equal(proto_decode(&f, &m), cases[i].status);
+        if (cases[i].status != PROTO_OK)
+            continue;
+        assert_int_equal(m.u.join.credential, cases[i].kind);
+        assert_int_equal(m.u.join.secret_len, cases[i].len);
+        assert_memory_equal(m.u.join.secret, secret, cases[i].len);
+        {   /* and the writer writes the same bytes */
+            uint8_t again[512];
+            proto_writer w;
+            proto_writer_init(&w, again, sizeof again);
+            proto_put_join(&w, &m.u.join);
+            assert_int_equal(w.len, n);
+            assert_memory_equal(again, b, n);
+        }
+    }
+    /* the longest join fits before join */
+    assert_true(PROTO_SIZE_JOIN_MAX - 4 <= PROTO_MAX_LEN_PREJOIN);
 }
 
 static void test_join_ok_roundtrip(void **state)
 {
     proto_writer w;
     proto_msg m;
-    const proto_join_ok in = {0xfffffffe, {-0.0f, FLT_MAX, -FLT_MIN}, {0.1f, 4.0f, 2.0f}};
+    proto_join_ok in = {.avatar_id = 0xfffffffe, .pos = {-0.0f, FLT_MAX, -FLT_MIN},
+                        .box = {0.1f, 4.0f, 2.0f}};
 
     (void)state;
     proto_writer_init(&w, big, BIG);
@@ -408,6 +468,17 @@ static void test_join_ok_roundtrip(void **state)
     assert_int_equal(m.u.join_ok.avatar_id, in.avatar_id);
     assert_same_floats(m.u.join_ok.pos, in.pos, 3);
     assert_same_floats(m.u.join_ok.box, in.box, 3);
+    assert_int_equal(m.u.join_ok.has_token, 0);
+    /* an account's join_ok carries its next resume token */
+    in.has_token = 1;
+    for (unsigned i = 0; i < PROTO_RESUME_TOKEN_SIZE; i++)
+        in.token[i] = (uint8_t)(255 - i);
+    proto_writer_init(&w, big, BIG);
+    proto_put_join_ok(&w, &in);
+    assert_int_equal(w.len, PROTO_SIZE_JOIN_OK_MAX);
+    decode_all(big, w.len, &m);
+    assert_int_equal(m.u.join_ok.has_token, 1);
+    assert_memory_equal(m.u.join_ok.token, in.token, PROTO_RESUME_TOKEN_SIZE);
 }
 
 static void test_move_roundtrip(void **state)
@@ -894,8 +965,10 @@ static void test_collision_roundtrip(void **state)
 static void test_max_sizes(void **state)
 {
     char name[PROTO_NAME_MAX + 1], text[PROTO_MESSAGE_MAX + 1];
+    static const uint8_t password[PROTO_PASSWORD_MAX];
     proto_writer w;
-    const proto_join join = {{name, PROTO_NAME_MAX}, {1, 1, 1}};
+    const proto_join join = {.name = {name, PROTO_NAME_MAX}, .box = {1, 1, 1}, .credential = PROTO_CRED_PASSWORD,
+                             .secret = password, .secret_len = PROTO_PASSWORD_MAX};
     const proto_avatar_joined aj = {1, {name, PROTO_NAME_MAX}, {0, 0, 0}, {1, 1, 1}};
 
     (void)state;
@@ -1007,7 +1080,7 @@ static void test_name_truncation(void **state)
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         proto_writer w;
         proto_msg m;
-        const proto_join join = {{cases[i].in, (uint32_t)strlen(cases[i].in)}, {1, 1, 1}};
+        const proto_join join = {.name = {cases[i].in, (uint32_t)strlen(cases[i].in)}, .box = {1, 1, 1}};
         const proto_avatar_joined aj = {3, {cases[i].in, (uint32_t)strlen(cases[i].in)},
                                         {0, 0, 0}, {1, 1, 1}};
 
@@ -1075,7 +1148,7 @@ static void test_empty_name_encodes(void **state)
     proto_writer w;
     proto_frame f;
     proto_msg m;
-    const proto_join join = {{NULL, 0}, {1, 1, 1}};
+    const proto_join join = {.name = {NULL, 0}, .box = {1, 1, 1}};
 
     (void)state;
     proto_writer_init(&w, big, BIG);
@@ -1093,7 +1166,7 @@ static void test_stream_of_frames(void **state)
     size_t ends[5], off = 0, k = 0;
     proto_writer w;
     const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
-    const proto_join join = {{"ann", 3}, {1, 1, 1}};
+    const proto_join join = {.name = {"ann", 3}, .box = {1, 1, 1}};
     const proto_move move = {1, {0, 0, 0}};
 
     (void)state;
@@ -1211,8 +1284,8 @@ static void test_writer_overflow_sticky(void **state)
     proto_frame f;
     size_t at, off = 0;
     const proto_hello hello = {PROTO_MAGIC, 1};
-    const proto_join join = {{"a", 1}, {1, 1, 1}};
-    const proto_join_ok jok = {1, {0, 0, 0}, {1, 1, 1}};
+    const proto_join join = {.name = {"a", 1}, .box = {1, 1, 1}};
+    const proto_join_ok jok = {.avatar_id = 1, .box = {1, 1, 1}};
     const proto_move move = {1, {0, 0, 0}};
     const proto_avatar_joined aj = {1, {"a", 1}, {0, 0, 0}, {1, 1, 1}};
     const proto_avatar_left al = {1, 0};
@@ -1589,7 +1662,9 @@ static void test_short_every_type(void **state)
 }
 
 /* Bytes after the layout are trailing, except after an upload chunk's head,
- * where they are more data (the chunk cap is test_upload_chunk_sizes'). */
+ * where they are more data (the chunk cap is test_upload_chunk_sizes'), and
+ * after a join or join_ok, where they start its optional tail (a credential,
+ * a token) and these zeros make a broken one. */
 static void test_trailing_every_type(void **state)
 {
     sample s[NSAMPLES];
@@ -1600,9 +1675,13 @@ static void test_trailing_every_type(void **state)
         uint8_t p[SAMPLE_MAX + 32] = {0};
 
         memcpy(p, s[i].payload, s[i].len);
-        for (size_t extra = 1; extra <= 17; extra++)
-            assert_int_equal(decode_raw(s[i].type, p, s[i].len + extra),
-                             s[i].data_at ? PROTO_OK : PROTO_ERR_TRAILING);
+        for (size_t extra = 1; extra <= 17; extra++) {
+            int got = decode_raw(s[i].type, p, s[i].len + extra);
+            if (s[i].type == PROTO_JOIN || s[i].type == PROTO_JOIN_OK)
+                assert_true(got == PROTO_ERR_SHORT || got == PROTO_ERR_BAD_VALUE);
+            else
+                assert_int_equal(got, s[i].data_at ? PROTO_OK : PROTO_ERR_TRAILING);
+        }
     }
 }
 
@@ -2355,7 +2434,7 @@ static void test_strerror_total(void **state)
 {
     const char *unknown = proto_strerror(-1);
     const int known[] = {PROTO_OK, PROTO_INCOMPLETE, 16, 17, 18, 19, 20, 21, 22, 23, 24,
-                         25, 26, 27, 28, 29, 30, 32, 34, 35, 36, 37, 38};
+                         25, 26, 27, 28, 29, 30, 32, 34, 35, 36, 37, 38, 39, 40, 41, 42};
 
     (void)state;
     for (int s = -2000; s <= 2000; s++) {
@@ -2368,7 +2447,7 @@ static void test_strerror_total(void **state)
     assert_ptr_equal(proto_strerror(15), unknown);
     assert_ptr_equal(proto_strerror(31), unknown); /* reserved */
     assert_ptr_equal(proto_strerror(33), unknown);
-    assert_ptr_equal(proto_strerror(39), unknown);
+    assert_ptr_equal(proto_strerror(43), unknown);
     for (size_t i = 0; i < sizeof known / sizeof known[0]; i++) {
         assert_true(proto_strerror(known[i]) != unknown);
         for (size_t j = 0; j < i; j++)
@@ -2417,6 +2496,7 @@ int main(void)
         cmocka_unit_test(test_hello_roundtrip),
         cmocka_unit_test(test_welcome_roundtrip),
         cmocka_unit_test(test_join_roundtrip),
+        cmocka_unit_test(test_join_credentials),
         cmocka_unit_test(test_join_ok_roundtrip),
         cmocka_unit_test(test_move_roundtrip),
         cmocka_unit_test(test_snapshot_empty),

@@ -1,0 +1,206 @@
+#include "moderation.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <sqlite3.h>
+
+#include "account.h"
+#include "dbInt.h"
+
+static int sql_fail(db *d) { return db__fail(d, "%s", sqlite3_errmsg(db_sqlite(d))); }
+
+/* Prepares sql; NULL with the message on failure. */
+static sqlite3_stmt *prepare(db *d, const char *sql)
+{
+    sqlite3_stmt *st = NULL;
+
+    if (sqlite3_prepare_v2(db_sqlite(d), sql, -1, &st, NULL) != SQLITE_OK) {
+        sql_fail(d);
+        return NULL;
+    }
+    return st;
+}
+
+/* Steps st to its end and finalizes it; 0 or -1. */
+static int finish(db *d, sqlite3_stmt *st)
+{
+    int rc = sqlite3_step(st);
+
+    if (rc != SQLITE_DONE && rc != SQLITE_ROW)
+        sql_fail(d);
+    sqlite3_finalize(st);
+    return rc == SQLITE_DONE || rc == SQLITE_ROW ? 0 : -1;
+}
+
+/* Appends an action to the feed (inside the caller's transaction). */
+static int feed(db *d, const char *kind, int64_t session_id, const char *name, double at)
+{
+    sqlite3_stmt *st = prepare(d, "INSERT INTO admin_events(kind, session_id, name, at) VALUES (?1, ?2, ?3, ?4)");
+
+    if (!st)
+        return -1;
+    sqlite3_bind_text(st, 1, kind, -1, SQLITE_STATIC);
+    if (session_id)
+        sqlite3_bind_int64(st, 2, session_id);
+    if (name)
+        sqlite3_bind_text(st, 3, name, -1, SQLITE_STATIC);
+    sqlite3_bind_double(st, 4, at);
+    return finish(d, st);
+}
+
+/* Ends the write transaction: COMMIT if rc is 0, else ROLLBACK; returns rc
+ * (or -1 when the commit fails). */
+static int end_write(db *d, int rc)
+{
+    if (rc == 0 && db_commit(d) == 0)
+        return 0;
+    db_rollback(d);
+    return rc ? rc : -1;
+}
+
+int db_kick(db *d, int64_t session_id, double at)
+{
+    sqlite3_stmt *st;
+    int rc;
+
+    if (db_begin(d) != 0)
+        return -1;
+    st = prepare(d, "SELECT 1 FROM sessions WHERE id = ?1 AND ended_at IS NULL");
+    if (!st)
+        return end_write(d, -1);
+    sqlite3_bind_int64(st, 1, session_id);
+    rc = sqlite3_step(st);
+    sqlite3_finalize(st);
+    if (rc != SQLITE_ROW) {
+        if (rc != SQLITE_DONE)
+            return end_write(d, sql_fail(d));
+        db__fail(d, "no session %lld is open", (long long)session_id);
+        return end_write(d, DB_MOD_NO_SESSION);
+    }
+    return end_write(d, feed(d, "kick", session_id, NULL, at));
+}
+
+int db_ban(db *d, const char *name, double until, double at)
+{
+    sqlite3_stmt *st;
+    db_account acc;
+    int rc;
+
+    if (!name || !*name || strlen(name) > DB_ACCOUNT_NAME_MAX)
+        return db__fail(d, "ban: a name is 1 to %u bytes", DB_ACCOUNT_NAME_MAX);
+    if (db_begin(d) != 0)
+        return -1;
+    st = prepare(d, "INSERT INTO bans(name, until, created_at) VALUES (?1, ?2, ?3) "
+                    "ON CONFLICT(name) DO UPDATE SET until = excluded.until");
+    if (!st)
+        return end_write(d, -1);
+    sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
+    if (until > 0)
+        sqlite3_bind_double(st, 2, until);
+    sqlite3_bind_double(st, 3, at);
+    rc = finish(d, st);
+    if (rc == 0)
+        rc = feed(d, "ban", 0, name, at);
+    rc = end_write(d, rc);
+    /* a banned account's tokens go: it must not come back by resuming */
+    if (rc == 0 && db_account_find(d, name, &acc) == 0 && db_account_tokens_revoke(d, acc.id) < 0)
+        return -1;
+    return rc;
+}
+
+int db_unban(db *d, const char *name, double at)
+{
+    sqlite3_stmt *st;
+    int rc;
+
+    if (db_begin(d) != 0)
+        return -1;
+    st = prepare(d, "DELETE FROM bans WHERE name = ?1");
+    if (!st)
+        return end_write(d, -1);
+    sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
+    rc = finish(d, st);
+    if (rc == 0 && sqlite3_changes(db_sqlite(d)) == 0) {
+        db__fail(d, "%s is not banned", name);
+        return end_write(d, DB_MOD_NOT_BANNED);
+    }
+    if (rc == 0)
+        rc = feed(d, "unban", 0, name, at);
+    return end_write(d, rc);
+}
+
+int db_banned(db *d, const char *name, double now, double *until)
+{
+    sqlite3_stmt *st = prepare(d, "SELECT coalesce(until, 0) FROM bans WHERE name = ?1 "
+                                  "AND (until IS NULL OR until > ?2)");
+    int rc;
+
+    *until = 0;
+    if (!st)
+        return -1;
+    sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
+    sqlite3_bind_double(st, 2, now);
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW)
+        *until = sqlite3_column_double(st, 0);
+    else if (rc != SQLITE_DONE)
+        sql_fail(d);
+    sqlite3_finalize(st);
+    return rc == SQLITE_ROW ? 1 : rc == SQLITE_DONE ? 0 : -1;
+}
+
+/* Most actions read per call: a server applies them in one go. */
+#define FEED_BATCH 256
+
+int db_admin_events(db *d, int64_t after, db_admin_event_fn *fn, void *ctx, int64_t *last)
+{
+    struct action {
+        char kind[8];
+        int64_t session_id;
+        char name[DB_ACCOUNT_NAME_MAX + 1];
+    } *batch = calloc(FEED_BATCH, sizeof *batch);
+    sqlite3_stmt *st = batch ? prepare(d, "SELECT id, kind, coalesce(session_id, 0), coalesce(name, '') "
+                                          "FROM admin_events WHERE id > ?1 ORDER BY id LIMIT ?2")
+                             : NULL;
+    int n = 0, rc;
+
+    if (!st) {
+        free(batch);
+        return batch ? -1 : db__fail(d, "out of memory");
+    }
+    sqlite3_bind_int64(st, 1, after);
+    sqlite3_bind_int(st, 2, FEED_BATCH);
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+        const unsigned char *kind = sqlite3_column_text(st, 1), *name = sqlite3_column_text(st, 3);
+        *last = sqlite3_column_int64(st, 0);
+        snprintf(batch[n].kind, sizeof batch[n].kind, "%s", kind ? (const char *)kind : "");
+        batch[n].session_id = sqlite3_column_int64(st, 2);
+        snprintf(batch[n].name, sizeof batch[n].name, "%s", name ? (const char *)name : "");
+        n++;
+    }
+    if (rc != SQLITE_DONE)
+        sql_fail(d);
+    sqlite3_finalize(st);
+    for (int i = 0; i < n; i++)
+        fn(ctx, batch[i].kind, batch[i].session_id, batch[i].name);
+    free(batch);
+    return rc == SQLITE_DONE ? 0 : -1;
+}
+
+int db_admin_events_head(db *d, int64_t *last)
+{
+    sqlite3_stmt *st = prepare(d, "SELECT coalesce(max(id), 0) FROM admin_events");
+    int rc;
+
+    if (!st)
+        return -1;
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW)
+        *last = sqlite3_column_int64(st, 0);
+    else
+        sql_fail(d);
+    sqlite3_finalize(st);
+    return rc == SQLITE_ROW ? 0 : -1;
+}

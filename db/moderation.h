@@ -1,0 +1,44 @@
+/*
+ * moderation.h: kicks and bans in the store, and the feed of them that a
+ * running server follows (schema: db/migrations/0006_moderation.sql).
+ *
+ * cvre-admin writes an action (db_kick, db_ban, db_unban); every running
+ * server reads the feed (db_admin_events) about every 100 ms and applies
+ * it: a kicked session gets bye and is closed, a banned name's sessions
+ * too, and the auth worker refuses a banned name's joins (db_banned).
+ *
+ * Functions return 0 or -1 with the message in db_error(), except where a
+ * DB_MOD_* answer is said; those that write use one transaction of their
+ * own and must not be called inside one.
+ */
+#ifndef CVRE_MODERATION_H
+#define CVRE_MODERATION_H
+
+#include <stdint.h>
+
+#include "db.h"
+
+/* db_kick: no session of that id is open. Nothing written. */
+#define DB_MOD_NO_SESSION (-2)
+/* db_unban: the name is not banned. Nothing written. */
+#define DB_MOD_NOT_BANNED (-3)
+
+/* Asks running servers to disconnect session id. */
+int db_kick(db *d, int64_t session_id, double at);
+/* Bars name (1..32 bytes) from joining until `until` (0: until unbanned)
+ * and asks running servers to disconnect its sessions. Banning a banned
+ * name sets its new end. An account's resume tokens are revoked too. */
+int db_ban(db *d, const char *name, double until, double at);
+int db_unban(db *d, const char *name, double at);
+/* 1 and *until (0: no end) if name is banned at `now`, 0 if not, -1. */
+int db_banned(db *d, const char *name, double now, double *until);
+
+/* The feed: calls fn for each action with id > after, in id order (kind
+ * "kick" with session_id, or "ban" / "unban" with name), and sets *last to
+ * the last id seen. Actions are read in one batch before fn is called. */
+typedef void db_admin_event_fn(void *ctx, const char *kind, int64_t session_id, const char *name);
+int db_admin_events(db *d, int64_t after, db_admin_event_fn *fn, void *ctx, int64_t *last);
+/* The newest action's id, 0 if none (where a starting server begins). */
+int db_admin_events_head(db *d, int64_t *last);
+
+#endif
