@@ -403,7 +403,11 @@ int db_account_delete(db *d, const char *name, int64_t *objects)
         *objects = 0;
     if (begin_write(d) < 0)
         return -1;
-    return end_write(d, delete_locked(d, name, objects));
+    int rc = delete_locked(d, name, objects);
+    /* running servers end its sessions and hand its objects to the world */
+    if (rc == 0)
+        rc = db__admin_event(d, "deleted", 0, name, db_now());
+    return end_write(d, rc);
 }
 
 int db_account_set_password(db *d, const char *name, const char *password, size_t password_len, double at)
@@ -436,6 +440,8 @@ int db_account_set_password(db *d, const char *name, const char *password, size_
     }
     if (rc == 0 && db_account_tokens_revoke(d, a.id) < 0)
         rc = -1;
+    if (rc == 0) /* a new password logs every device out, running servers too */
+        rc = db__admin_event(d, "logout", 0, a.name, at);
     return end_write(d, rc);
 }
 

@@ -11,4 +11,9 @@
  * `return db__fail(d, ...)` in the store's error convention. */
 int db__fail(db *d, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
+/* Appends an action to the admin feed (moderation.c), inside the caller's
+ * write transaction: kind as the admin_events table allows, session_id 0
+ * or name NULL when the kind takes none. */
+int db__admin_event(db *d, const char *kind, int64_t session_id, const char *name, double at);
+
 #endif

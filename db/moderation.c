@@ -34,8 +34,7 @@ static int finish(db *d, sqlite3_stmt *st)
     return rc == SQLITE_DONE || rc == SQLITE_ROW ? 0 : -1;
 }
 
-/* Appends an action to the feed (inside the caller's transaction). */
-static int feed(db *d, const char *kind, int64_t session_id, const char *name, double at)
+int db__admin_event(db *d, const char *kind, int64_t session_id, const char *name, double at)
 {
     sqlite3_stmt *st = prepare(d, "INSERT INTO admin_events(kind, session_id, name, at) VALUES (?1, ?2, ?3, ?4)");
 
@@ -79,7 +78,7 @@ int db_kick(db *d, int64_t session_id, double at)
         db__fail(d, "no session %lld is open", (long long)session_id);
         return end_write(d, DB_MOD_NO_SESSION);
     }
-    return end_write(d, feed(d, "kick", session_id, NULL, at));
+    return end_write(d, db__admin_event(d, "kick", session_id, NULL, at));
 }
 
 int db_ban(db *d, const char *name, double until, double at)
@@ -102,7 +101,7 @@ int db_ban(db *d, const char *name, double until, double at)
     sqlite3_bind_double(st, 3, at);
     rc = finish(d, st);
     if (rc == 0)
-        rc = feed(d, "ban", 0, name, at);
+        rc = db__admin_event(d, "ban", 0, name, at);
     rc = end_write(d, rc);
     /* a banned account's tokens go: it must not come back by resuming */
     if (rc == 0 && db_account_find(d, name, &acc) == 0 && db_account_tokens_revoke(d, acc.id) < 0)
@@ -127,7 +126,7 @@ int db_unban(db *d, const char *name, double at)
         return end_write(d, DB_MOD_NOT_BANNED);
     }
     if (rc == 0)
-        rc = feed(d, "unban", 0, name, at);
+        rc = db__admin_event(d, "unban", 0, name, at);
     return end_write(d, rc);
 }
 

@@ -2,10 +2,13 @@
  * moderation.h: kicks and bans in the store, and the feed of them that a
  * running server follows (schema: db/migrations/0006_moderation.sql).
  *
- * cvre-admin writes an action (db_kick, db_ban, db_unban); every running
- * server reads the feed (db_admin_events) about every 100 ms and applies
- * it: a kicked session gets bye and is closed, a banned name's sessions
- * too, and the auth worker refuses a banned name's joins (db_banned).
+ * cvre-admin writes an action (db_kick, db_ban, db_unban; db/account.c
+ * adds "logout" when an account's password changes and "deleted" when it
+ * goes); every running server reads the feed (db_admin_events) about
+ * every 100 ms and applies it: a kicked session gets bye and is closed, a
+ * banned, logged-out or deleted name's sessions too (a deleted account's
+ * objects pass to the world account), and the auth worker refuses a
+ * banned name's joins (db_banned).
  *
  * Functions return 0 or -1 with the message in db_error(), except where a
  * DB_MOD_* answer is said; those that write use one transaction of their
@@ -34,8 +37,9 @@ int db_unban(db *d, const char *name, double at);
 int db_banned(db *d, const char *name, double now, double *until);
 
 /* The feed: calls fn for each action with id > after, in id order (kind
- * "kick" with session_id, or "ban" / "unban" with name), and sets *last to
- * the last id seen. Actions are read in one batch before fn is called. */
+ * "kick" with session_id, or "ban", "unban", "logout", "deleted" with
+ * name), and sets *last to the last id seen. Actions are read in one
+ * batch before fn is called. */
 typedef void db_admin_event_fn(void *ctx, const char *kind, int64_t session_id, const char *name);
 int db_admin_events(db *d, int64_t after, db_admin_event_fn *fn, void *ctx, int64_t *last);
 /* The newest action's id, 0 if none (where a starting server begins). */

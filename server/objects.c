@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "alloc.h"
 #include "ecm.h"
@@ -290,6 +291,18 @@ static uint32_t request_of(const proto_msg *m)
     case PROTO_OBJECT_UPLOAD_END: return m->u.upload_end.upload_id;
     case PROTO_OBJECT_PLACE: return m->u.object_place.object_id;
     default: return m->u.object_id;
+    }
+}
+
+void objects__owner_gone(server *s, const char *owner)
+{
+    for (uint32_t i = 0; i < scene_count(s->scene); i++) {
+        const scene_object *o = scene_at(s->scene, i);
+        if (strcasecmp(o->owner, owner) != 0)
+            continue;
+        scene_set_owner(s->scene, o->id, WORLD_OWNER);
+        log_info("object %u \"%s\": its owner %s was deleted; it is the world's now", o->id, o->name, owner);
+        broadcast_info(s, o, NULL, 0);
     }
 }
 

@@ -940,25 +940,34 @@ static void begin_shutdown(server *s, const char *why)
         say_bye(s, s->clients[i], PROTO_BYE_SHUTDOWN, "shutdown");
 }
 
-/* One admin action from the store's feed: a kick ends one session, a ban
+/* One admin action from the store's feed: a kick ends one session; a ban
  * every session joined under the name (the auth worker refuses its joins
- * from now on). */
+ * from now on), a new password or a deleted account that account's
+ * sessions (and a deleted account's objects pass to the world). */
 static void on_admin_event(void *ctx, const char *kind, int64_t session_id, const char *name)
 {
+    static const struct {
+        const char *kind, *why;
+    } ends[] = {{"kick", "kicked"}, {"ban", "banned"}, {"logout", "logged out: the password changed"},
+                {"deleted", "the account was deleted"}};
     server *s = ctx;
-    int ban = strcmp(kind, "ban") == 0;
-    if (!ban && strcmp(kind, "kick") != 0) {
+    size_t k = 0;
+    while (k < sizeof ends / sizeof ends[0] && strcmp(kind, ends[k].kind) != 0)
+        k++;
+    if (k == sizeof ends / sizeof ends[0]) {
         log_info("admin: %s %s", kind, name);
         return;
     }
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
         const world_avatar *a = c->avatar_id ? world_get(s->world, c->avatar_id) : NULL;
-        if (ban ? !(a && strcasecmp(a->name, name) == 0) : c->session_id != session_id)
+        if (k == 0 ? c->session_id != session_id : !(a && strcasecmp(a->name, name) == 0))
             continue;
-        log_info("%s (session %lld): %s by an admin", c->peer, (long long)c->session_id, ban ? "banned" : "kicked");
-        say_bye(s, c, PROTO_BYE_KICKED, ban ? "banned" : "kicked");
+        log_info("%s (session %lld): %s", c->peer, (long long)c->session_id, ends[k].why);
+        say_bye(s, c, PROTO_BYE_KICKED, ends[k].why);
     }
+    if (strcmp(kind, "deleted") == 0)
+        objects__owner_gone(s, name);
 }
 
 static void on_signal(ev_loop *loop, int fd, unsigned events, void *data)

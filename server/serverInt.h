@@ -152,6 +152,9 @@ void objects__stop(server *s);
 void objects__on_message(server *s, client *c, const proto_msg *m);
 /* Sends c every object in the world (after its join). */
 void objects__send_all(server *s, client *c);
+/* The objects of a deleted account pass to the world (the store did the
+ * same); every client hears of the new owner. */
+void objects__owner_gone(server *s, const char *owner);
 /* Frees what c's unfinished upload holds. */
 void objects__client_gone(server *s, client *c);
 

@@ -12,12 +12,14 @@ CREATE TABLE bans (
 );
 
 -- The actions a running server applies within a second: kick a session
--- (session_id), or ban (disconnect every session joined under name) or
--- unban a name. AUTOINCREMENT: ids are never reused, so a follower that
+-- (session_id); ban (disconnect every session joined under name) or unban
+-- a name; logout (an account's password changed: its sessions end) and
+-- deleted (an account is gone: its sessions end, its objects are the world
+-- account's). AUTOINCREMENT: ids are never reused, so a follower that
 -- remembers the last id it saw misses nothing.
 CREATE TABLE admin_events (
     id          INTEGER PRIMARY KEY AUTOINCREMENT,
-    kind        TEXT    NOT NULL CHECK (kind IN ('kick', 'ban', 'unban')),
+    kind        TEXT    NOT NULL CHECK (kind IN ('kick', 'ban', 'unban', 'logout', 'deleted')),
     session_id  INTEGER,                      -- kick
     name        TEXT,                         -- ban, unban
     at          REAL    NOT NULL

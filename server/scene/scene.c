@@ -264,6 +264,15 @@ int scene_place(scene *s, uint32_t id, const proto_transform *at)
     return 0;
 }
 
+int scene_set_owner(scene *s, uint32_t id, const char *owner)
+{
+    object *o = find(s, id, NULL);
+    if (!o)
+        return -ENOENT;
+    snprintf(o->pub.owner, sizeof o->pub.owner, "%s", owner);
+    return 0;
+}
+
 int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxes, uint32_t count)
 {
     object *o = find(s, id, NULL);

@@ -73,6 +73,9 @@ int scene_place(scene *s, uint32_t id, const proto_transform *at);
  * Returns 0, -ENOENT, -EINVAL as scene_add, or -ENOMEM (the object keeps
  * its boxes). */
 int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxes, uint32_t count);
+/* Gives object id to owner (a deleted account's objects pass to the world
+ * account). 0 or -ENOENT. */
+int scene_set_owner(scene *s, uint32_t id, const char *owner);
 
 /* The object, or NULL. Valid until the next change to the scene. */
 const scene_object *scene_get(const scene *s, uint32_t id);

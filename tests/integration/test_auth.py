@@ -105,6 +105,30 @@ def test_objects_belong_to_accounts():
     assert srv.stop() == 0
 
 
+def test_password_change_and_deletion_reach_a_running_server():
+    """A new password ends the account's sessions; a deleted account's
+    sessions end and its objects pass to the world, which everyone hears."""
+    srv = Server(A.bin)
+    w = Raw(srv.port)
+    w.handshake("witness")
+    ann = Raw(srv.port)
+    ann.handshake("ann", srv.account("ann"))
+    obj = upload(ann, 1, open(ROOM, "rb").read(), "room.stl", fmt="stl", up=1)
+    p = subprocess.run([os.path.join(A.bin, "cvre-admin"), "--db", srv.db, "user", "passwd", "ann",
+                        "--password-stdin"], input="new-pw\n", capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p
+    assert [m for m in ann.wait_closed(5) if m["type"] == "bye"], "ann was not logged out"
+    ann = Raw(srv.port)
+    ann.handshake("ann", "new-pw")
+    p = subprocess.run([os.path.join(A.bin, "cvre-admin"), "--db", srv.db, "user", "del", "ann"],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p
+    assert [m for m in ann.wait_closed(5) if m["type"] == "bye"], "ann's session outlived her account"
+    m = w.expect("object", where=lambda m: m["id"] == obj["id"] and m["owner"] == "world")
+    still_moving(w, 1)
+    assert srv.stop() == 0
+
+
 def test_upload_quotas():
     """Two objects an account, counted from the store: the third is
     refused until one goes; another account has its own quota."""
@@ -233,5 +257,5 @@ def test_client_logs_in_from_the_environment():
 
 
 run([test_guests_accounts_and_tokens, test_objects_belong_to_accounts, test_required_mode_and_rate_limit,
-     test_abuse_limits, test_upload_quotas,
+     test_abuse_limits, test_upload_quotas, test_password_change_and_deletion_reach_a_running_server,
      test_collisions_carry_their_user_from_the_first_tick, test_client_logs_in_from_the_environment])
