@@ -1,9 +1,9 @@
 /* cvre-admin: read-only questions to a cvre database, safe while the server
- * runs, and a few changes: rolling a collision map back, and adding,
- * deleting and setting the password of accounts, which reopen the database
- * read-write for that command only. Flags, help texts and exit codes live
- * here; the SQL is in query.c, the accounts in user.c, the output forms in
- * out.c. */
+ * runs, and a few changes: rolling a collision map back, adding, deleting
+ * and setting the password of accounts, kicking sessions and banning names,
+ * which reopen the database read-write for that command only. Flags, help
+ * texts and exit codes live here; the SQL is in query.c, the accounts in
+ * user.c, kicks and bans in moderate.c, the output forms in out.c. */
 #include <errno.h>
 #include <getopt.h>
 #include <math.h>
@@ -17,6 +17,7 @@
 #include "account.h"
 #include "db.h"
 #include "map.h"
+#include "moderate.h"
 #include "out.h"
 #include "query.h"
 #include "user.h"
@@ -34,8 +35,8 @@ static const char usage[] =
     "\n"
     "Answers questions about a cvre database: the collision log, objects and\n"
     "their collision maps (ECM), users and sessions, accounts. It opens the file\n"
-    "read-only and can run while the server writes to it; only rollback and\n"
-    "user add, del and passwd write.\n"
+    "read-only and can run while the server writes to it; only rollback, user\n"
+    "add, del and passwd, kick, ban and unban write.\n"
     "\n"
     "Commands:\n"
     "  collisions [filters]      collisions, newest first (--object, --user, --since,\n"
@@ -45,7 +46,7 @@ static const char usage[] =
     "  versions ID               the ECM versions of an object and their history\n"
     "  diff ID A B               the boxes that differ between versions A and B of an object\n"
     "  rollback ID K             make version K's boxes the object's collision map again\n"
-    "                            (as a new version; the only command that writes)\n"
+    "                            (as a new version)\n"
     "  sessions                  who was connected when (--user, --since, --until, --limit)\n"
     "  clusters                  the latest clustering run's clusters (--object, --limit)\n"
     "  map --svg FILE            a picture of an object's collision map (--object ID,\n"
@@ -55,6 +56,11 @@ static const char usage[] =
     "  user del NAME             delete an account (its objects pass to the world account)\n"
     "  user list                 the accounts (never their password hashes)\n"
     "  user passwd NAME          set an account's password; asks for it (--password-stdin)\n"
+    "  kick SESSION              have the server close a session (see sessions)\n"
+    "  ban NAME [--minutes N]    bar a name from joining (N minutes, or until unbanned)\n"
+    "                            and close its sessions\n"
+    "  unban NAME                lift a name's ban\n"
+    "  bans                      the bans in force\n"
     "  help [COMMAND]            this text, or a command's (same as COMMAND --help)\n"
     "\n"
     "Options (before or after the command):\n"
@@ -76,7 +82,8 @@ static const char usage[] =
     "\n"
     "Exit status:\n"
     "  0  success (also when no rows match)\n"
-    "  1  the object, version, user or account asked about does not exist\n"
+    "  1  the object, version, user, account or open session asked about does not\n"
+    "     exist, or the name to unban is not banned\n"
     "  2  bad arguments (also: an empty or mistyped password)\n"
     "  3  the database cannot be used: missing or unreadable file, not a cvre\n"
     "     database, a schema version this build does not know, or a failed query\n"
@@ -97,7 +104,7 @@ struct command {
 #define ADMIN_POS_MAX 3
 
 enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32, OPT_SVG = 64,
-       OPT_MAPVERSION = 128, OPT_ADMIN = 256, OPT_PASSWORD_STDIN = 512 };
+       OPT_MAPVERSION = 128, OPT_ADMIN = 256, OPT_PASSWORD_STDIN = 512, OPT_MINUTES = 1024 };
 
 static const struct command commands[] = {
     {"collisions", OPT_OBJECT | OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_REGION | OPT_LIMIT, 0,
@@ -176,9 +183,9 @@ static const struct command commands[] = {
      "server publishes it to its clients like any other change. Prints the new\n"
      "version: object, version, parent, restores, reason, boxes, created, detail.\n"
      "\n"
-     "The one command that writes: after the usual read-only open has checked\n"
-     "the schema version, it opens the database read-write (it never migrates\n"
-     "one). Safe while the server runs.\n"
+     "It writes: after the usual read-only open has checked the schema version,\n"
+     "it opens the database read-write (it never migrates one). Safe while the\n"
+     "server runs.\n"
      "\n"
      "Exit 1 if there is no such object or version K; 4, with nothing written,\n"
      "if the object was removed, if K is in force or the version in force has\n"
@@ -282,6 +289,49 @@ static const struct command commands[] = {
      "a bad name or an empty, too long or mistyped password; 4, with nothing\n"
      "written, if the name is taken (add) or the account is world (del, passwd);\n"
      "3 if the database cannot be used or the write failed.\n"},
+    {"kick", 0, 0,
+     "usage: cvre-admin kick SESSION\n"
+     "\n"
+     "Asks every running server to close session SESSION (its number in\n"
+     "cvre-admin sessions and in the client's welcome): the client gets bye\n"
+     "(reason kicked) and is disconnected within about a second, and the\n"
+     "session ends with reason kicked. Nobody else notices. Nothing stops it\n"
+     "from joining again: ban its name for that. Prints the session: session,\n"
+     "user, peer, started, joined.\n"
+     "\n"
+     "It writes (an action in the admin_events feed that servers follow), after\n"
+     "the read-only open has checked the schema version; safe while the server\n"
+     "runs. Exit 1, nothing written, if no session SESSION is open; 3 if the\n"
+     "write failed.\n"},
+    {"ban", OPT_MINUTES, 0,
+     "usage: cvre-admin ban NAME [--minutes N]\n"
+     "\n"
+     "Bars NAME from joining, as an account or as a guest, in any letter case,\n"
+     "and asks every running server to close the sessions joined under it: they\n"
+     "get bye (reason kicked) within about a second, their sessions end with\n"
+     "reason banned, and their next join is refused (\"NAME is banned\"). An\n"
+     "account's resume tokens are revoked. A name may be banned before anyone\n"
+     "uses it. Banning a banned name sets its new end. Prints the ban: name,\n"
+     "until, since.\n"
+     "\n"
+     "  --minutes N       for N minutes (a whole number from 1 to 52596000, 100\n"
+     "                    years); without it, until unbanned\n"
+     "\n"
+     "A name is 1 to 32 bytes without control characters. It writes, like kick;\n"
+     "safe while the server runs. Exit 2 for a bad name or --minutes; 3 if the\n"
+     "write failed.\n"},
+    {"unban", 0, 0,
+     "usage: cvre-admin unban NAME\n"
+     "\n"
+     "Lifts NAME's ban (any letter case): it may join again at once. Prints the\n"
+     "ban it lifted: name, until, since. It writes, like kick; safe while the\n"
+     "server runs. Exit 1, nothing written, if NAME is not banned (a ban whose\n"
+     "time is up is not); 3 if the write failed.\n"},
+    {"bans", 0, 0,
+     "usage: cvre-admin bans\n"
+     "\n"
+     "The bans in force, oldest first: name, until (when it ends, or never:\n"
+     "until unbanned), since (when the name was banned).\n"},
 };
 
 static const char *prog = "cvre-admin";
@@ -424,7 +474,7 @@ static const struct command *find_command(const char *name)
 }
 
 enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT, O_SVG,
-       O_MAPVERSION, O_ADMIN, O_PASSWORD_STDIN };
+       O_MAPVERSION, O_ADMIN, O_PASSWORD_STDIN, O_MINUTES };
 
 /* Every command's options but --version, whose meaning depends on it. */
 #define SHARED_OPTIONS                                                                                              \
@@ -433,7 +483,8 @@ enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, 
         {"user", required_argument, 0, O_USER}, {"since", required_argument, 0, O_SINCE},                           \
         {"until", required_argument, 0, O_UNTIL}, {"region", required_argument, 0, O_REGION},                       \
         {"limit", required_argument, 0, O_LIMIT}, {"svg", required_argument, 0, O_SVG},                           \
-        {"admin", no_argument, 0, O_ADMIN}, {"password-stdin", no_argument, 0, O_PASSWORD_STDIN}
+        {"admin", no_argument, 0, O_ADMIN}, {"password-stdin", no_argument, 0, O_PASSWORD_STDIN},             \
+        {"minutes", required_argument, 0, O_MINUTES}
 
 static const struct option options[] = {
     SHARED_OPTIONS,
@@ -455,6 +506,7 @@ struct args {
     const char *svg;      /* map --svg */
     uint32_t map_version; /* map --version; 0: none given */
     user_request user;    /* user: --admin, --password-stdin (the verb and name come later) */
+    moderate_request mod; /* kick, ban, unban, bans: --minutes (the rest comes later) */
 };
 
 /* Parses options from argv[1..] (argv[0] names the program or the command).
@@ -467,7 +519,8 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
                                    [O_SINCE - O_OBJECT] = OPT_SINCE,   [O_UNTIL - O_OBJECT] = OPT_UNTIL,
                                    [O_REGION - O_OBJECT] = OPT_REGION, [O_LIMIT - O_OBJECT] = OPT_LIMIT,
                                    [O_SVG - O_OBJECT] = OPT_SVG,       [O_MAPVERSION - O_OBJECT] = OPT_MAPVERSION,
-                                   [O_ADMIN - O_OBJECT] = OPT_ADMIN,   [O_PASSWORD_STDIN - O_OBJECT] = OPT_PASSWORD_STDIN};
+                                   [O_ADMIN - O_OBJECT] = OPT_ADMIN,   [O_PASSWORD_STDIN - O_OBJECT] = OPT_PASSWORD_STDIN,
+                                   [O_MINUTES - O_OBJECT] = OPT_MINUTES};
     const struct option *table = cmd && (cmd->opts & OPT_MAPVERSION) ? map_options : options;
     const char *where = cmd ? cmd->name : NULL;
     int o, li = 0;
@@ -530,6 +583,12 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
             break;
         case O_ADMIN: a->user.admin = 1; break;
         case O_PASSWORD_STDIN: a->user.password_stdin = 1; break;
+        case O_MINUTES:
+            if (parse_int(optarg, 1, MODERATE_MINUTES_MAX, &n) < 0)
+                return usage_error(where, "--minutes wants a whole number from 1 to %lld, not \"%s\"",
+                                   MODERATE_MINUTES_MAX, optarg);
+            a->mod.minutes = n;
+            break;
         }
     }
     return 0;
@@ -594,6 +653,29 @@ static int user_arguments(int argc, char **argv, struct args *a)
     if ((r->verb == USER_ADD || r->verb == USER_PASSWD) && !r->password_stdin && !isatty(STDIN_FILENO))
         return usage_error("user", "%s",
                            "asks for the password on a terminal: give --password-stdin to read it from standard input");
+    return 0;
+}
+
+/* Checks the words after kick, ban or unban (argv[0..argc)) into a->mod:
+ * one session number or one name that may be banned; bans takes none.
+ * Returns 0 or the usage exit status. */
+static int moderate_arguments(const char *cmd, int argc, char **argv, struct args *a)
+{
+    moderate_request *r = &a->mod;
+    int want = r->verb == MODERATE_BANS ? 0 : 1;
+    long long n = 0;
+    if (argc > want)
+        return usage_error(cmd, "unexpected argument \"%s\"", argv[want]);
+    if (argc < want)
+        return usage_error(cmd, "%s", r->verb == MODERATE_KICK ? "wants a session number" : "wants a name");
+    if (r->verb == MODERATE_KICK && parse_int(argv[0], 1, INT64_MAX, &n) < 0)
+        return usage_error(cmd, "wants a positive whole number as the session, not \"%s\"", argv[0]);
+    if (r->verb == MODERATE_KICK)
+        r->session = n;
+    char why[128];
+    if ((r->verb == MODERATE_BAN || r->verb == MODERATE_UNBAN) && moderate_name_check(argv[0], why, sizeof why) < 0)
+        return usage_error(cmd, "not a name: %s", why);
+    r->name = want ? argv[0] : NULL;
     return 0;
 }
 
@@ -667,8 +749,11 @@ int main(int argc, char **argv)
     int positional = sub_argc - optind;
     if (strcmp(cmd->name, "user") == 0 && (rc = user_arguments(positional, sub_argv + optind, &a)) != 0)
         return rc;
-    if (strcmp(cmd->name, "user") == 0)
-        positional = 0; /* taken: a verb and a name, not numbers */
+    a.mod.verb = moderate_verb(cmd->name);
+    if (a.mod.verb >= 0 && (rc = moderate_arguments(cmd->name, positional, sub_argv + optind, &a)) != 0)
+        return rc;
+    if (strcmp(cmd->name, "user") == 0 || a.mod.verb >= 0)
+        positional = 0; /* taken: a verb, a name or a session, not object ids */
     if (positional > cmd->npos)
         return usage_error(cmd->name, "unexpected argument \"%s\"", sub_argv[optind + cmd->npos]);
     if (positional < cmd->npos)
@@ -716,6 +801,10 @@ int main(int argc, char **argv)
         return rollback(d, a.db, a.format, pos[0], (uint32_t)pos[1]);
     if (strcmp(cmd->name, "user") == 0) {
         rc = user_run(d, a.db, &a.user, a.format, err, sizeof err);
+        return exit_status(rc, err);
+    }
+    if (a.mod.verb >= 0) {
+        rc = moderate_run(d, a.db, &a.mod, a.format, err, sizeof err);
         return exit_status(rc, err);
     }
     rc = run_command(cmd, d, &a, pos);

@@ -91,6 +91,8 @@ static char *table_cell(sqlite3_stmt *st, int i, int kind)
     char buf[OUT_CELL_MAX];
     if (sqlite3_column_type(st, i) == SQLITE_NULL)
         return strcpy(xmalloc(2), "-");
+    if (kind == OUT_TIME && sqlite3_column_type(st, i) == SQLITE_TEXT)
+        kind = OUT_TEXT; /* a word instead of a time: never */
     switch (kind) {
     case OUT_INT: snprintf(buf, sizeof buf, "%lld", (long long)sqlite3_column_int64(st, i)); break;
     case OUT_REAL: snprintf(buf, sizeof buf, "%.3f", sqlite3_column_double(st, i)); break;
@@ -150,6 +152,8 @@ static void stream_cell(out *o, sqlite3_stmt *st, int i)
             fputs("null", o->f);
         return;
     }
+    if (kind == OUT_TIME && sqlite3_column_type(st, i) == SQLITE_TEXT)
+        kind = OUT_TEXT; /* a word instead of a time: never */
     double v = kind == OUT_INT || kind == OUT_BOOL || kind == OUT_TEXT ? 0 : sqlite3_column_double(st, i);
     switch (kind) {
     case OUT_INT: fprintf(o->f, "%lld", (long long)sqlite3_column_int64(st, i)); break;

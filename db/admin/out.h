@@ -23,7 +23,8 @@ enum out_format { OUT_TABLE, OUT_CSV, OUT_JSON };
 enum out_kind {
     OUT_INT,      /* integer */
     OUT_REAL,     /* real number */
-    OUT_TIME,     /* Unix seconds (REAL), printed as ISO-8601 UTC */
+    OUT_TIME,     /* Unix seconds (REAL), printed as ISO-8601 UTC; a TEXT value
+                   * (a word such as "never") is printed as text */
     OUT_SECONDS,  /* a duration in seconds: h:mm:ss in a table, a number otherwise */
     OUT_BOOL,     /* 0/1: yes/no in a table, true/false in JSON, 1/0 in CSV */
     OUT_TEXT
