@@ -102,6 +102,7 @@ static void *run_job(void *ctx, void *arg)
     int rc = 0;
 
     r->session = job->session;
+    r->credential = job->credential;
     snprintf(r->name, sizeof r->name, "%s", job->name); /* an account's spelling replaces it */
     if (job->credential == PROTO_CRED_NONE) {
         admit_guest(a, job, r);

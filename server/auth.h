@@ -9,7 +9,8 @@
  * "guest<session>:<name>", so that one person is one user to clustering),
  * and, for an account, issues the next resume token. Results come back
  * through an eventfd (auth_fd) as the importer's do. Jobs wait at most
- * AUTH_QUEUE_MAX at once: a flood of logins is refused, not queued.
+ * AUTH_QUEUE_MAX at once, of which the caller lets at most AUTH_LOGINS_MAX
+ * carry a credential: a flood of logins is refused, not queued.
  */
 #ifndef CVRE_AUTH_H
 #define CVRE_AUTH_H
@@ -19,10 +20,12 @@
 
 #include "proto.h"
 
-/* Logins waiting at once. Each password costs the worker one Argon2id
- * verification, one after the other: 32 is some 5 s of work, past which a
- * client would rather hear "try again" than wait. */
-#define AUTH_QUEUE_MAX 32u
+/* Joins waiting at once. A guest's costs one small write (the bot swarm
+ * joins 1,000 a second); a login one Argon2id verification, one after the
+ * other: 32 logins are some 5 s of work, past which a client would rather
+ * hear "try again" than wait. */
+#define AUTH_QUEUE_MAX 4096u
+#define AUTH_LOGINS_MAX 32u
 /* How long a resume token lasts: a week of coming back without a password. */
 #define AUTH_TOKEN_LIFETIME_S (7.0 * 86400.0)
 
@@ -38,6 +41,7 @@ typedef struct auth_job {
 
 typedef struct auth_result {
     int64_t session;
+    uint8_t credential;                   /* the job's: a login, or a guest's join */
     int status;                           /* 0, PROTO_ERR_AUTH or PROTO_ERR_INTERNAL */
     char message[PROTO_MESSAGE_MAX + 1];  /* for the client when status is not 0 */
     char name[PROTO_NAME_MAX + 1];        /* the display name: an account's as stored; the

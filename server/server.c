@@ -297,6 +297,10 @@ static void on_join(server *s, client *c, const proto_join *m)
         return;
     }
     if (m->credential != PROTO_CRED_NONE) {
+        if (s->logins_pending >= AUTH_LOGINS_MAX) {
+            server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "too many logins at once: try again in a moment");
+            return;
+        }
         if (!ratelimit_take(s->logins, c->addr, server__now(s))) {
             server__protocol_error(s, c, PROTO_ERR_RATE_LIMITED,
                                    "too many logins from your address: wait a few seconds");
@@ -311,6 +315,7 @@ static void on_join(server *s, client *c, const proto_join *m)
         server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "too many joins at once: try again in a moment");
         return;
     }
+    s->logins_pending += m->credential != PROTO_CRED_NONE;
     c->state = ST_AUTH;
     watch(s, c);
 }
@@ -358,6 +363,7 @@ static void on_auth_results(ev_loop *loop, int fd, unsigned events, void *data)
     auth_result r;
     while (auth_take(s->auth, &r) == 0) {
         client *c = server__client_by_session(s, r.session);
+        s->logins_pending -= r.credential != PROTO_CRED_NONE;
         if (c && c->state == ST_AUTH && !c->closing) {
             c->state = ST_JOIN;
             if (r.status == PROTO_ERR_AUTH)

@@ -123,6 +123,7 @@ struct server {
     scene *scene;
     importer *importer;
     auth *auth;          /* joins' credentials, checked off the loop */
+    uint32_t logins_pending; /* joins with a credential at the auth worker */
     ratelimit *logins;   /* logins per address */
     ratelimit *joins;    /* joins per address; NULL: no limit */
     addrcount *per_address; /* connections open per address */

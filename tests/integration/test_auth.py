@@ -162,12 +162,13 @@ def test_required_mode_and_rate_limit():
     w.handshake("ann", srv.account("ann"))
     assert "accounts only" in refused_join(srv.port, "visitor", E["AUTH_REQUIRED"])
     # 5 logins at once, then one every 2 s: the witness's took one
-    codes = []
-    for i in range(6):
-        c = Raw(srv.port)
+    # (sent together: one after the other, the checks' time would refill it)
+    cs = [Raw(srv.port) for _ in range(6)]
+    for i, c in enumerate(cs):
         c.send(hello() + join("ann", password="guess%d" % i))
-        codes.append([m for m in c.wait_closed() if m["type"] == "error"][0]["code"])
-    assert codes[:4] == [E["AUTH"]] * 4 and codes[-1] == E["RATE_LIMITED"], codes
+    codes = sorted([m for m in c.wait_closed(30) if m["type"] == "error"][0]["code"] for c in cs)
+    # six past a burst of five (less what refilled since the witness's)
+    assert set(codes) == {E["AUTH"], E["RATE_LIMITED"]} and codes.count(E["AUTH"]) >= 4, codes
     still_moving(w, 1)
     time.sleep(2.2)  # a token comes back
     ok = Raw(srv.port)

@@ -118,13 +118,14 @@ def test_doorway_opens_live_and_walls_stay():
     # boxes (only the strip behind the door was wanted at first); walking
     # there makes collisions against the version in force, which the next
     # round opens, until nothing stops the crowd.
+    # They keep pressing until they are through: the test waits for that
+    # event, not for a number of rounds in a given time, which a slow
+    # (sanitized, loaded) machine did not always fit.
     inner = ["u1", "u2", "u3", "u4"]
-    for _ in range(4):
-        crowd.walk({n: (7, 0, -3.9) for n in inner}, 1.0)
-        if crowd.at("u1")[2] < -3.8:
-            break
-        crowd.wait_version(room, max(m["ecm_version"] for m in crowd.infos if m["id"] == room) + 1)
-    assert crowd.at("u1")[2] < -3.8, crowd.at("u1")
+    deadline = time.time() + 60
+    while crowd.at("u1")[2] >= -3.8 and time.time() < deadline:
+        crowd.walk({n: (7, 0, -3.9) for n in inner}, 0.5)
+    assert crowd.at("u1")[2] < -3.8, (crowd.at("u1"), [(m["id"], m["ecm_version"]) for m in crowd.infos])
     assert max(m["ecm_version"] for m in crowd.infos if m["id"] == room) >= 3
     # The east wall beside the door still blocks (z = -0.8 is solid wall).
     crowd.walk({"wallbumper": (14, 0, -0.8)}, 0.5)
