@@ -91,8 +91,10 @@ int db_ban(db *d, const char *name, double until, double at)
         return db__fail(d, "ban: a name is 1 to %u bytes", DB_ACCOUNT_NAME_MAX);
     if (db_begin(d) != 0)
         return -1;
+    /* a ban in force gets its new end; the row of one whose time was up is a new ban */
     st = prepare(d, "INSERT INTO bans(name, until, created_at) VALUES (?1, ?2, ?3) "
-                    "ON CONFLICT(name) DO UPDATE SET until = excluded.until");
+                    "ON CONFLICT(name) DO UPDATE SET until = excluded.until, created_at = CASE WHEN bans.until "
+                    "<= excluded.created_at THEN excluded.created_at ELSE bans.created_at END");
     if (!st)
         return end_write(d, -1);
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);

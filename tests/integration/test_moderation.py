@@ -195,10 +195,15 @@ def test_refusals_and_help():
     # a ban whose time is up is no ban
     admin("ban", "eve", "--minutes", "1", db=srv.db)
     with closing(sqlite3.connect(srv.db)) as con:
-        con.execute("UPDATE bans SET until = until - 120")
+        con.execute("UPDATE bans SET until = until - 120, created_at = created_at - 86400")
         con.commit()
     assert bans(srv.db) == {}
     admin("unban", "eve", db=srv.db, check=1)
+    _, out, _ = admin("ban", "eve", "--json", db=srv.db)  # a new ban, not the old one's row
+    (eve,) = json.loads(out)
+    with closing(sqlite3.connect(srv.db)) as con:
+        (since,), = con.execute("SELECT created_at FROM bans").fetchall()
+    assert eve == {"name": "eve", "until": "never", "since": iso(since)} and since > time.time() - 60, eve
 
     _, out, _ = admin("--help")
     for line in ("kick SESSION", "ban NAME [--minutes N]", "unban NAME", "bans "):
