@@ -82,23 +82,67 @@ __attribute__((format(printf, 4, 5))) static int say(char *err, size_t errlen, i
     return rc;
 }
 
-/* What the pipes carried and how the helper ended. */
+/* What the pipes carried and how the helper ended. The answer's head is
+ * read into head; once it parses, its triangles go straight into tris,
+ * the array the caller keeps. */
 typedef struct exchange {
-    uint8_t *answer;
-    size_t have, cap;
-    int too_large;  /* the answer passed its largest size: the helper was killed */
-    int timed_out;  /* the wall-clock deadline passed: the helper was killed */
-    int status;     /* waitpid's */
+    uint32_t max_triangles;
+    uint8_t head[IMPORT_PIPE_ANSWER_HEAD];
+    size_t head_have;
+    long head_len;        /* 0 until the head parses */
+    import_pipe_head h;
+    float *tris;
+    size_t tris_have, tris_need;
+    int bad;              /* EPROTO or EFBIG: the answer broke the form; the helper was killed */
+    char why[256];        /* for bad */
+    int timed_out;        /* the wall-clock deadline passed: the helper was killed */
+    int status;           /* waitpid's */
 } exchange;
 
+/* Takes n bytes of answer from p. 0, or -ENOMEM; a broken answer sets
+ * x->bad (the caller kills the helper). */
+static int take_answer(exchange *x, const uint8_t *p, size_t n)
+{
+    if (x->head_len == 0) {
+        size_t k = n < sizeof x->head - x->head_have ? n : sizeof x->head - x->head_have;
+        memcpy(x->head + x->head_have, p, k);
+        x->head_have += k;
+        x->head_len = import_pipe_answer_head(x->head, x->head_have, x->max_triangles, &x->h, x->why, sizeof x->why);
+        if (x->head_len < 0) {
+            x->bad = (int)-x->head_len;
+            return 0;
+        }
+        if (x->head_len == 0) {
+            if (x->head_have == sizeof x->head)
+                x->bad = EPROTO, snprintf(x->why, sizeof x->why, "the importer's answer has no valid header");
+            return 0;
+        }
+        x->tris_need = x->h.status == 0 ? (size_t)x->h.ntris * 36u : 0;
+        if (x->tris_need && !(x->tris = cvre_malloc(x->tris_need)))
+            return -ENOMEM;
+        /* what came after the head is the start of the triangles */
+        p += k - (x->head_have - (size_t)x->head_len);
+        n -= k - (x->head_have - (size_t)x->head_len);
+    }
+    if (n > x->tris_need - x->tris_have) {
+        x->bad = EPROTO;
+        snprintf(x->why, sizeof x->why, "the importer answered more than its %u triangles", x->h.ntris);
+        return 0;
+    }
+    memcpy((uint8_t *)x->tris + x->tris_have, p, n);
+    x->tris_have += n;
+    return 0;
+}
+
 /* Feeds head then data to *fd_in (closed and set to -1 once all is sent)
- * while reading fd_out into x, until the helper closes its stdout, the
- * answer grows past max, or the deadline. Returns 0 or -errno
- * (x->too_large / x->timed_out set when it killed the helper). */
+ * while reading the answer from fd_out into x, until the helper closes its
+ * stdout, breaks the answer's form, or the deadline. Returns 0 or -errno
+ * (x->bad / x->timed_out set when it killed the helper). */
 static int talk(pid_t pid, int *fd_in, int fd_out, const uint8_t *head, size_t head_len,
-                const uint8_t *data, size_t len, uint64_t max, double deadline, exchange *x)
+                const uint8_t *data, size_t len, double deadline, exchange *x)
 {
     size_t sent = 0, total = head_len + len;
+    uint8_t buf[65536];
 
     fcntl(*fd_in, F_SETFL, O_NONBLOCK);
     fcntl(fd_out, F_SETFL, O_NONBLOCK);
@@ -130,31 +174,25 @@ static int talk(pid_t pid, int *fd_in, int fd_out, const uint8_t *head, size_t h
             }
         }
         if (pf[0].revents & (POLLIN | POLLERR | POLLHUP)) {
-            ssize_t k;
-            if (x->have == x->cap) {
-                size_t cap = x->cap ? x->cap * 2 : 65536;
-                uint8_t *b;
-                if (cap > max + 1)
-                    cap = (size_t)max + 1;
-                if (cap <= x->cap || !(b = cvre_realloc(x->answer, cap))) {
-                    if (cap <= x->cap) { /* over max by a byte at least */
-                        x->too_large = 1;
-                        kill(pid, SIGKILL);
-                        return 0;
-                    }
-                    kill(pid, SIGKILL);
-                    return -ENOMEM;
-                }
-                x->answer = b;
-                x->cap = cap;
-            }
-            k = read(fd_out, x->answer + x->have, x->cap - x->have);
+            /* the triangles straight into their array; the rest through buf */
+            int direct = x->head_len > 0 && x->tris_have < x->tris_need;
+            uint8_t *to = direct ? (uint8_t *)x->tris + x->tris_have : buf;
+            size_t room = direct ? x->tris_need - x->tris_have : sizeof buf;
+            ssize_t k = read(fd_out, to, room);
             if (k == 0)
                 return 0;
-            if (k > 0)
-                x->have += (size_t)k;
-            else if (errno != EAGAIN && errno != EINTR)
+            if (k < 0 && errno != EAGAIN && errno != EINTR)
                 return -errno;
+            if (k > 0 && direct)
+                x->tris_have += (size_t)k;
+            else if (k > 0 && take_answer(x, buf, (size_t)k) < 0) {
+                kill(pid, SIGKILL);
+                return -ENOMEM;
+            }
+            if (x->bad) {
+                kill(pid, SIGKILL);
+                return 0;
+            }
         }
     }
 }
@@ -187,7 +225,7 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     char mem[16], cpu[16], envbuf[3][512], *envp[4];
     char *argv[] = {(char *)p->helper, "--memory", mem, "--cpu", cpu, NULL};
     int to[2] = {-1, -1}, from[2] = {-1, -1}, rc;
-    exchange x = {0};
+    exchange x = {.max_triangles = opt ? opt->max_triangles : IMPORT_MAX_TRIANGLES};
     posix_spawn_file_actions_t fa;
     pid_t pid;
     double deadline = now_s() + IMPORT_PROC_WALL_SECONDS(p->cpu_seconds);
@@ -220,8 +258,7 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     }
     close(to[0]), to[0] = -1;
     close(from[1]), from[1] = -1;
-    rc = talk(pid, &to[1], from[0], head, head_len, data, len,
-              import_pipe_answer_max(opt->max_triangles), deadline, &x);
+    rc = talk(pid, &to[1], from[0], head, head_len, data, len, deadline, &x);
     reap(pid, deadline, &x);
     if (rc < 0) {
         say(err, errlen, rc, "import failed: reading the importer's answer: %s", strerror(-rc));
@@ -229,9 +266,10 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
                (WIFSIGNALED(x.status) && WTERMSIG(x.status) == SIGXCPU)) {
         rc = say(err, errlen, -ETIMEDOUT, "import failed: timed out (over %u s of CPU)",
                  (unsigned)p->cpu_seconds);
-    } else if (x.too_large) {
-        rc = say(err, errlen, -EFBIG, "import failed: too large (an answer over %u triangles)",
-                 (unsigned)opt->max_triangles);
+    } else if (x.bad == EFBIG) {
+        rc = say(err, errlen, -EFBIG, "import failed: too large (%s)", x.why);
+    } else if (x.bad) {
+        rc = say(err, errlen, -EPROTO, "import failed: bad answer from the importer: %s", x.why);
     } else if (WIFSIGNALED(x.status)) {
         rc = say(err, errlen, -ECHILD, "import failed: parser crashed (%s)",
                  WTERMSIG(x.status) == SIGSYS ? "a forbidden system call"
@@ -239,16 +277,24 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     } else if (!WIFEXITED(x.status) || WEXITSTATUS(x.status) != 0) {
         rc = say(err, errlen, -ECHILD, "import failed: the importer exited with status %d",
                  WIFEXITED(x.status) ? WEXITSTATUS(x.status) : -1);
-    } else if (x.have >= 14 && (int32_t)le_get_u32(x.answer + 8) == -ENOMEM) {
+    } else if (x.head_len <= 0 || x.tris_have != x.tris_need) {
+        rc = say(err, errlen, -EPROTO, "import failed: bad answer from the importer: it ended %s",
+                 x.head_len <= 0 ? "in its header" : "before its last triangle");
+    } else if (x.h.status == -ENOMEM) {
         rc = say(err, errlen, -EFBIG, "import failed: too large (over the importer's %u MB)",
                  (unsigned)p->memory_mb);
+    } else if (x.h.status != 0) {
+        rc = say(err, errlen, x.h.status, "%s", x.h.message);
+    } else if ((rc = import_pipe_answer_tris(x.tris, &x.h, x.why, sizeof x.why)) != 0) {
+        say(err, errlen, rc, "import failed: bad answer from the importer: %s", x.why);
     } else {
-        rc = import_pipe_answer(x.answer, x.have, opt->max_triangles, out, err, errlen);
-        if (rc == -EPROTO) {
-            char why[256];
-            snprintf(why, sizeof why, "%s", err);
-            say(err, errlen, rc, "import failed: bad answer from the importer: %s", why);
-        }
+        out->tris = x.tris;
+        out->ntris = x.h.ntris;
+        memcpy(out->min, x.h.box, sizeof out->min);
+        memcpy(out->max, x.h.box + 3, sizeof out->max);
+        x.tris = NULL;
+        if (errlen)
+            err[0] = 0;
     }
 cleanup:
     for (int i = 0; i < 2; i++) {
@@ -257,6 +303,6 @@ cleanup:
         if (from[i] >= 0)
             close(from[i]);
     }
-    free(x.answer);
+    free(x.tris);
     return rc;
 }

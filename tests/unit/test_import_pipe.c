@@ -73,8 +73,8 @@ static void test_answers(void **state)
     assert_int_equal(decode(b, n, 2, err), 0);
     for (size_t k = 0; k < n; k++) /* every truncation */
         assert_int_equal(decode(b, k, 2, err), -EPROTO);
-    assert_int_equal(decode(b, n, 1, err), -EPROTO); /* over the limit asked */
-    assert_non_null(strstr(err, "2 triangles"));
+    assert_int_equal(decode(b, n, 1, err), -EFBIG); /* over the limit asked */
+    assert_non_null(strstr(err, "2 triangles, over the limit of 1"));
     c = malloc(n + 1);
     memcpy(c, b, n);
     c[n] = 0;
