@@ -58,6 +58,7 @@
  * contain the rest.
  */
 #include "import.h"
+#include "importInt.h"
 
 #include <errno.h>
 #include <float.h>
@@ -104,8 +105,7 @@ static pthread_mutex_t assimp_lock = PTHREAD_MUTEX_INITIALIZER;
 /* Formats a message into err and returns rc. Bytes that are not
  * printable ASCII (from the hint, or file text quoted by Assimp) become
  * '?', so the message stays one line whatever the upload held. */
-__attribute__((format(printf, 4, 5))) static int fail(char *err, size_t errlen, int rc,
-                                                      const char *fmt, ...)
+int import__fail(char *err, size_t errlen, int rc, const char *fmt, ...)
 {
     va_list ap;
 
@@ -443,7 +443,7 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
     size_t bad = find_control(p, n);
 
     if (bad < n)
-        return fail(err, errlen, -EINVAL, "OBJ: control character at byte %zu", bad);
+        return import__fail(err, errlen, -EINVAL, "OBJ: control character at byte %zu", bad);
     for (size_t at = 0, eol; at < n; at = eol + 1) {
         size_t cur = at, wl;
         const unsigned char *w, *x;
@@ -452,34 +452,34 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
         for (eol = at; eol < n && p[eol] != '\n' && p[eol] != '\r'; eol++) /* CR ends one too */
             ;
         if (eol > at && p[eol - 1] == '\\')
-            return fail(err, errlen, -EINVAL, "OBJ line %llu: line continuations are not supported",
+            return import__fail(err, errlen, -EINVAL, "OBJ line %llu: line continuations are not supported",
                         line + 1);
         wl = next_word(p, eol, &cur, &w);
         vertex = kw_is(w, wl, "v") || kw_is(w, wl, "vt") || kw_is(w, wl, "vn");
         element = kw_is(w, wl, "f") || kw_is(w, wl, "l") || kw_is(w, wl, "p");
         if (wl && ((w != p + at && (vertex || element)) ||
                    (w == p + at && strchr("flpv", *w) && !vertex && !element)))
-            return fail(err, errlen, -EINVAL, "OBJ line %llu: unknown or indented statement",
+            return import__fail(err, errlen, -EINVAL, "OBJ line %llu: unknown or indented statement",
                         line + 1);
         if (vertex) {
             int k = 0;
             while ((xl = next_word(p, eol, &cur, &x)) != 0) {
                 if (!is_number(x, xl) || x[0] == '.')
-                    return fail(err, errlen, -EINVAL, "OBJ line %llu: malformed number", line + 1);
+                    return import__fail(err, errlen, -EINVAL, "OBJ line %llu: malformed number", line + 1);
                 k++;
             }
             if (wl == 1 ? k != 3 && k != 4 && k != 6 : w[1] == 'n' ? k != 3 : k < 1 || k > 3)
-                return fail(err, errlen, -EINVAL, "OBJ line %llu: wrong count of numbers",
+                return import__fail(err, errlen, -EINVAL, "OBJ line %llu: wrong count of numbers",
                             line + 1);
             vertices += wl == 1;
         } else if (element) {
             while ((xl = next_word(p, eol, &cur, &x)) != 0) {
                 long long v = 0;
                 if (!obj_vertex_ref(x, xl, &v) || v == 0)
-                    return fail(err, errlen, -EINVAL, "OBJ line %llu: malformed vertex index",
+                    return import__fail(err, errlen, -EINVAL, "OBJ line %llu: malformed vertex index",
                                 line + 1);
                 if (v < 0 && (unsigned long long)-v > vertices)
-                    return fail(err, errlen, -EINVAL,
+                    return import__fail(err, errlen, -EINVAL,
                                 "OBJ line %llu: vertex index %lld before the first vertex",
                                 line + 1, v);
                 if (v > highest)
@@ -491,10 +491,10 @@ static int check_obj(const unsigned char *p, size_t n, char *err, size_t errlen)
         line += eol < n && p[eol] == '\n';
     }
     if ((unsigned long long)highest > vertices)
-        return fail(err, errlen, -EINVAL, "OBJ vertex index %lld, but the file has %llu", highest,
+        return import__fail(err, errlen, -EINVAL, "OBJ vertex index %lld, but the file has %llu", highest,
                     vertices);
     if (parts > IMPORT_MAX_PARTS)
-        return fail(err, errlen, -EINVAL,
+        return import__fail(err, errlen, -EINVAL,
                     "%llu OBJ objects, groups and material switches, over the limit of %u", parts,
                     (unsigned)IMPORT_MAX_PARTS);
     return 0;
@@ -532,11 +532,11 @@ static int check_stl(const unsigned char *p, size_t n, char *err, size_t errlen)
     if (is_binary_stl(p, n))
         return 0;
     if ((at = find_control(p, n)) < n)
-        return fail(err, errlen, -EINVAL, "STL: control character at byte %zu", at);
+        return import__fail(err, errlen, -EINVAL, "STL: control character at byte %zu", at);
     at = 0;
     while ((wl = next_word(p, n, &at, &w)) != 0) {
         if (!kw_is(w, wl, "solid"))
-            return fail(err, errlen, -EINVAL, "STL: 'solid' expected at byte %zu", at - wl);
+            return import__fail(err, errlen, -EINVAL, "STL: 'solid' expected at byte %zu", at - wl);
         while (at < n && p[at] != '\n') /* the solid's name */
             at++;
         for (;;) {
@@ -544,19 +544,19 @@ static int check_stl(const unsigned char *p, size_t n, char *err, size_t errlen)
             if (kw_is(w, wl, "endsolid"))
                 break;
             if (!kw_is(w, wl, "facet"))
-                return fail(err, errlen, -EINVAL, "STL: facet or endsolid expected at byte %zu",
+                return import__fail(err, errlen, -EINVAL, "STL: facet or endsolid expected at byte %zu",
                             at - wl);
             for (size_t k = 0; k < sizeof facet / sizeof facet[0]; k++) {
                 const char *want = facet[k] + (facet[k][0] == '+');
                 wl = facet[k][0] == '+' ? same_line_word(p, n, &at, &w) : next_word(p, n, &at, &w);
                 if (want[0] == '#' ? !is_number(w, wl) : !kw_is(w, wl, want))
-                    return fail(err, errlen, -EINVAL, "STL: malformed facet at byte %zu", at);
+                    return import__fail(err, errlen, -EINVAL, "STL: malformed facet at byte %zu", at);
             }
         }
         while (at < n && p[at] != '\n') /* the name again */
             at++;
         if (++solids > IMPORT_MAX_PARTS)
-            return fail(err, errlen, -EINVAL, "more than %u STL solids",
+            return import__fail(err, errlen, -EINVAL, "more than %u STL solids",
                         (unsigned)IMPORT_MAX_PARTS);
     }
     return 0;
@@ -674,7 +674,7 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             continue;
         if (kw_is(w[0], wl[0], "end_header")) {
             if (!have_format)
-                return (size_t)fail(err, errlen, 0, "PLY header has no format line");
+                return (size_t)import__fail(err, errlen, 0, "PLY header has no format line");
             return at;
         }
         if (kw_is(w[0], wl[0], "format") && k >= 2) {
@@ -682,14 +682,14 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             h->ascii = kw_is(w[1], wl[1], "ascii");
             h->big_endian = kw_is(w[1], wl[1], "binary_big_endian");
             if (!h->ascii && !h->big_endian && !kw_is(w[1], wl[1], "binary_little_endian"))
-                return (size_t)fail(err, errlen, 0, "PLY format is not ascii or binary");
+                return (size_t)import__fail(err, errlen, 0, "PLY format is not ascii or binary");
         } else if (kw_is(w[0], wl[0], "element")) {
             ply_elem *e;
             if (h->nelems == IMPORT_MAX_PLY_PROPERTIES)
-                return (size_t)fail(err, errlen, 0, "PLY header declares too many elements");
+                return (size_t)import__fail(err, errlen, 0, "PLY header declares too many elements");
             e = &h->elems[h->nelems++];
             if (k < 3 || !parse_u32(w[2], wl[2], &e->count))
-                return (size_t)fail(err, errlen, 0, "PLY element line without a count");
+                return (size_t)import__fail(err, errlen, 0, "PLY element line without a count");
             e->first = h->nprops;
             in_props = 1;
             continue;
@@ -697,25 +697,25 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             ply_prop *q;
             int kind, count_kind;
             if (!in_props)
-                return (size_t)fail(err, errlen, 0, "PLY property outside an element");
+                return (size_t)import__fail(err, errlen, 0, "PLY property outside an element");
             if (h->nprops == IMPORT_MAX_PLY_PROPERTIES)
-                return (size_t)fail(err, errlen, 0, "PLY header declares over %d properties",
+                return (size_t)import__fail(err, errlen, 0, "PLY header declares over %d properties",
                                     IMPORT_MAX_PLY_PROPERTIES);
             q = &h->props[h->nprops++];
             h->elems[h->nelems - 1].nprops++;
             if (k >= 2 && kw_is(w[1], wl[1], "list")) {
                 if (k < 4 || !(q->count_size = ply_type(w[2], wl[2], &count_kind)) ||
                     count_kind == PLY_FLOAT || !(q->size = ply_type(w[3], wl[3], &kind)))
-                    return (size_t)fail(err, errlen, 0, "PLY list property of unknown type");
+                    return (size_t)import__fail(err, errlen, 0, "PLY list property of unknown type");
                 q->count_signed = count_kind == PLY_SIGNED;
             } else if (k < 2 || !(q->size = ply_type(w[1], wl[1], &kind))) {
-                return (size_t)fail(err, errlen, 0, "PLY property of unknown type");
+                return (size_t)import__fail(err, errlen, 0, "PLY property of unknown type");
             }
             continue;
         }
         in_props = 0; /* format, obj_info or a line Assimp skips */
     }
-    return (size_t)fail(err, errlen, 0, "PLY header has no end_header line");
+    return (size_t)import__fail(err, errlen, 0, "PLY header has no end_header line");
 }
 
 /* Reads a list length of q->count_size bytes at p; -1 if negative. */
@@ -776,18 +776,18 @@ static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
      * PLY line at a CR, so one may only come before a line feed */
     text = h.ascii ? n : at;
     if ((bad = find_control(p, text)) < text)
-        return fail(err, errlen, -EINVAL, "PLY: control character at byte %zu", bad);
+        return import__fail(err, errlen, -EINVAL, "PLY: control character at byte %zu", bad);
     for (size_t i = 0; i < text; i++)
         if (p[i] == '\r' && (i + 1 == n || p[i + 1] != '\n'))
-            return fail(err, errlen, -EINVAL, "PLY: carriage return inside a line at byte %zu", i);
+            return import__fail(err, errlen, -EINVAL, "PLY: carriage return inside a line at byte %zu", i);
     for (uint32_t e = 0; e < h.nelems; e++) {
         const ply_elem *el = &h.elems[e];
         if (el->count > 0 && el->nprops == 0)
-            return fail(err, errlen, -EINVAL, "PLY element %u has no properties", e);
+            return import__fail(err, errlen, -EINVAL, "PLY element %u has no properties", e);
         /* Every value takes at least a byte: refuse impossible counts
          * before walking them. */
         if ((uint64_t)el->count * el->nprops > n - at)
-            return fail(err, errlen, -EINVAL,
+            return import__fail(err, errlen, -EINVAL,
                         "PLY header declares %u of element %u, more than the file holds", el->count,
                         e);
         for (uint32_t i = 0; i < el->count; i++) {
@@ -797,10 +797,10 @@ static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
                     eol++;
                 line++;
                 if (at >= n)
-                    return fail(err, errlen, -EINVAL,
+                    return import__fail(err, errlen, -EINVAL,
                                 "PLY data ends before the elements its header declares");
                 if (!ply_ascii_line(p, at, eol, &h, el))
-                    return fail(err, errlen, -EINVAL,
+                    return import__fail(err, errlen, -EINVAL,
                                 "PLY data line %zu does not match its element %u", line, e);
                 at = eol < n ? eol + 1 : n;
                 continue;
@@ -810,13 +810,13 @@ static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
                 int64_t items = 1;
                 if (q->count_size) {
                     if (n - at < q->count_size)
-                        return fail(err, errlen, -EINVAL,
+                        return import__fail(err, errlen, -EINVAL,
                                     "PLY data ends before the elements its header declares");
                     items = ply_get_count(p + at, q, h.big_endian);
                     at += q->count_size;
                 }
                 if (items < 0 || (uint64_t)items > (n - at) / q->size)
-                    return fail(err, errlen, -EINVAL,
+                    return import__fail(err, errlen, -EINVAL,
                                 "PLY data ends before the elements its header declares");
                 at += (size_t)items * q->size;
             }
@@ -1165,16 +1165,16 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
         elements_max = IMPORT_MAX_GLB_ELEMENTS;
 
     if (n < 20)
-        return fail(err, errlen, -EINVAL, "GLB shorter than its header");
+        return import__fail(err, errlen, -EINVAL, "GLB shorter than its header");
     if (le_get_u32(p + 4) != 2)
-        return fail(err, errlen, -EINVAL, "GLB version %u (only glTF 2.0 is supported)",
+        return import__fail(err, errlen, -EINVAL, "GLB version %u (only glTF 2.0 is supported)",
                     le_get_u32(p + 4));
     if (le_get_u32(p + 8) != n)
-        return fail(err, errlen, -EINVAL, "GLB length field says %u bytes, the file has %zu",
+        return import__fail(err, errlen, -EINVAL, "GLB length field says %u bytes, the file has %zu",
                     le_get_u32(p + 8), n);
     json_len = le_get_u32(p + 12);
     if (le_get_u32(p + 16) != 0x4E4F534Au || json_len > n - 20)
-        return fail(err, errlen, -EINVAL, "GLB does not start with a whole JSON chunk");
+        return import__fail(err, errlen, -EINVAL, "GLB does not start with a whole JSON chunk");
 
     doc = glb_parse(&c, p + 20, json_len, where, sizeof where);
     if (doc && !json_is_object(doc))
@@ -1185,8 +1185,8 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
     if (!c.why && (!json_is_string(version) || json_string_value(version)[0] != '2'))
         glb_refuse(&c, "asset.version is not 2.x");
     if (c.why) {
-        rc = c.nomem ? fail(err, errlen, -ENOMEM, "out of memory")
-                     : fail(err, errlen, -EINVAL, "GLB JSON: %s", c.why);
+        rc = c.nomem ? import__fail(err, errlen, -ENOMEM, "out of memory")
+                     : import__fail(err, errlen, -EINVAL, "GLB JSON: %s", c.why);
         goto cleanup;
     }
 
@@ -1195,7 +1195,7 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
     meshes = glb_member(&c, doc, "meshes", JSON_ARRAY, "meshes is not an array");
     accessors = glb_member(&c, doc, "accessors", JSON_ARRAY, "accessors is not an array");
     if (c.why) {
-        rc = fail(err, errlen, -EINVAL, "GLB: %s", c.why);
+        rc = import__fail(err, errlen, -EINVAL, "GLB: %s", c.why);
         goto cleanup;
     }
     nn = (uint32_t)json_array_size(nodes); /* under the JSON's length: 32 bits */
@@ -1204,14 +1204,14 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
     u32 = cvre_calloc((size_t)4 * nn + na + 1, sizeof *u32);
     paths = cvre_malloc(((size_t)nn + 1) * sizeof *paths);
     if (!u32 || !paths) {
-        rc = fail(err, errlen, -ENOMEM, "out of memory");
+        rc = import__fail(err, errlen, -ENOMEM, "out of memory");
         goto cleanup;
     }
     if (nodes)
         total = glb_node_paths(&c, nodes, scenes, u32, u32 + nn, paths, u32 + 2 * nn,
                                u32 + 3 * nn);
     if (!c.why && total > IMPORT_MAX_GLB_NODES) {
-        rc = fail(err, errlen, -EINVAL, "GLB node hierarchy expands to over %u nodes",
+        rc = import__fail(err, errlen, -EINVAL, "GLB node hierarchy expands to over %u nodes",
                   (unsigned)IMPORT_MAX_GLB_NODES);
         goto cleanup;
     }
@@ -1219,9 +1219,9 @@ static int check_glb(const unsigned char *p, size_t n, char *err, size_t errlen)
         glb_accessor_counts(&c, accessors, u32 + 4 * nn);
     total = c.why ? 0 : glb_primitive_elements(&c, meshes, u32 + 4 * nn, na);
     if (c.why)
-        rc = fail(err, errlen, -EINVAL, "GLB: %s", c.why);
+        rc = import__fail(err, errlen, -EINVAL, "GLB: %s", c.why);
     else if (total > elements_max)
-        rc = fail(err, errlen, -EINVAL,
+        rc = import__fail(err, errlen, -EINVAL,
                   "GLB meshes copy %llu accessor elements, over the limit of %llu for its size",
                   (unsigned long long)total, (unsigned long long)elements_max);
     else
@@ -1257,16 +1257,16 @@ static int count_meshes(const struct aiScene *sc, uint32_t *mesh_tris, char *err
         const struct aiMesh *me = sc->mMeshes[m];
         uint32_t t = 0;
         if (!me)
-            return fail(err, errlen, -EINVAL, "mesh %u missing", m);
+            return import__fail(err, errlen, -EINVAL, "mesh %u missing", m);
         for (unsigned f = 0; f < me->mNumFaces; f++) {
             const struct aiFace *fa = &me->mFaces[f];
             if (fa->mNumIndices != 3)
                 continue;
             if (!me->mVertices)
-                return fail(err, errlen, -EINVAL, "mesh %u has faces but no positions", m);
+                return import__fail(err, errlen, -EINVAL, "mesh %u has faces but no positions", m);
             for (int k = 0; k < 3; k++)
                 if (fa->mIndices[k] >= me->mNumVertices)
-                    return fail(err, errlen, -EINVAL, "mesh %u: vertex index %u out of range", m,
+                    return import__fail(err, errlen, -EINVAL, "mesh %u: vertex index %u out of range", m,
                                 fa->mIndices[k]);
             t++;
         }
@@ -1294,7 +1294,7 @@ static int check_polygons(const struct aiScene *sc, char *err, size_t errlen)
                 largest = k;
             work += (uint64_t)k * k;
             if (work > IMPORT_MAX_POLYGON_WORK)
-                return fail(err, errlen, -EINVAL,
+                return import__fail(err, errlen, -EINVAL,
                             "polygons too large to triangulate (largest so far %u vertices; "
                             "their squared sizes may total %llu)",
                             largest, (unsigned long long)IMPORT_MAX_POLYGON_WORK);
@@ -1329,11 +1329,11 @@ static int emit_vertex(walk *w, const double m[16], const struct aiVector3D *v, 
         /* also false for NaN; checked before the conversion, which
          * would be undefined out of range */
         if (!(fabs(s) <= FLT_MAX))
-            return fail(w->err, w->errlen, -EINVAL,
+            return import__fail(w->err, w->errlen, -EINVAL,
                         "coordinate not a finite float in triangle %llu",
                         (unsigned long long)w->ntris + 1);
         if (fabs(s) > IMPORT_MAX_COORD)
-            return fail(w->err, w->errlen, -EINVAL,
+            return import__fail(w->err, w->errlen, -EINVAL,
                         "coordinate %.3g m in triangle %llu is beyond %.0f km of the model's origin", s,
                         (unsigned long long)w->ntris + 1, IMPORT_MAX_COORD / 1000.0);
         o[k] = (float)s;
@@ -1360,18 +1360,18 @@ static int visit(walk *w, const struct aiNode *node, const double parent[16], un
     int rc;
 
     if (depth > IMPORT_MAX_NODE_DEPTH)
-        return fail(w->err, w->errlen, -EINVAL, "node hierarchy deeper than %d",
+        return import__fail(w->err, w->errlen, -EINVAL, "node hierarchy deeper than %d",
                     IMPORT_MAX_NODE_DEPTH);
     mat_mul(m, parent, local);
     for (unsigned i = 0; i < node->mNumMeshes; i++) {
         unsigned mi = node->mMeshes[i];
         const struct aiMesh *me;
         if (mi >= w->scene->mNumMeshes)
-            return fail(w->err, w->errlen, -EINVAL, "node refers to missing mesh %u", mi);
+            return import__fail(w->err, w->errlen, -EINVAL, "node refers to missing mesh %u", mi);
         if (!w->out) {
             w->ntris += w->mesh_tris[mi];
             if (w->ntris > w->max_tris)
-                return fail(w->err, w->errlen, -EFBIG, "more than %u triangles", w->max_tris);
+                return import__fail(w->err, w->errlen, -EFBIG, "more than %u triangles", w->max_tris);
             continue;
         }
         me = w->scene->mMeshes[mi];
@@ -1388,7 +1388,7 @@ static int visit(walk *w, const struct aiNode *node, const double parent[16], un
     }
     for (unsigned i = 0; i < node->mNumChildren; i++) {
         if (!node->mChildren[i])
-            return fail(w->err, w->errlen, -EINVAL, "node child missing");
+            return import__fail(w->err, w->errlen, -EINVAL, "node child missing");
         if ((rc = visit(w, node->mChildren[i], m, depth + 1)) != 0)
             return rc;
     }
@@ -1406,10 +1406,10 @@ static int collect(const struct aiScene *sc, const import_options *opt, import_m
     int rc;
 
     if (!sc->mRootNode)
-        return fail(err, errlen, -EINVAL, "no scene graph");
+        return import__fail(err, errlen, -EINVAL, "no scene graph");
     mesh_tris = cvre_calloc(sc->mNumMeshes, sizeof *mesh_tris);
     if (!mesh_tris)
-        return fail(err, errlen, -ENOMEM, "out of memory");
+        return import__fail(err, errlen, -ENOMEM, "out of memory");
     memset(&w, 0, sizeof w);
     w.scene = sc;
     w.mesh_tris = mesh_tris;
@@ -1422,16 +1422,16 @@ static int collect(const struct aiScene *sc, const import_options *opt, import_m
         (rc = visit(&w, sc->mRootNode, identity, 0)) != 0)
         goto cleanup;
     if (w.ntris == 0) {
-        rc = fail(err, errlen, -EINVAL, "the file has no triangles");
+        rc = import__fail(err, errlen, -EINVAL, "the file has no triangles");
         goto cleanup;
     }
     if (w.ntris > SIZE_MAX / (9 * sizeof(float))) {
-        rc = fail(err, errlen, -ENOMEM, "out of memory");
+        rc = import__fail(err, errlen, -ENOMEM, "out of memory");
         goto cleanup;
     }
     out->tris = cvre_malloc((size_t)w.ntris * 9 * sizeof(float));
     if (!out->tris) {
-        rc = fail(err, errlen, -ENOMEM, "out of memory for %llu triangles",
+        rc = import__fail(err, errlen, -ENOMEM, "out of memory for %llu triangles",
                   (unsigned long long)w.ntris);
         goto cleanup;
     }
@@ -1472,9 +1472,9 @@ static int hint_format(const char *hint)
 static int check_options(const import_options *o, char *err, size_t errlen)
 {
     if (!(o->unit_scale > 0.0f) || !isfinite(o->unit_scale))
-        return fail(err, errlen, -EINVAL, "unit_scale must be positive and finite");
+        return import__fail(err, errlen, -EINVAL, "unit_scale must be positive and finite");
     if (o->max_triangles == 0)
-        return fail(err, errlen, -EINVAL, "max_triangles must be at least 1");
+        return import__fail(err, errlen, -EINVAL, "max_triangles must be at least 1");
     return 0;
 }
 
@@ -1497,27 +1497,27 @@ int import_model(const void *data, size_t len, const char *hint, const import_op
     if (errlen)
         err[0] = 0;
     if (!out)
-        return fail(err, errlen, -EINVAL, "no output mesh");
+        return import__fail(err, errlen, -EINVAL, "no output mesh");
     memset(out, 0, sizeof *out);
     if (!opt)
         opt = &defaults;
     if ((rc = check_options(opt, err, errlen)) != 0)
         return rc;
     if (!data || len == 0)
-        return fail(err, errlen, -EINVAL, "empty file");
+        return import__fail(err, errlen, -EINVAL, "empty file");
     if (len > IMPORT_MAX_BYTES)
-        return fail(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
+        return import__fail(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
                     (unsigned)IMPORT_MAX_BYTES);
     hinted = hint_format(hint);
     if (hinted == -2)
-        return fail(err, errlen, -EINVAL, "unsupported format \"%.16s\" (supported: %s)", hint,
+        return import__fail(err, errlen, -EINVAL, "unsupported format \"%.16s\" (supported: %s)", hint,
                     import_formats());
     fmt = sniff(p, len);
     if (fmt < 0 && hinted == FMT_OBJ)
         fmt = FMT_OBJ;
     if (fmt < 0)
-        return hinted >= 0 ? fail(err, errlen, -EINVAL, "not a valid %s file", formats[hinted].name)
-                           : fail(err, errlen, -EINVAL, "unrecognised format (supported: %s)",
+        return hinted >= 0 ? import__fail(err, errlen, -EINVAL, "not a valid %s file", formats[hinted].name)
+                           : import__fail(err, errlen, -EINVAL, "unrecognised format (supported: %s)",
                                   import_formats());
     if ((rc = formats[fmt].check(p, len, err, errlen)) != 0)
         return rc;
@@ -1534,7 +1534,7 @@ int import_model(const void *data, size_t len, const char *hint, const import_op
     if (!sc) {
         const char *why = aiGetErrorString();
         rc = strstr(why, "bad_alloc") ? -ENOMEM : -EINVAL;
-        fail(err, errlen, rc, "%s parse error: %s", formats[fmt].name,
+        import__fail(err, errlen, rc, "%s parse error: %s", formats[fmt].name,
              *why ? why : "(no reason given)");
     }
     pthread_mutex_unlock(&assimp_lock);
@@ -1547,7 +1547,7 @@ int import_model(const void *data, size_t len, const char *hint, const import_op
     /* On failure this releases the scene. */
     sc = aiApplyPostProcessing(sc, aiProcess_Triangulate);
     if (!sc)
-        return fail(err, errlen, -EINVAL, "%s: triangulation failed", formats[fmt].name);
+        return import__fail(err, errlen, -EINVAL, "%s: triangulation failed", formats[fmt].name);
     rc = collect(sc, opt, out, err, errlen);
     aiReleaseImport(sc);
     return rc;

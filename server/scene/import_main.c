@@ -125,25 +125,12 @@ static int sandbox(void)
     return rc;
 }
 
-/* Reads exactly n bytes of stdin; -1 on an error or an early end. */
-static int read_all(uint8_t *p, size_t n)
+/* Moves exactly n bytes: reads them from stdin into p, or (writing) writes
+ * them from p to stdout. -1 on an error or an early end. */
+static int move_all(uint8_t *p, size_t n, int writing)
 {
     while (n) {
-        ssize_t k = read(0, p, n);
-        if (k < 0 && errno == EINTR)
-            continue;
-        if (k <= 0)
-            return -1;
-        p += k;
-        n -= (size_t)k;
-    }
-    return 0;
-}
-
-static int write_all(const uint8_t *p, size_t n)
-{
-    while (n) {
-        ssize_t k = write(1, p, n);
+        ssize_t k = writing ? write(1, p, n) : read(0, p, n);
         if (k < 0 && errno == EINTR)
             continue;
         if (k <= 0)
@@ -262,14 +249,14 @@ int main(int argc, char **argv)
      * The head's length depends on its hint: read it a byte at a time until
      * it parses. */
     while ((head_len = import_pipe_request_parse(head, have, &opt, hint, &data_len)) == 0) {
-        if (have == sizeof head || read_all(head + have, 1) != 0)
+        if (have == sizeof head || move_all(head + have, 1, 0) != 0)
             _exit(EXIT_REQUEST);
         have++;
     }
     if (head_len < 0 || data_len > IMPORT_MAX_BYTES || data_len == 0)
         _exit(EXIT_REQUEST);
     data = cvre_malloc(data_len);
-    if (!data || read_all(data, data_len) != 0)
+    if (!data || move_all(data, data_len, 0) != 0)
         _exit(EXIT_REQUEST);
     rc = 1;
 #ifdef CVRE_TEST_HOOKS
@@ -280,11 +267,11 @@ int main(int argc, char **argv)
     free(data);
     /* the head, then the triangles straight from the mesh: no copy */
     head_len = (long)import_pipe_answer_head_encode(answer, rc, err, &mesh);
-    if (write_all(answer, (size_t)head_len) != 0)
+    if (move_all(answer, (size_t)head_len, 1) != 0)
         _exit(EXIT_REQUEST);
     if (rc == 0) {
         import_pipe_tris_to_le(mesh.tris, (size_t)mesh.ntris * 9u);
-        if (write_all((const uint8_t *)mesh.tris, (size_t)mesh.ntris * 36u) != 0)
+        if (move_all((uint8_t *)mesh.tris, (size_t)mesh.ntris * 36u, 1) != 0)
             _exit(EXIT_REQUEST);
     }
     _exit(EXIT_ANSWERED);

@@ -2,12 +2,12 @@
 
 #include <errno.h>
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "alloc.h"
+#include "importInt.h"
 #include "le.h"
 
 _Static_assert(IMPORT_PIPE_HINT_MAX <= 255u, "the hint's length is a u8");
@@ -104,19 +104,6 @@ int import_pipe_answer_encode(int status, const char *message, const import_mesh
     return 0;
 }
 
-/* Formats a reason into err and returns -EPROTO. */
-__attribute__((format(printf, 3, 4))) static int bad(char *err, size_t errlen, const char *fmt, ...)
-{
-    va_list ap;
-
-    if (errlen) {
-        va_start(ap, fmt);
-        vsnprintf(err, errlen, fmt, ap);
-        va_end(ap);
-    }
-    return -EPROTO;
-}
-
 /* The helper's message into err, one line of printable ASCII. */
 static void copy_message(const uint8_t *p, size_t n, char *err, size_t errlen)
 {
@@ -136,16 +123,16 @@ long import_pipe_answer_head(const uint8_t *p, size_t n, uint32_t max_triangles,
 
     if (n < 14)
         return n >= 4 && memcmp(p, answer_magic, 4) != 0
-                   ? bad(err, errlen, "the importer's answer has no valid header")
+                   ? import__fail(err, errlen, -EPROTO, "the importer's answer has no valid header")
                    : 0;
     if (memcmp(p, answer_magic, 4) != 0 || le_get_u32(p + 4) != IMPORT_PIPE_VERSION)
-        return bad(err, errlen, "the importer's answer has no valid header");
+        return import__fail(err, errlen, -EPROTO, "the importer's answer has no valid header");
     h->status = (int32_t)le_get_u32(p + 8);
     ml = le_get_u16(p + 12);
     if (ml > IMPORT_PIPE_MESSAGE_MAX)
-        return bad(err, errlen, "the importer's message is too long");
+        return import__fail(err, errlen, -EPROTO, "the importer's message is too long");
     if (h->status != 0 && h->status != -EINVAL && h->status != -EFBIG && h->status != -ENOMEM)
-        return bad(err, errlen, "the importer answered status %d", (int)h->status);
+        return import__fail(err, errlen, -EPROTO, "the importer answered status %d", (int)h->status);
     if (n < 14 + ml + (h->status == 0 ? 28u : 0u))
         return 0;
     copy_message(p + 14, ml, h->message, sizeof h->message);
@@ -154,7 +141,7 @@ long import_pipe_answer_head(const uint8_t *p, size_t n, uint32_t max_triangles,
         return (long)(14 + ml);
     h->ntris = le_get_u32(p + 14 + ml);
     if (h->ntris == 0)
-        return bad(err, errlen, "the importer answered no triangles");
+        return import__fail(err, errlen, -EPROTO, "the importer answered no triangles");
     if (h->ntris > max_triangles) {
         if (errlen)
             snprintf(err, errlen, "the importer answered %u triangles, over the limit of %u", h->ntris,
@@ -175,7 +162,7 @@ int import_pipe_answer_tris(float *tris, const import_pipe_head *h, char *err, s
         float v = le_get_f32((const uint8_t *)&tris[i]);
         int axis = (int)(i % 3);
         if (!isfinite(v) || fabsf(v) > IMPORT_MAX_COORD)
-            return bad(err, errlen, "the importer answered a coordinate that is not finite or beyond %.0f km",
+            return import__fail(err, errlen, -EPROTO, "the importer answered a coordinate that is not finite or beyond %.0f km",
                        IMPORT_MAX_COORD / 1000.0);
         tris[i] = v;
         got[axis] = fminf(got[axis], v);
@@ -183,7 +170,7 @@ int import_pipe_answer_tris(float *tris, const import_pipe_head *h, char *err, s
     }
     for (int i = 0; i < 6; i++)
         ok &= got[i] == h->box[i]; /* by value: -0 is 0 */
-    return ok ? 0 : bad(err, errlen, "the importer's box is not its triangles' box");
+    return ok ? 0 : import__fail(err, errlen, -EPROTO, "the importer's box is not its triangles' box");
 }
 
 int import_pipe_answer(const uint8_t *p, size_t n, uint32_t max_triangles, import_mesh *out,
@@ -198,9 +185,9 @@ int import_pipe_answer(const uint8_t *p, size_t n, uint32_t max_triangles, impor
     if (k < 0)
         return (int)k;
     if (k == 0)
-        return bad(err, errlen, "the importer's answer ends in its header (%zu bytes)", n);
+        return import__fail(err, errlen, -EPROTO, "the importer's answer ends in its header (%zu bytes)", n);
     if ((uint64_t)(n - (size_t)k) != (uint64_t)h.ntris * 36u)
-        return bad(err, errlen, "the importer's answer holds %zu bytes after its header for %u triangles",
+        return import__fail(err, errlen, -EPROTO, "the importer's answer holds %zu bytes after its header for %u triangles",
                    n - (size_t)k, h.ntris);
     if (h.status != 0) {
         if (errlen)

@@ -7,7 +7,6 @@
 #include <poll.h>
 #include <signal.h>
 #include <spawn.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -17,6 +16,7 @@
 
 #include "alloc.h"
 #include "import_pipe.h"
+#include "importInt.h"
 #include "le.h"
 
 const char *import_proc_default_helper(void)
@@ -66,20 +66,6 @@ static void helper_env(char *envp[4], char bufs[3][512])
         k++;
     }
     envp[k] = NULL;
-}
-
-/* Formats err and returns rc. */
-__attribute__((format(printf, 4, 5))) static int say(char *err, size_t errlen, int rc,
-                                                     const char *fmt, ...)
-{
-    va_list ap;
-
-    if (errlen) {
-        va_start(ap, fmt);
-        vsnprintf(err, errlen, fmt, ap);
-        va_end(ap);
-    }
-    return rc;
 }
 
 /* What the pipes carried and how the helper ended. The answer's head is
@@ -235,16 +221,16 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     if (!opt)
         opt = &defaults;
     if (!data || len == 0)
-        return say(err, errlen, -EINVAL, "empty file");
+        return import__fail(err, errlen, -EINVAL, "empty file");
     if (len > IMPORT_MAX_BYTES)
-        return say(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
+        return import__fail(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
                    (unsigned)IMPORT_MAX_BYTES);
     head_len = import_pipe_request_head(head, hint, opt, (uint32_t)len);
     snprintf(mem, sizeof mem, "%u", (unsigned)p->memory_mb);
     snprintf(cpu, sizeof cpu, "%u", (unsigned)p->cpu_seconds);
     helper_env(envp, envbuf);
     if (pipe2(to, O_CLOEXEC) != 0 || pipe2(from, O_CLOEXEC) != 0) {
-        rc = say(err, errlen, -errno, "cannot start the importer: pipe: %s", strerror(errno));
+        rc = import__fail(err, errlen, -errno, "cannot start the importer: pipe: %s", strerror(errno));
         goto cleanup;
     }
     posix_spawn_file_actions_init(&fa);
@@ -253,7 +239,7 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     rc = posix_spawn(&pid, p->helper, &fa, NULL, argv, envp);
     posix_spawn_file_actions_destroy(&fa);
     if (rc != 0) {
-        rc = say(err, errlen, -rc, "cannot start the importer %s: %s", p->helper, strerror(rc));
+        rc = import__fail(err, errlen, -rc, "cannot start the importer %s: %s", p->helper, strerror(rc));
         goto cleanup;
     }
     close(to[0]), to[0] = -1;
@@ -261,32 +247,32 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     rc = talk(pid, &to[1], from[0], head, head_len, data, len, deadline, &x);
     reap(pid, deadline, &x);
     if (rc < 0) {
-        say(err, errlen, rc, "import failed: reading the importer's answer: %s", strerror(-rc));
+        import__fail(err, errlen, rc, "import failed: reading the importer's answer: %s", strerror(-rc));
     } else if (x.timed_out ||
                (WIFSIGNALED(x.status) && WTERMSIG(x.status) == SIGXCPU)) {
-        rc = say(err, errlen, -ETIMEDOUT, "import failed: timed out (over %u s of CPU)",
+        rc = import__fail(err, errlen, -ETIMEDOUT, "import failed: timed out (over %u s of CPU)",
                  (unsigned)p->cpu_seconds);
     } else if (x.bad == EFBIG) {
-        rc = say(err, errlen, -EFBIG, "import failed: too large (%s)", x.why);
+        rc = import__fail(err, errlen, -EFBIG, "import failed: too large (%s)", x.why);
     } else if (x.bad) {
-        rc = say(err, errlen, -EPROTO, "import failed: bad answer from the importer: %s", x.why);
+        rc = import__fail(err, errlen, -EPROTO, "import failed: bad answer from the importer: %s", x.why);
     } else if (WIFSIGNALED(x.status)) {
-        rc = say(err, errlen, -ECHILD, "import failed: parser crashed (%s)",
+        rc = import__fail(err, errlen, -ECHILD, "import failed: parser crashed (%s)",
                  WTERMSIG(x.status) == SIGSYS ? "a forbidden system call"
                                               : strsignal(WTERMSIG(x.status)));
     } else if (!WIFEXITED(x.status) || WEXITSTATUS(x.status) != 0) {
-        rc = say(err, errlen, -ECHILD, "import failed: the importer exited with status %d",
+        rc = import__fail(err, errlen, -ECHILD, "import failed: the importer exited with status %d",
                  WIFEXITED(x.status) ? WEXITSTATUS(x.status) : -1);
     } else if (x.head_len <= 0 || x.tris_have != x.tris_need) {
-        rc = say(err, errlen, -EPROTO, "import failed: bad answer from the importer: it ended %s",
+        rc = import__fail(err, errlen, -EPROTO, "import failed: bad answer from the importer: it ended %s",
                  x.head_len <= 0 ? "in its header" : "before its last triangle");
     } else if (x.h.status == -ENOMEM) {
-        rc = say(err, errlen, -EFBIG, "import failed: too large (over the importer's %u MB)",
+        rc = import__fail(err, errlen, -EFBIG, "import failed: too large (over the importer's %u MB)",
                  (unsigned)p->memory_mb);
     } else if (x.h.status != 0) {
-        rc = say(err, errlen, x.h.status, "%s", x.h.message);
+        rc = import__fail(err, errlen, x.h.status, "%s", x.h.message);
     } else if ((rc = import_pipe_answer_tris(x.tris, &x.h, x.why, sizeof x.why)) != 0) {
-        say(err, errlen, rc, "import failed: bad answer from the importer: %s", x.why);
+        import__fail(err, errlen, rc, "import failed: bad answer from the importer: %s", x.why);
     } else {
         out->tris = x.tris;
         out->ntris = x.h.ntris;
