@@ -104,11 +104,11 @@ int db_ban(db *d, const char *name, double until, double at)
     rc = finish(d, st);
     if (rc == 0)
         rc = db__admin_event(d, "ban", 0, name, at);
-    rc = end_write(d, rc);
-    /* a banned account's tokens go: it must not come back by resuming */
+    /* a banned account's tokens go with the ban, in its transaction: it
+     * must not come back by resuming */
     if (rc == 0 && db_account_find(d, name, &acc) == 0 && db_account_tokens_revoke(d, acc.id) < 0)
-        return -1;
-    return rc;
+        rc = -1;
+    return end_write(d, rc);
 }
 
 int db_unban(db *d, const char *name, double at)
@@ -118,14 +118,25 @@ int db_unban(db *d, const char *name, double at)
 
     if (db_begin(d) != 0)
         return -1;
-    st = prepare(d, "DELETE FROM bans WHERE name = ?1");
+    /* only a ban in force is lifted (an ended one is no ban, as for
+     * db_banned); ended rows go as well */
+    st = prepare(d, "DELETE FROM bans WHERE name = ?1 AND (until IS NULL OR until > ?2)");
     if (!st)
         return end_write(d, -1);
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
+    sqlite3_bind_double(st, 2, at);
     rc = finish(d, st);
-    if (rc == 0 && sqlite3_changes(db_sqlite(d)) == 0) {
-        db__fail(d, "%s is not banned", name);
-        return end_write(d, DB_MOD_NOT_BANNED);
+    if (rc == 0) {
+        int lifted = sqlite3_changes(db_sqlite(d));
+        sqlite3_stmt *old = prepare(d, "DELETE FROM bans WHERE name = ?1");
+        if (!old)
+            return end_write(d, -1);
+        sqlite3_bind_text(old, 1, name, -1, SQLITE_STATIC);
+        rc = finish(d, old);
+        if (rc == 0 && lifted == 0) {
+            db__fail(d, "%s is not banned", name);
+            return end_write(d, DB_MOD_NOT_BANNED);
+        }
     }
     if (rc == 0)
         rc = db__admin_event(d, "unban", 0, name, at);

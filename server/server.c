@@ -311,6 +311,7 @@ static void on_join(server *s, client *c, const proto_join *m)
     if (m->secret_len)
         memcpy(job.secret, m->secret, m->secret_len);
     memcpy(c->join_box, m->box, sizeof c->join_box);
+    memcpy(c->join_name, job.name, sizeof c->join_name);
     if (auth_submit(s->auth, &job) != 0) {
         server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "too many joins at once: try again in a moment");
         return;
@@ -967,7 +968,9 @@ static void on_admin_event(void *ctx, const char *kind, int64_t session_id, cons
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
         const world_avatar *a = c->avatar_id ? world_get(s->world, c->avatar_id) : NULL;
-        if (k == 0 ? c->session_id != session_id : !(a && strcasecmp(a->name, name) == 0))
+        /* a join being checked may have passed the ban check already */
+        const char *who = a ? a->name : c->state == ST_AUTH ? c->join_name : NULL;
+        if (k == 0 ? c->session_id != session_id : !(who && strcasecmp(who, name) == 0))
             continue;
         log_info("%s (session %lld): %s", c->peer, (long long)c->session_id, ends[k].why);
         say_bye(s, c, PROTO_BYE_KICKED, ends[k].why);

@@ -58,6 +58,7 @@ typedef struct client {
     int64_t account_id; /* accounts.id; 0 for a guest */
     int is_admin;       /* the account may place and remove anyone's objects */
     float join_box[3];  /* the avatar box asked for, kept while the join is checked */
+    char join_name[PROTO_NAME_MAX + 1]; /* the name asked for, likewise (a ban may come meanwhile) */
     uint64_t moves_window_ns;  /* start of the second the move counts are for */
     uint32_t moves_in_window, moves_dropped_in_window;
     int has_seq;

@@ -71,18 +71,20 @@ static void test_kick_ban_unban_feed(void **state)
     assert_int_equal(db_unban(d, "mallory", 103.0), 0);
     assert_int_equal(db_banned(d, "mallory", 150.0, &until), 0);
     assert_int_equal(db_unban(d, "mallory", 104.0), DB_MOD_NOT_BANNED);
+    assert_int_equal(db_ban(d, "eve", 150.0, 104.0), 0);
+    assert_int_equal(db_unban(d, "eve", 160.0), DB_MOD_NOT_BANNED); /* it had ended: no ban to lift */
     assert_int_equal(db_ban(d, "", 0, 105.0), -1);
     assert_int_equal(db_ban(d, "a-name-longer-than-thirty-two-bytes", 0, 105.0), -1);
 
     seen[0] = 0;
     last = 0;
     assert_int_equal(db_admin_events(d, 0, note, NULL, &last), 0);
-    assert_string_equal(seen, "kick:7:\nban:0:Mallory\nban:0:mallory\nunban:0:mallory\n");
-    assert_int_equal(last, 4);
+    assert_string_equal(seen, "kick:7:\nban:0:Mallory\nban:0:mallory\nunban:0:mallory\nban:0:eve\n");
+    assert_int_equal(last, 5);
     seen[0] = 0;
     assert_int_equal(db_admin_events(d, last, note, NULL, &last), 0); /* nothing new */
     assert_string_equal(seen, "");
-    assert_int_equal(last, 4);
+    assert_int_equal(last, 5);
     db_close(d);
 }
 
