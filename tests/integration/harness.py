@@ -100,6 +100,24 @@ def refused(c, request, code):
     return m
 
 
+def still_moving(w, seq):
+    """A witness moves and gets its pong: nobody's trouble reached it."""
+    w.send(move(seq, (0.01 * seq, 0, 0)) + ping(seq))
+    w.expect("pong", where=lambda m: m["stamp"] == seq)
+
+
+def refused_join(port, name, code, **cred):
+    """Joins and expects an error with code, then the close; returns the
+    error's message."""
+    c = Raw(port)
+    c.send(hello() + join(name, **cred))
+    msgs = c.wait_closed(timeout=30)  # a password join costs an Argon2id hash
+    errors = [m for m in msgs if m["type"] == "error"]
+    assert errors and errors[0]["code"] == code, msgs
+    assert not [m for m in msgs if m["type"] == "join_ok"], msgs
+    return errors[0]["message"]
+
+
 def decode(t, p):
     """One server-to-client message as a dict (enough for the tests)."""
     if t == T["WELCOME"]:

@@ -11,29 +11,12 @@ import struct
 import subprocess
 import time
 
-from harness import (E, MODELS, T, Raw, Server, args, frame, hello, join, move, ping, refused, run,
-                     upload, upload_frames)
+from harness import (E, MODELS, T, Raw, Server, args, frame, hello, join, move, refused, refused_join, run,
+                     still_moving, upload, upload_frames)
 
 A = args()
 ROOM = os.path.join(MODELS, "openings", "openfoam_room_with_doorway.stl")
 ROOM_WORLD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "room.world")
-
-
-def refused_join(port, name, code, **cred):
-    """Joins and expects an error with code, then the close."""
-    c = Raw(port)
-    c.send(hello() + join(name, **cred))
-    msgs = c.wait_closed()
-    errors = [m for m in msgs if m["type"] == "error"]
-    assert errors and errors[0]["code"] == code, msgs
-    assert not [m for m in msgs if m["type"] == "join_ok"], msgs
-    return errors[0]["message"]
-
-
-def still_moving(w, seq):
-    """The witness moves and gets its pong: nobody's trouble reached it."""
-    w.send(move(seq, (0.01 * seq, 0, 0)) + ping(seq))
-    w.expect("pong", where=lambda m: m["stamp"] == seq)
 
 
 def test_guests_accounts_and_tokens():

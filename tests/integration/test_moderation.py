@@ -12,29 +12,11 @@ import sqlite3
 import time
 from contextlib import closing
 
-from harness import E, Raw, Server, admin, args, hello, join, iso, move, ping, run
+from harness import E, Raw, Server, admin, args, iso, ping, refused_join, run, still_moving
 
 A = args()
 BYE_KICKED = 2  # PROTO_BYE_KICKED
 BAN_COLUMNS = ["name", "until", "since"]
-
-
-def still_moving(w, seq):
-    """The witness moves and gets its pong: nobody's trouble reached it."""
-    w.send(move(seq, (0.01 * seq, 0, 0)) + ping(seq))
-    w.expect("pong", where=lambda m: m["stamp"] == seq)
-
-
-def refused_join(port, name, code, **cred):
-    """Joins and expects an error with code, then the close; returns the
-    error's message."""
-    c = Raw(port)
-    c.send(hello() + join(name, **cred))
-    msgs = c.wait_closed(timeout=30)  # a password join costs an Argon2id hash
-    errors = [m for m in msgs if m["type"] == "error"]
-    assert errors and errors[0]["code"] == code, msgs
-    assert not [m for m in msgs if m["type"] == "join_ok"], msgs
-    return errors[0]["message"]
 
 
 def session(db, sid):
