@@ -66,7 +66,7 @@ static unsigned long long data_now(void)
  * tells that build's allocator to return NULL rather than abort). */
 static int set_limits(unsigned long memory_mb, unsigned long cpu_seconds)
 {
-    struct rlimit cpu = {cpu_seconds, cpu_seconds + 1}, none = {0, 0};
+    struct rlimit cpu = {cpu_seconds, cpu_seconds + 1}, none = {0, 0}, three = {3, 3};
 #ifndef CVRE_ASAN
     struct rlimit mem = {memory_mb << 20, memory_mb << 20};
     if (setrlimit(RLIMIT_AS, &mem) != 0)
@@ -77,7 +77,11 @@ static int set_limits(unsigned long memory_mb, unsigned long cpu_seconds)
     if (setrlimit(RLIMIT_DATA, &mem) != 0)
         return -1;
 #endif
-    if (setrlimit(RLIMIT_CPU, &cpu) != 0 || setrlimit(RLIMIT_FSIZE, &none) != 0 ||
+    /* no file descriptors beyond stdin, stdout and stderr (the seccomp
+     * filter forbids opening anything too); no RLIMIT_FSIZE: stderr may be
+     * the server's log file, and a sanitizer's report there would die of
+     * SIGXFSZ instead of saying what happened */
+    if (setrlimit(RLIMIT_CPU, &cpu) != 0 || setrlimit(RLIMIT_NOFILE, &three) != 0 ||
         setrlimit(RLIMIT_CORE, &none) != 0)
         return -1;
     return 0;

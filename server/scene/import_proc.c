@@ -115,8 +115,10 @@ static int take_answer(exchange *x, const uint8_t *p, size_t n)
         snprintf(x->why, sizeof x->why, "the importer answered more than its %u triangles", x->h.ntris);
         return 0;
     }
-    memcpy((uint8_t *)x->tris + x->tris_have, p, n);
-    x->tris_have += n;
+    if (n) { /* tris is NULL for a refusal, which has no triangles */
+        memcpy((uint8_t *)x->tris + x->tris_have, p, n);
+        x->tris_have += n;
+    }
     return 0;
 }
 

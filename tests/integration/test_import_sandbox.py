@@ -59,6 +59,7 @@ def test_misbehaving_parser_hurts_nobody():
         c.send(upload_frames(uid, b"cvre-import-test:" + word, "evil.obj", fmt="obj"))
         m = refused(c, uid, E["IMPORT"])
         assert m["message"].startswith("import failed: ") and why in m["message"], (word, m)
+        assert "File size" not in m["message"], m  # stderr (the server's log) stays writable
     good = upload(c, 6, open(ROOM, "rb").read(), "room.stl", fmt="stl", up=1)
     assert good["triangles"] == 54, good
     gap = w.finish()
