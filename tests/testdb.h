@@ -34,4 +34,36 @@ static inline int64_t testdb_scalar(sqlite3 *s, const char *sql)
 }
 #endif
 
+#if defined(cmocka_unit_test) && defined(CVRE_DB_H) && defined(TESTDB_NAME)
+/* A unit test's one database file, /tmp/cvre-test-TESTDB_NAME-PID.sqlite,
+ * made anew by testdb_setup and removed by testdb_teardown (cmocka's setup
+ * and teardown of each test); testdb_open opens it read-write or fails the
+ * test. */
+static char testdb_path[64];
+
+static inline int testdb_setup(void **state)
+{
+    (void)state;
+    snprintf(testdb_path, sizeof testdb_path, "/tmp/cvre-test-%s-%d.sqlite", TESTDB_NAME, (int)getpid());
+    testdb_remove(testdb_path);
+    return 0;
+}
+
+static inline int testdb_teardown(void **state)
+{
+    (void)state;
+    testdb_remove(testdb_path);
+    return 0;
+}
+
+static inline db *testdb_open(void)
+{
+    char err[256];
+    db *d = db_open(testdb_path, DB_READWRITE, err, sizeof err);
+    if (!d)
+        fail_msg("%s", err);
+    return d;
+}
+#endif
+
 #endif

@@ -18,40 +18,15 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../testdb.h"
 #include "account.h"
 #include "db.h"
 #include "migrations.h"
-
-static char path[64];
+#define TESTDB_NAME "account"
+#include "../testdb.h"
 
 static int64_t scalar(db *d, const char *sql)
 {
     return testdb_scalar(db_sqlite(d), sql);
-}
-
-static int setup(void **state)
-{
-    (void)state;
-    snprintf(path, sizeof path, "/tmp/cvre-test-account-%d.sqlite", (int)getpid());
-    testdb_remove(path);
-    return 0;
-}
-
-static int teardown(void **state)
-{
-    (void)state;
-    testdb_remove(path);
-    return 0;
-}
-
-static db *open_rw(void)
-{
-    char err[256];
-    db *d = db_open(path, DB_READWRITE, err, sizeof err);
-    if (!d)
-        fail_msg("%s", err);
-    return d;
 }
 
 static double seconds(void)
@@ -144,7 +119,7 @@ static int collect(void *ctx, const db_account *a)
 static void test_add_find_list(void **state)
 {
     (void)state;
-    db *d = open_rw();
+    db *d = testdb_open();
     /* The migration made the reserved account. */
     db_account w;
     assert_int_equal(db_account_get(d, DB_ACCOUNT_WORLD, &w), 0);
@@ -219,7 +194,7 @@ static int verify_timed(db *d, const char *name, const char *password, int64_t *
 static void test_verify(void **state)
 {
     (void)state;
-    db *d = open_rw();
+    db *d = testdb_open();
     int64_t alice, id = 0;
     double right, wrong, unknown, world, t;
     assert_int_equal(db_account_add(d, "alice", "correct horse", 13, 0, 100.0, &alice), 0); /* hash 1 */
@@ -255,7 +230,7 @@ static void test_verify(void **state)
 static void test_passwd_and_delete(void **state)
 {
     (void)state;
-    db *d = open_rw();
+    db *d = testdb_open();
     int64_t alice, id = 0;
     assert_int_equal(db_account_add(d, "alice", "first", 5, 0, 100.0, &alice), 0); /* hash 1 */
     uint8_t tok[DB_ACCOUNT_TOKEN_BYTES];
@@ -320,7 +295,7 @@ static void test_passwd_and_delete(void **state)
 static void test_tokens(void **state)
 {
     (void)state;
-    db *d = open_rw();
+    db *d = testdb_open();
     int64_t alice = add_unhashed(d, "alice"), bob = add_unhashed(d, "bob"), id = 0;
     uint8_t t1[DB_ACCOUNT_TOKEN_BYTES], t2[DB_ACCOUNT_TOKEN_BYTES], t3[DB_ACCOUNT_TOKEN_BYTES];
     assert_int_equal(db_account_token_issue(d, alice, 1000.0, 2000.0, t1), 0);
@@ -394,7 +369,7 @@ static void test_migration_from_schema_4(void **state)
     (void)state;
     assert_true(db_schema_version() >= 5); /* accounts came with 5; later ones migrate too */
     sqlite3 *raw;
-    assert_int_equal(sqlite3_open(path, &raw), SQLITE_OK);
+    assert_int_equal(sqlite3_open(testdb_path, &raw), SQLITE_OK);
     for (int i = 0; i < 4; i++)
         assert_int_equal(sqlite3_exec(raw, db_migrations[i].sql, NULL, NULL, NULL), SQLITE_OK);
     assert_int_equal(sqlite3_exec(raw,
@@ -409,11 +384,11 @@ static void test_migration_from_schema_4(void **state)
     sqlite3_close(raw);
 
     char err[256];
-    assert_null(db_open(path, DB_READONLY, err, sizeof err)); /* read-only never migrates */
+    assert_null(db_open(testdb_path, DB_READONLY, err, sizeof err)); /* read-only never migrates */
     char want[64];
     snprintf(want, sizeof want, "schema version 4, this build expects %d", db_schema_version());
     assert_non_null(strstr(err, want));
-    db *d = open_rw();
+    db *d = testdb_open();
     assert_int_equal(scalar(d, "PRAGMA user_version"), db_schema_version());
     assert_int_equal(scalar(d, "SELECT count(*) FROM accounts"), 1);
     assert_int_equal(scalar(d, "SELECT id FROM accounts WHERE name = 'world' AND password_hash IS NULL"),
@@ -428,7 +403,7 @@ static void test_migration_from_schema_4(void **state)
     assert_int_equal(handed, 1);
     assert_int_equal(scalar(d, "SELECT owner_id FROM objects WHERE id = 7"), 1);
     db_close(d);
-    d = db_open(path, DB_READONLY, err, sizeof err);
+    d = db_open(testdb_path, DB_READONLY, err, sizeof err);
     assert_non_null(d);
     db_close(d);
 }
@@ -437,11 +412,11 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_names),
-        cmocka_unit_test_setup_teardown(test_add_find_list, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_verify, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_passwd_and_delete, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_tokens, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_migration_from_schema_4, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_add_find_list, testdb_setup, testdb_teardown),
+        cmocka_unit_test_setup_teardown(test_verify, testdb_setup, testdb_teardown),
+        cmocka_unit_test_setup_teardown(test_passwd_and_delete, testdb_setup, testdb_teardown),
+        cmocka_unit_test_setup_teardown(test_tokens, testdb_setup, testdb_teardown),
+        cmocka_unit_test_setup_teardown(test_migration_from_schema_4, testdb_setup, testdb_teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

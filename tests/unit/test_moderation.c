@@ -9,36 +9,11 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../testdb.h"
 #include "account.h"
 #include "db.h"
 #include "moderation.h"
-
-static char path[64];
-
-static int setup(void **state)
-{
-    (void)state;
-    snprintf(path, sizeof path, "/tmp/cvre-test-moderation-%d.sqlite", (int)getpid());
-    testdb_remove(path);
-    return 0;
-}
-
-static int teardown(void **state)
-{
-    (void)state;
-    testdb_remove(path);
-    return 0;
-}
-
-static db *open_rw(void)
-{
-    char err[256];
-    db *d = db_open(path, DB_READWRITE, err, sizeof err);
-    if (!d)
-        fail_msg("%s", err);
-    return d;
-}
+#define TESTDB_NAME "moderation"
+#include "../testdb.h"
 
 /* What the feed gave, as "kind:session:name" lines. */
 static char seen[1024];
@@ -51,7 +26,7 @@ static void note(void *ctx, const char *kind, int64_t session_id, const char *na
 
 static void test_kick_ban_unban_feed(void **state)
 {
-    db *d = open_rw();
+    db *d = testdb_open();
     int64_t head = -1, last;
     double until;
 
@@ -91,7 +66,7 @@ static void test_kick_ban_unban_feed(void **state)
 /* A ban revokes the account's resume tokens: it cannot come back by one. */
 static void test_ban_revokes_tokens(void **state)
 {
-    db *d = open_rw();
+    db *d = testdb_open();
     uint8_t token[DB_ACCOUNT_TOKEN_BYTES];
     int64_t id, got;
 
@@ -106,8 +81,8 @@ static void test_ban_revokes_tokens(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test_setup_teardown(test_kick_ban_unban_feed, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_ban_revokes_tokens, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_kick_ban_unban_feed, testdb_setup, testdb_teardown),
+        cmocka_unit_test_setup_teardown(test_ban_revokes_tokens, testdb_setup, testdb_teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
