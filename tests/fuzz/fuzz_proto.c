@@ -16,11 +16,13 @@
  * the target (see tests/fuzz/README.md), which also has
  *   fuzz_proto --write-seeds DIR     one valid frame per type, as a corpus
  */
+#include <errno.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "fz.h"
 #include "proto.h"
@@ -853,6 +855,10 @@ static int write_seeds(const char *dir)
 {
     static uint8_t buf[PROTO_MAX_LEN + 4];
 
+    if (mkdir(dir, 0777) != 0 && errno != EEXIST) {
+        perror(dir);
+        return 1;
+    }
     fz_seed(1);
     for (size_t i = 0; i < NTYPES; i++) {
         const uint16_t t = types[i];

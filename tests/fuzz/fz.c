@@ -6,6 +6,7 @@
 #include "fz.h"
 
 #include <dirent.h>
+#include <errno.h>
 #include <signal.h>
 #include <float.h>
 #include <stdarg.h>
@@ -701,6 +702,10 @@ static int run_random(unsigned long long runs, uint64_t seed, const char *save_d
     inputs in = {NULL, 0, 0};
     int ok = 1;
 
+    if (save_dir && mkdir(save_dir, 0777) != 0 && errno != EEXIST) {
+        perror(save_dir);
+        return 1;
+    }
     for (int i = 0; i < argc && ok; i++)
         ok = add_path(&in, argv[i]);
     for (size_t i = 0; ok && i < in.n; i++)
