@@ -6,13 +6,14 @@
 # python3-sklearn and python3-numpy serve the tests and the scenario runner
 # (DBSCAN against scikit-learn's; triangle tests of simulated users).
 # --bench also installs what only the benchmarks compare against: OpenVDB
-# (libopenvdb-dev, with TBB) for bench-voxel.
+# (libopenvdb-dev, with TBB) for bench-voxel; and libFuzzer
+# (libclang-rt-14-dev), which fuzz-long links its targets with.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
           libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev chromium)
 for arg in "$@"; do
   case "$arg" in
-    --bench) packages+=(libopenvdb-dev) ;;
+    --bench) packages+=(libopenvdb-dev libclang-rt-14-dev) ;;
     *) echo "usage: bash tools/deps.sh [--bench]" >&2; exit 2 ;;
   esac
 done

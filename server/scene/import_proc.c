@@ -43,13 +43,17 @@ static double now_s(void)
     return (double)t.tv_sec + (double)t.tv_nsec * 1e-9;
 }
 
-/* The helper's environment: only the sanitizers' options, passed on (and,
+/* The helper's environment: the sanitizers' options, passed on (and,
  * under AddressSanitizer, whose allocator would abort at the helper's
- * memory limit, a NULL from malloc instead, as without it). envp holds 4
- * pointers, bufs 3 strings. */
-static void helper_env(char *envp[4], char bufs[3][512])
+ * memory limit, a NULL from malloc instead, as without it), and glibc's
+ * huge-page malloc. envp holds 5 pointers, bufs 3 strings. */
+static void helper_env(char *envp[5], char bufs[3][512])
 {
     static const char *const names[] = {"ASAN_OPTIONS", "UBSAN_OPTIONS", "LSAN_OPTIONS"};
+    /* glibc (2.35 on) backs malloc with transparent huge pages: every page
+     * of a new process is touched for the first time, and in 2 MB pages
+     * the city block's import took 0.25 s instead of 0.65 s here */
+    static char tunables[] = "GLIBC_TUNABLES=glibc.malloc.hugetlb=1";
     int k = 0;
 
     for (int i = 0; i < 3; i++) {
@@ -65,6 +69,7 @@ static void helper_env(char *envp[4], char bufs[3][512])
         envp[k] = bufs[k];
         k++;
     }
+    envp[k++] = tunables;
     envp[k] = NULL;
 }
 
@@ -210,7 +215,7 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
 {
     static const import_options defaults = IMPORT_OPTIONS_DEFAULT;
     uint8_t head[IMPORT_PIPE_REQUEST_HEAD];
-    char mem[16], cpu[16], envbuf[3][512], *envp[4];
+    char mem[16], cpu[16], envbuf[3][512], *envp[5];
     char *argv[] = {(char *)p->helper, "--memory", mem, "--cpu", cpu, NULL};
     int to[2] = {-1, -1}, from[2] = {-1, -1}, rc;
     exchange x = {.max_triangles = opt ? opt->max_triangles : IMPORT_MAX_TRIANGLES};
