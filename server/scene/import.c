@@ -573,6 +573,7 @@ typedef struct ply_prop {
 typedef struct ply_elem {
     uint32_t count;
     uint32_t first, nprops; /* its properties in the table */
+    int is_vertex;
 } ply_elem;
 
 typedef struct ply_header {
@@ -652,6 +653,26 @@ static int parse_u32(const unsigned char *w, size_t n, uint32_t *v)
  * properties at the first such line and ignores properties after it, so
  * we refuse those rather than count them differently.
  */
+/*
+ * The element layout Assimp's reader survives, found by fuzzing: vertices
+ * first (faces before them made it allocate 32 GB), one vertex element (a
+ * second made it write past the positions it allocated for the first), and
+ * no list among the vertex's properties (a negative length in an unsigned
+ * column: 32 GB). 1, or 0 with err set.
+ */
+static int ply_check_elements(const ply_header *h, char *err, size_t errlen)
+{
+    if (h->nelems > 0 && !h->elems[0].is_vertex)
+        return import__fail(err, errlen, 0, "PLY: the first element must be vertex");
+    for (uint32_t e = 1; e < h->nelems; e++)
+        if (h->elems[e].is_vertex)
+            return import__fail(err, errlen, 0, "PLY: two vertex elements");
+    for (uint32_t k = 0; h->nelems > 0 && k < h->elems[0].nprops; k++)
+        if (h->props[h->elems[0].first + k].count_size)
+            return import__fail(err, errlen, 0, "PLY: a list property in the vertex element");
+    return 1;
+}
+
 static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, char *err,
                                size_t errlen)
 {
@@ -675,7 +696,7 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
         if (kw_is(w[0], wl[0], "end_header")) {
             if (!have_format)
                 return (size_t)import__fail(err, errlen, 0, "PLY header has no format line");
-            return at;
+            return ply_check_elements(h, err, errlen) ? at : 0;
         }
         if (kw_is(w[0], wl[0], "format") && k >= 2) {
             have_format = 1;
@@ -690,6 +711,7 @@ static size_t ply_parse_header(const unsigned char *p, size_t n, ply_header *h, 
             e = &h->elems[h->nelems++];
             if (k < 3 || !parse_u32(w[2], wl[2], &e->count))
                 return (size_t)import__fail(err, errlen, 0, "PLY element line without a count");
+            e->is_vertex = kw_is(w[1], wl[1], "vertex");
             e->first = h->nprops;
             in_props = 1;
             continue;
@@ -746,7 +768,9 @@ static int ply_ascii_line(const unsigned char *p, size_t at, size_t eol, const p
                 return 0;
             if (i == 0 && h->props[k].count_size) {
                 uint32_t len;
-                if (!parse_u32(w, wl, &len))
+                /* a list of length 0 (a face without vertices) made
+                 * Assimp's triangulation abort the process */
+                if (!parse_u32(w, wl, &len) || len == 0)
                     return 0;
                 want += len;
             }
@@ -814,6 +838,8 @@ static int check_ply(const unsigned char *p, size_t n, char *err, size_t errlen)
                                     "PLY data ends before the elements its header declares");
                     items = ply_get_count(p + at, q, h.big_endian);
                     at += q->count_size;
+                    if (items == 0) /* Assimp's triangulation aborts */
+                        return import__fail(err, errlen, -EINVAL, "PLY: a list of length 0 (element %u)", e);
                 }
                 if (items < 0 || (uint64_t)items > (n - at) / q->size)
                     return import__fail(err, errlen, -EINVAL,

@@ -414,33 +414,27 @@ static int next_text_value(const char **t, double *v)
 }
 
 /*
+ * Refused by the PLY pre-check since fuzzing found them
+ * (corpus/fuzz_ply/hostile-*.ply): a list of length 0 (Assimp's
+ * triangulation aborted), a first element other than vertex and a list in
+ * the vertex element (32 GB allocations), two vertex elements (a heap
+ * write past Assimp's positions).
+ *
  * Known, reported, unfixed, all let through by the PLY pre-check
  * (corpus/fuzz_ply/known-*.ply):
- * - a list of length 0 (a face with no vertices) makes Assimp's
- *   triangulation fail an assertion and abort the process;
  * - a polygon of four or more vertices with an index out of range makes
  *   the triangulation read out of bounds (SIGSEGV), before import.c
  *   checks indices;
  * - a binary body whose first byte is a line feed is read by Assimp one
  *   byte later than by the pre-check, so the data it reads was never
  *   checked (shifted face lists: the SIGSEGV above);
- * - a list property in the vertex element, with a negative value in an
- *   unsigned column, makes Assimp allocate 32 GB (found by fuzz-long);
- * - a second element named vertex makes Assimp write past the end of the
- *   positions it allocated for the first: heap corruption that glibc
- *   reports ("free(): invalid next size") and ASan cannot see, Assimp not
- *   being instrumented (found by fuzz-long; valgrind shows the write).
- * - faces without a vertex element first (a 165-byte binary file) make
- *   Assimp allocate 32 GB (found by fuzz-long);
  * - in ASCII, a real number ("-1e+38") in an integer column makes
  *   Assimp's reader throw on the rest of the line, leaking its mesh
  *   (found by fuzz-long).
- * Skipped: binary bodies starting with a line feed; a list in the first
- * element; a first element other than vertex; two vertex elements; a real
- * in an integer column (ASCII);
- * any list of length 0,
- * or of four or more with an index outside the first element, walking the
- * body as the header says until it stops making sense.
+ * Skipped: binary bodies starting with a line feed; a real in an integer
+ * column (ASCII); a list of four or more with an index outside the first
+ * element, walking the body as the header says until it stops making
+ * sense.
  */
 static const char *ply_known(const uint8_t *data, size_t size)
 {
@@ -455,14 +449,6 @@ static const char *ply_known(const uint8_t *data, size_t size)
     at = (size_t)(f.body - data);
     if (f.format != 0 && at < size && data[at] == '\n')
         return "binary PLY body starting with a line feed";
-    for (int k = 0; k < f.elems[0].nprops; k++)
-        if (f.elems[0].props[k].count_type[0])
-            return "PLY list in the first element";
-    for (int e = 1; e < f.nelems; e++)
-        if (strcmp(f.elems[e].name, "vertex") == 0)
-            return "PLY with two vertex elements";
-    if (strcmp(f.elems[0].name, "vertex") != 0)
-        return "PLY whose first element is not vertex";
     for (int e = 0; e < f.nelems; e++) {
         unsigned long count = strtoul(f.elems[e].count, NULL, 10);
         for (unsigned long i = 0; i < count && at < size; i++) {
@@ -485,9 +471,7 @@ static const char *ply_known(const uint8_t *data, size_t size)
                                       : !get_value(data + at, size - at, q->count_type, f.format == 2, &items))
                         return NULL;
                     at += f.format ? (size_t)type_size(q->count_type) : 0;
-                    if (items == 0)
-                        return "PLY list of length 0";
-                    if (!(items >= 0 && items <= 4096))
+                    if (!(items > 0 && items <= 4096))
                         return NULL;
                 }
                 for (int j = 0; j < (int)items; j++) {

@@ -338,12 +338,12 @@ def ply_corpus(models, out):
         'no-end-header.ply': 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n',
         'property-before-element.ply': 'ply\nformat ascii 1.0\nproperty float x\nend_header\n',
         'element-no-properties.ply': 'ply\nformat ascii 1.0\nelement vertex 3\nend_header\n' + v3,
-        'known-empty-face-abort.ply': ascii_ply(3, 1, v3, '0\n'),
+        'hostile-empty-face-abort.ply': ascii_ply(3, 1, v3, '0\n'),
         'known-quad-index-out-of-range-segv.ply': ascii_ply(4, 1, v3 + '0 0 1\n', '4 0 1 2 1000000000\n'),
-        'known-vertex-list-negative-uchar-32gb.ply':
+        'hostile-vertex-list-negative-uchar-32gb.ply':
         'ply\nformat ascii 1.0\nelement vertex 3\nproperty uchar x\nproperty uchar y\n'
         'property list int16 uint8 p6\nend_header\n-1 2 3 7 5 7\n5 7 3 1 2 3\n6 1 3 5 1 3\n',
-        'known-two-vertex-elements-heap-overflow.ply':
+        'hostile-two-vertex-elements-heap-overflow.ply':
         'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n'
         'element vertex 4\nproperty short x\nproperty short y\nelement face 1\n'
         'property list uchar int vertex_indices\nend_header\n' + v3 + '0 0\n1 0\n1 1\n0 1\n' + f1,

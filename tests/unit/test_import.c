@@ -492,6 +492,32 @@ static void test_bad_input(void **state)
     import_mesh_free(&m0);
     free(b.p);
 
+    /* PLY element layouts fuzzing found Assimp abort, corrupt its heap or
+     * allocate 32 GB on */
+    b = ply_ascii(tri_props, "0 0 0\n1 0 0\n0 1 0\n0\n"); /* a face of no vertices */
+    expect_fail(b, "ply", -EINVAL, "PLY data line 4 does not match its element 1");
+    free(b.p);
+    b = ply_ascii("element face 1\nproperty list uchar int vertex_indices\nelement vertex 3\n"
+                  "property float x\nproperty float y\nproperty float z\n",
+                  "3 0 1 2\n0 0 0\n1 0 0\n0 1 0\n");
+    expect_fail(b, "ply", -EINVAL, "the first element must be vertex");
+    free(b.p);
+    b = ply_ascii("element vertex 1\nproperty float x\nelement vertex 1\nproperty float y\n", "0\n0\n");
+    expect_fail(b, "ply", -EINVAL, "two vertex elements");
+    free(b.p);
+    b = ply_ascii("element vertex 1\nproperty list uchar float x\n", "1 0\n");
+    expect_fail(b, "ply", -EINVAL, "a list property in the vertex element");
+    free(b.p);
+    {
+        static const unsigned char empty_face[13] = {0}; /* a vertex at 0, then a face of length 0 */
+        b = ply_binary("ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n"
+                       "property float y\nproperty float z\nelement face 1\n"
+                       "property list uchar int vertex_indices\nend_header\n",
+                       empty_face, sizeof empty_face);
+        expect_fail(b, "ply", -EINVAL, "a list of length 0");
+        free(b.p);
+    }
+
     /* PLY headers declaring far more than the data holds */
     b = ply_ascii("element vertex 4000000000\nproperty float x\nproperty float y\n"
                   "property float z\nelement face 1\nproperty list uchar int vertex_indices\n",
