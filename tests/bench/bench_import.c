@@ -18,6 +18,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench.h"
 #include "scene/import.h"
 #include "scene/import_proc.h"
 
@@ -32,19 +33,6 @@ static const struct {
     {"scenes/dabrovic_sponza.obj", 0},
     {"scenes/openfoam_windAroundBuildings.obj", 0},
 };
-
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec * 1e3 + (double)t.tv_nsec / 1e6;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
 
 static unsigned char *slurp(const char *path, size_t *len)
 {
@@ -73,10 +61,10 @@ static double time_import(const import_proc *p, const unsigned char *data, size_
 
     for (int i = 0; i < repeat; i++) {
         import_mesh m;
-        double t0 = now_ms();
+        double t0 = bench_now_ms();
         int rc = p ? import_isolated(p, data, len, hint, o, &m, err, sizeof err)
                    : import_model(data, len, hint, o, &m, err, sizeof err);
-        t[i] = now_ms() - t0;
+        t[i] = bench_now_ms() - t0;
         if (rc != 0) {
             fprintf(stderr, "bench_import: %s: %s\n", p ? "isolated" : "in process", err);
             free(t);
@@ -85,8 +73,7 @@ static double time_import(const import_proc *p, const unsigned char *data, size_
         *ntris = m.ntris;
         import_mesh_free(&m);
     }
-    qsort(t, (size_t)repeat, sizeof *t, cmp_d);
-    med = t[repeat / 2];
+    med = bench_median(t, repeat);
     free(t);
     return med;
 }

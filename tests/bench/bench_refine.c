@@ -20,31 +20,13 @@
 #include <unistd.h>
 
 #include "../testdb.h"
+#include "bench.h"
 #include "apply.h"
 #include "db.h"
 #include "ecm.h"
 #include "proto.h"
 #include "scene/import.h"
 #include "scene/scene.h"
-
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec * 1e3 + (double)t.tv_nsec / 1e6;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_d);
-    return n % 2 ? v[n / 2] : (v[n / 2 - 1] + v[n / 2]) / 2;
-}
 
 static int load(const char *dir, const char *rel, int z_up, uint32_t limit, import_mesh *m)
 {
@@ -146,14 +128,14 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         char reset[128];
         snprintf(reset, sizeof reset, "UPDATE objects SET ecm_version = 1 WHERE id = %lld", (long long)o.id);
         sqlite3_exec(db_sqlite(d), reset, NULL, NULL, NULL);
-        double t0 = now_ms();
+        double t0 = bench_now_ms();
         ecm_applied a;
         int rc = ecm_apply(d, &p, 0, &cl, 1, &a, err, sizeof err);
         if (rc != ECM_APPLY_WRITTEN) {
             fprintf(stderr, "%s: refinement: %d %s\n", label, rc, err);
             return -1;
         }
-        double t1 = now_ms();
+        double t1 = bench_now_ms();
         /* Publishing, as the server does it: read the version back, swap
          * it in, encode the frame for a client. */
         float(*nb)[6];
@@ -176,7 +158,7 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         free(lo);
         free(hi);
         free(nb);
-        double t2 = now_ms();
+        double t2 = bench_now_ms();
         t[0][r] = t1 - t0;
         t[1][r] = a.stats.voxel_ms;
         t[2][r] = a.stats.divide_ms;
@@ -185,8 +167,8 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         boxes_after = a.boxes_after;
     }
     printf("| %-22s | %7u | %4u^3 | %5u | %8.1f | %8.1f | %12.1f | %7.2f | %8.1f |\n", label, m.ntris,
-           1u << depth, boxes_after, median(t[1], repeat), median(t[2], repeat), median(t[0], repeat),
-           median(t[3], repeat), median(t[4], repeat));
+           1u << depth, boxes_after, bench_median(t[1], repeat), bench_median(t[2], repeat), bench_median(t[0], repeat),
+           bench_median(t[3], repeat), bench_median(t[4], repeat));
     for (int k = 0; k < 5; k++)
         free(t[k]);
     free(frame);

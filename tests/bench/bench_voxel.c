@@ -25,25 +25,13 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench.h"
 #include "scene/import.h"
 #include "voxel.h"
 
 #define MAX_MODELS 8
 #define MAX_REPEAT 101
 #define MAX_DEPTHS 10
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
 
 /* Reads and imports MODELS_DIR/rel into *m. Returns 0 or prints why not. */
 static int load(const char *dir, const char *rel, import_mesh *m)
@@ -188,13 +176,13 @@ int main(int argc, char **argv)
             for (int r = 0; r < 2 * repeat; r++) {
                 int mt = r % 2; /* alternate, so that a busy spell hits both */
                 voxel_grid g;
-                double t0 = now_ms();
+                double t0 = bench_now_ms();
                 int rc = voxel_grid_init(&g, depths[di], m.min, m.max);
                 if (rc == 0)
                     rc = mt ? voxel_mark_threads(&g, m.tris, m.ntris, 0) : voxel_mark(&g, m.tris, m.ntris);
                 uint64_t occ = g.occupied;
                 voxel_grid_free(&g);
-                t[mt][r / 2] = now_ms() - t0;
+                t[mt][r / 2] = bench_now_ms() - t0;
                 if (rc != 0) {
                     fprintf(stderr, "bench_voxel: %s: error %d\n", name, rc);
                     return 2;
@@ -204,8 +192,8 @@ int main(int argc, char **argv)
                 else if (occ != cells)
                     status = 1;
             }
-            qsort(t[0], (size_t)repeat, sizeof t[0][0], cmp_double);
-            qsort(t[1], (size_t)repeat, sizeof t[1][0], cmp_double);
+            qsort(t[0], (size_t)repeat, sizeof t[0][0], bench_cmp_double);
+            qsort(t[1], (size_t)repeat, sizeof t[1][0], bench_cmp_double);
             double mb = (double)n * n * n / 8.0 / (1024.0 * 1024.0);
             if (json)
                 printf("{\"model\": \"%s\", \"triangles\": %u, \"depth\": %u, \"n\": %u, \"ms\": %.4f, "
