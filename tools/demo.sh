@@ -9,9 +9,20 @@ bash tools/deps.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j "$(nproc)" >/dev/null
 port=${CVRE_PORT:-7878}
-./build/cvre-server --port "$port" --db cvre-demo.db --world server/worlds/demo.world "$@" &
+ready=$(mktemp)
+./build/cvre-server --port "$port" --db cvre-demo.db --world server/worlds/demo.world "$@" >"$ready" &
 server=$!
-sleep 0.5
+# the bots start once the server says it listens (loading the world takes
+# seconds); if it stops first, so does the demo, with its exit code
+until grep -q '^listening on' "$ready"; do
+  if ! kill -0 $server 2>/dev/null; then
+    rm -f "$ready"
+    wait $server
+    exit $?
+  fi
+  sleep 0.2
+done
+rm -f "$ready"
 ./build/cvre-client --port "$port" --bots 8 --rate 5 --pattern random-walk --duration 86400 --name wanderer >/dev/null &
 bots=$!
 trap 'kill -TERM $bots $server 2>/dev/null; wait $server' INT TERM EXIT
