@@ -12,6 +12,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <sys/socket.h>
 #include <sys/types.h>
 
 #include "proto.h"
@@ -47,5 +48,15 @@ size_t conn_out_pending(const conn *c);
 /* Writes as much pending output as the socket takes. Returns the bytes still
  * pending (0: all written), or -errno on a broken connection. */
 ssize_t conn_flush(conn *c);
+
+/* Listens on host:port (port 0: any free one) with a non-blocking,
+ * close-on-exec socket; writes the bound address to address as
+ * conn_peer_name does. Returns the socket, or -1 with a message in err.
+ * Every endpoint (the protocol's, the metrics one) listens through here. */
+int conn_listen(const char *host, uint16_t port, int backlog, char *address, size_t addrlen, char *err,
+                size_t errlen);
+/* "HOST:PORT" of a socket address, numeric, IPv6 in brackets; "?" if it
+ * cannot be named. */
+void conn_peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t outlen);
 
 #endif

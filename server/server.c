@@ -2,7 +2,6 @@
 #include "server.h"
 
 #include <errno.h>
-#include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <signal.h>
@@ -765,18 +764,6 @@ static void reap(server *s, client *c)
     free(c);
 }
 
-static void peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t outlen)
-{
-    char host[64], port[8]; /* numeric: an IPv6 address with scope fits */
-    if (getnameinfo((const struct sockaddr *)sa, len, host, sizeof host, port, sizeof port,
-                    NI_NUMERICHOST | NI_NUMERICSERV) != 0)
-        snprintf(out, outlen, "?");
-    else if (sa->ss_family == AF_INET6)
-        snprintf(out, outlen, "[%s]:%s", host, port);
-    else
-        snprintf(out, outlen, "%s:%s", host, port);
-}
-
 /* Refuses a connection the server has no room for, with a best-effort error
  * frame (the socket is fresh, so a small write goes through). */
 static void refuse(int fd, const char *why)
@@ -806,7 +793,7 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
             return;
         }
         char peer[80], addr[80];
-        peer_name(&sa, len, peer, sizeof peer);
+        conn_peer_name(&sa, len, peer, sizeof peer);
         ratelimit_address(peer, addr, sizeof addr);
         if (s->nclients >= s->cfg.max_clients || cfd >= s->max_fd) {
             log_warn("%s refused: server full (%u clients)", peer, s->nclients);
@@ -1014,46 +1001,6 @@ static void before_sleep(ev_loop *loop, void *data)
 
 /* ---- setup ------------------------------------------------------------ */
 
-static int listen_on(server *s, char *err, size_t errlen)
-{
-    struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
-                             .ai_flags = AI_PASSIVE | AI_NUMERICSERV},
-                    *res = NULL;
-    char port[8];
-    snprintf(port, sizeof port, "%u", s->cfg.port);
-    int rc = getaddrinfo(s->cfg.host, port, &hints, &res);
-    if (rc != 0) {
-        snprintf(err, errlen, "cannot resolve %s: %s", s->cfg.host, gai_strerror(rc));
-        return -1;
-    }
-    int fd = -1, saved = 0;
-    for (struct addrinfo *ai = res; ai; ai = ai->ai_next) {
-        fd = socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC, ai->ai_protocol);
-        if (fd < 0) {
-            saved = errno;
-            continue;
-        }
-        int one = 1;
-        setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-        if (bind(fd, ai->ai_addr, ai->ai_addrlen) == 0 && listen(fd, SRV_LISTEN_BACKLOG) == 0)
-            break;
-        saved = errno;
-        close(fd);
-        fd = -1;
-    }
-    freeaddrinfo(res);
-    if (fd < 0) {
-        snprintf(err, errlen, "cannot listen on %s:%u: %s", s->cfg.host, s->cfg.port, strerror(saved));
-        return -1;
-    }
-    struct sockaddr_storage sa;
-    socklen_t len = sizeof sa;
-    getsockname(fd, (struct sockaddr *)&sa, &len);
-    peer_name(&sa, len, s->address, sizeof s->address);
-    s->listen_fd = fd;
-    return 0;
-}
-
 static int setup_signals(server *s, char *err, size_t errlen)
 {
     sigset_t set;
@@ -1120,7 +1067,10 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
         goto fail;
     dblog_config lc = {DBLOG_QUEUE_ROWS_DEFAULT, DBLOG_BATCH_ROWS_DEFAULT, DBLOG_BATCH_MS_DEFAULT};
     s->log = dblog_open(cfg->db_path, &lc, err, errlen);
-    if (!s->log || objects__start(s, err, errlen) < 0 || listen_on(s, err, errlen) < 0)
+    if (!s->log || objects__start(s, err, errlen) < 0)
+        goto fail;
+    s->listen_fd = conn_listen(cfg->host, cfg->port, SRV_LISTEN_BACKLOG, s->address, sizeof s->address, err, errlen);
+    if (s->listen_fd < 0)
         goto fail;
     s->logins = ratelimit_create(SRV_LOGIN_SLOTS, SRV_LOGIN_PER_SECOND, cfg->login_burst);
     s->per_address = addrcount_create(SRV_LOGIN_SLOTS);
