@@ -13,11 +13,11 @@
 int conn_init(conn *c, int fd)
 {
     memset(c, 0, sizeof *c);
+    c->fd = fd; /* even on failure: conn_free closes it */
     c->in = cvre_malloc(SRV_INBUF_INITIAL);
     if (!c->in)
         return -ENOMEM;
     c->in_cap = SRV_INBUF_INITIAL;
-    c->fd = fd;
     return 0;
 }
 

@@ -25,7 +25,8 @@ typedef struct conn {
     size_t out_head, out_tail, out_cap; /* pending bytes are out[head..tail) */
 } conn;
 
-/* Takes ownership of fd (closed by conn_free). Returns 0 or -ENOMEM. */
+/* Takes ownership of fd (closed by conn_free, also after a failure here).
+ * Returns 0 or -ENOMEM. */
 int conn_init(conn *c, int fd);
 void conn_free(conn *c);
 

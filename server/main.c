@@ -58,6 +58,9 @@ static const char usage[] =
     "  --refine-max-empty F      share of a merged box that may be empty space, 0..1 (default 0.25)\n"
     "  --stats-file FILE         append per-interval figures as JSON lines\n"
     "  --stats-interval S        seconds between stats lines (default 10)\n"
+    "  --metrics HOST:PORT       serve Prometheus metrics at http://HOST:PORT/metrics\n"
+    "                            ([IPV6]:PORT; port 0 picks a free one, logged as\n"
+    "                            \"metrics on http://...\"); off by default\n"
     "  --log-level LEVEL         debug, info, warn or error (default info)\n"
     "  --help                    show this help\n"
     "  --version                 show the version\n"
@@ -88,6 +91,26 @@ static double integer(const char *flag, const char *text, double lo, double hi)
     return v;
 }
 
+/* Splits text, HOST:PORT or [IPV6]:PORT, in place into *host and *port,
+ * or exits with a message naming the flag. */
+static void host_port(const char *flag, char *text, const char **host, uint16_t *port)
+{
+    char *colon = strrchr(text, ':');
+    size_t hlen = colon ? (size_t)(colon - text) : 0;
+    int bracketed = hlen >= 2 && text[0] == '[' && text[hlen - 1] == ']';
+    if (!colon || hlen == 0 || (text[0] == '[' && !bracketed) || (bracketed && hlen == 2)) {
+        fprintf(stderr, "cvre-server: --%s wants HOST:PORT or [IPV6]:PORT, not \"%s\"\n", flag, text);
+        exit(2);
+    }
+    *port = (uint16_t)integer(flag, colon + 1, 0, 65535);
+    *colon = 0;
+    if (bracketed) {
+        text[hlen - 1] = 0;
+        text++;
+    }
+    *host = text;
+}
+
 /* Lifts the soft limit on open files to the hard one: each client is a file. */
 static void raise_fd_limit(uint32_t max_clients)
 {
@@ -105,7 +128,7 @@ int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
            O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
-           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB };
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -125,6 +148,7 @@ int main(int argc, char **argv)
         {"auth", required_argument, 0, O_AUTH}, {"login-burst", required_argument, 0, O_LOGIN_BURST},
         {"max-per-address", required_argument, 0, O_PER_ADDR}, {"joins-per-second", required_argument, 0, O_JOINS},
         {"quota-objects", required_argument, 0, O_Q_OBJ}, {"quota-mb", required_argument, 0, O_Q_MB},
+        {"metrics", required_argument, 0, O_METRICS},
         {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
@@ -144,6 +168,7 @@ int main(int argc, char **argv)
         case O_IDLE: cfg.idle_timeout_ms = (uint32_t)integer("idle-timeout", optarg, 10, 86400000); break;
         case O_SEED: cfg.seed = (uint64_t)integer("seed", optarg, 0, 9007199254740992.0); break;
         case O_STATS: cfg.stats_file = optarg; break;
+        case O_METRICS: host_port("metrics", optarg, &cfg.metrics_host, &cfg.metrics_port); break;
         case O_WORLD_FILE: cfg.world_file = optarg; break;
         case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, 1024.0 * 1024 * 1024); break;
         case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, 100000000); break;

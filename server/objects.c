@@ -72,6 +72,8 @@ static void reject(server *s, client *c, uint32_t request_id, int code, const ch
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
     log_info("%s (session %lld): request %u refused: %s", c->peer, (long long)c->session_id, request_id, msg);
+    if ((unsigned)code < METRICS_CODES)
+        s->st.rejected[code]++;
     proto_writer w;
     if (server__out_begin(s, c, PROTO_SIZE_OBJECT_REJECTED_MAX, &w) < 0)
         return;
@@ -183,6 +185,7 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
     while (importer_take(s->importer, &r) == 0) {
         client *c = server__client_by_session(s, r.session);
         if (r.status != 0) {
+            s->st.imports_failed++;
             if (c)
                 reject(s, c, r.upload_id, r.status, "%s", r.message);
             continue;
@@ -195,9 +198,11 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
         int rc = scene_add(s->scene, &def);
         importer_result_free(&r);
         if (rc < 0) {
+            s->st.imports_failed++;
             log_error("object %u: cannot add it to the scene: %s", r.object_id, strerror(-rc));
             continue;
         }
+        s->st.imports_ok++;
         const scene_object *o = scene_get(s->scene, r.object_id);
         log_info("object %u \"%s\" of %s imported: %u triangles", o->id, o->name, o->owner, o->tri_count);
         broadcast_info(s, o, c, r.upload_id);
@@ -228,6 +233,7 @@ static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *dat
             log_error("object %u: cannot take collision map v%u: %s", u.object_id, u.version, strerror(-rc));
             continue;
         }
+        s->st.versions_published++;
         o = scene_get(s->scene, u.object_id);
         log_info("object %u \"%s\": collision map v%u -> v%u in force, %u -> %u boxes", o->id, o->name, old_version,
                  o->ecm_version, before, o->box_count);

@@ -2,6 +2,7 @@
 
 #include <errno.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -62,6 +63,7 @@ struct refiner {
     int64_t feed_after, collisions_after;
     tracked *objs; /* sorted by id */
     uint32_t nobjs, cap;
+    _Atomic uint64_t rounds, versions_written; /* refiner_stats, read by the loop's thread */
 };
 
 static uint64_t now_ms(void)
@@ -279,12 +281,13 @@ static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_fou
     ecm_applied a;
     char err[512];
     int rc = ecm_apply(r->db, &r->cfg.ecm, run_id, f, (uint32_t)k, &a, err, sizeof err);
-    if (rc == ECM_APPLY_WRITTEN)
+    if (rc == ECM_APPLY_WRITTEN) {
+        atomic_fetch_add_explicit(&r->versions_written, 1, memory_order_relaxed);
         log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %zu clusters of run %lld "
                  "(digitize %.1f ms, divide %.1f ms, in all %.1f ms)",
                  (long long)t->id, t->version, a.version, a.boxes_before, a.boxes_after, k, (long long)run_id,
                  a.stats.voxel_ms, a.stats.divide_ms, a.total_ms);
-    else if (rc == ECM_APPLY_UNCHANGED) {
+    } else if (rc == ECM_APPLY_UNCHANGED) {
         log_info("object %lld v%u: %zu clusters of run %lld press on real geometry only; map unchanged",
                  (long long)t->id, t->version, k, (long long)run_id);
         settle(t, f, k);
@@ -299,6 +302,7 @@ static void examine(refiner *r)
 {
     if (read_collisions(r) < 0)
         return;
+    atomic_fetch_add_explicit(&r->rounds, 1, memory_order_relaxed);
     cluster_run run = {.started = db_now(), .params = r->cfg.cluster};
     cluster_found *found = NULL;
     size_t nfound = 0;
@@ -449,4 +453,10 @@ void refiner_update_free(refiner_update *u)
 {
     free(u->boxes);
     u->boxes = NULL;
+}
+
+void refiner_stats_get(refiner *r, refiner_stats *out)
+{
+    out->rounds = atomic_load_explicit(&r->rounds, memory_order_relaxed);
+    out->versions_written = atomic_load_explicit(&r->versions_written, memory_order_relaxed);
 }

@@ -56,4 +56,13 @@ int refiner_fd(const refiner *r);
 int refiner_take(refiner *r, refiner_update *out);
 void refiner_update_free(refiner_update *u);
 
+/* Counters since refiner_start, for the metrics endpoint. */
+typedef struct refiner_stats {
+    uint64_t rounds;           /* online rounds: new collisions read and clustered */
+    uint64_t versions_written; /* refined collision maps this thread stored */
+} refiner_stats;
+
+/* Safe from any thread while the refiner runs. */
+void refiner_stats_get(refiner *r, refiner_stats *out);
+
 #endif

@@ -221,6 +221,8 @@ void server__protocol_error(server *s, client *c, int code, const char *fmt, ...
         s->st.timeouts++;
     else
         s->st.protocol_errors++;
+    if ((unsigned)code < METRICS_CODES)
+        s->st.errors[code]++;
     proto_writer w;
     if (server__out_begin(s, c, PROTO_SIZE_ERROR_MAX, &w) == 0) {
         proto_put_error(&w, (uint16_t)code, msg);
@@ -734,6 +736,8 @@ static void on_tick(ev_loop *loop, void *data)
             update_view(s, c, tick);
     }
     uint64_t us = (ev_clock(loop) - t0) / 1000u;
+    s->st.ticks++;
+    metrics_tick_observe(&s->st.tick_hist, (double)us * 1e-6);
     if (s->st.nticks < s->st.tick_cap)
         s->st.tick_us[s->st.nticks++] = us > UINT32_MAX ? UINT32_MAX : (uint32_t)us;
     server__events_flush(s);
@@ -863,13 +867,19 @@ static int cmp_u32(const void *x, const void *y)
     return (a > b) - (a < b);
 }
 
-/* Logs the interval's figures, appends them to the stats file if one was
- * asked for (with every tick duration, for exact percentiles), and starts a
- * new interval. */
+/* Logs the interval's figures (the growth of the totals since it began),
+ * appends them to the stats file if one was asked for (with every tick
+ * duration, for exact percentiles), and starts a new interval. */
 static void on_stats(ev_loop *loop, void *data)
 {
     server *s = data;
     stats *st = &s->st;
+    const stats *b = &s->st_base;
+    stats d = {.frames_in = st->frames_in - b->frames_in, .moves_in = st->moves_in - b->moves_in,
+               .bytes_in = st->bytes_in - b->bytes_in, .bytes_out = st->bytes_out - b->bytes_out,
+               .closed = st->closed - b->closed, .protocol_errors = st->protocol_errors - b->protocol_errors,
+               .timeouts = st->timeouts - b->timeouts, .slow_readers = st->slow_readers - b->slow_readers,
+               .moves_dropped = st->moves_dropped - b->moves_dropped};
     double secs = (double)(ev_clock(loop) - st->interval_start_ns) * 1e-9;
     uint32_t *sorted = xmalloc((st->nticks ? st->nticks : 1) * sizeof *sorted);
     memcpy(sorted, st->tick_us, st->nticks * sizeof *sorted);
@@ -878,13 +888,13 @@ static void on_stats(ev_loop *loop, void *data)
     double p99 = st->nticks ? sorted[(st->nticks * 99) / 100] / 1000.0 : 0;
     double mx = st->nticks ? sorted[st->nticks - 1] / 1000.0 : 0;
     free(sorted);
-    if (s->nclients || st->frames_in)
+    if (s->nclients || d.frames_in)
         log_info("stats: clients=%u ticks=%u tick_p50=%.2fms p99=%.2fms max=%.2fms moves/s=%.0f in=%.0fB/s "
                  "out=%.0fB/s closed=%llu errors=%llu timeouts=%llu slow=%llu moves_dropped=%llu",
-                 s->nclients, st->nticks, p50, p99, mx, (double)st->moves_in / secs, (double)st->bytes_in / secs,
-                 (double)st->bytes_out / secs, (unsigned long long)st->closed,
-                 (unsigned long long)st->protocol_errors, (unsigned long long)st->timeouts,
-                 (unsigned long long)st->slow_readers, (unsigned long long)st->moves_dropped);
+                 s->nclients, st->nticks, p50, p99, mx, (double)d.moves_in / secs, (double)d.bytes_in / secs,
+                 (double)d.bytes_out / secs, (unsigned long long)d.closed,
+                 (unsigned long long)d.protocol_errors, (unsigned long long)d.timeouts,
+                 (unsigned long long)d.slow_readers, (unsigned long long)d.moves_dropped);
     if (s->cfg.stats_file) {
         FILE *f = fopen(s->cfg.stats_file, "a");
         if (!f) {
@@ -894,19 +904,20 @@ static void on_stats(ev_loop *loop, void *data)
                     "{\"seconds\":%.3f,\"clients\":%u,\"moves_in\":%llu,\"frames_in\":%llu,\"bytes_in\":%llu,"
                     "\"bytes_out\":%llu,\"closed\":%llu,\"protocol_errors\":%llu,\"timeouts\":%llu,"
                     "\"slow_readers\":%llu,\"moves_dropped\":%llu,\"tick_us\":[",
-                    secs, s->nclients, (unsigned long long)st->moves_in, (unsigned long long)st->frames_in,
-                    (unsigned long long)st->bytes_in, (unsigned long long)st->bytes_out,
-                    (unsigned long long)st->closed, (unsigned long long)st->protocol_errors,
-                    (unsigned long long)st->timeouts, (unsigned long long)st->slow_readers,
-                    (unsigned long long)st->moves_dropped);
+                    secs, s->nclients, (unsigned long long)d.moves_in, (unsigned long long)d.frames_in,
+                    (unsigned long long)d.bytes_in, (unsigned long long)d.bytes_out,
+                    (unsigned long long)d.closed, (unsigned long long)d.protocol_errors,
+                    (unsigned long long)d.timeouts, (unsigned long long)d.slow_readers,
+                    (unsigned long long)d.moves_dropped);
             for (uint32_t i = 0; i < st->nticks; i++)
                 fprintf(f, i ? ",%u" : "%u", st->tick_us[i]);
             fprintf(f, "]}\n");
             fclose(f);
         }
     }
-    uint32_t *keep = st->tick_us, cap = st->tick_cap;
-    *st = (stats){.tick_us = keep, .tick_cap = cap, .interval_start_ns = ev_now(loop)};
+    st->nticks = 0;
+    st->interval_start_ns = ev_now(loop);
+    s->st_base = *st;
 }
 
 /* ---- shutdown --------------------------------------------------------- */
@@ -1096,6 +1107,8 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
         snprintf(err, errlen, "event loop setup failed");
         goto fail;
     }
+    if (metrics__start(s, err, errlen) < 0)
+        goto fail;
     ev_set_before_sleep(s->loop, before_sleep, s);
     s->st.interval_start_ns = ev_clock(s->loop);
     return s;
@@ -1140,6 +1153,7 @@ void server_destroy(server *s)
     addrcount_destroy(s->per_address);
     if (s->log)
         dblog_stop(s->log, NULL);
+    metrics__stop(s);
     if (s->loop)
         ev_destroy(s->loop);
     if (s->listen_fd >= 0)

@@ -29,6 +29,8 @@ typedef struct server_config {
     uint32_t max_upload;    /* bytes of one model file */
     uint32_t max_triangles; /* of one model */
     const char *world_file; /* objects to preload; NULL: none */
+    const char *metrics_host; /* the Prometheus endpoint (--metrics); NULL: off */
+    uint16_t metrics_port;    /* 0: any free port */
     import_proc importer;   /* the isolated importer every model goes through */
     int auth_required;      /* 1: accounts only; 0: guests may walk and look */
     double login_burst;     /* logins an address may make at once (then SRV_LOGIN_PER_SECOND) */

@@ -11,8 +11,10 @@
 #include "db.h"
 #include "dblog.h"
 #include "ev.h"
+#include "http_server.h"
 #include "auth.h"
 #include "importer.h"
+#include "metrics.h"
 #include "proto.h"
 #include "ratelimit.h"
 #include "refiner.h"
@@ -88,9 +90,16 @@ typedef struct store_event {
     char token[2 * PROTO_TOKEN_SIZE + 1];
 } store_event;
 
+/* The server's figures. The counters are totals since start, never reset:
+ * the metrics endpoint serves them as they are, and each stats interval
+ * (on_stats) reports their growth since its start (server.st_base). */
 typedef struct stats {
     uint64_t frames_in, moves_in, bytes_in, bytes_out;
     uint64_t accepted, closed, protocol_errors, timeouts, slow_readers, collisions, moves_dropped;
+    uint64_t ticks, imports_ok, imports_failed, versions_published;
+    uint64_t errors[METRICS_CODES];   /* error frames sent, by code */
+    uint64_t rejected[METRICS_CODES]; /* object requests refused, by code */
+    metrics_histogram tick_hist;
     uint32_t *tick_us; /* durations of this interval's ticks */
     uint32_t nticks, tick_cap;
     uint64_t interval_start_ns;
@@ -117,6 +126,8 @@ struct server {
     int stopping;
     uint64_t stop_deadline_ns;
     stats st;
+    stats st_base;            /* st when the stats interval began */
+    http_server *metrics;     /* --metrics (metrics_endpoint.c); NULL: off */
     char address[80];
     client **by_slot; /* the joined client of each avatar slot */
     dblog *log;       /* the collision log's writer thread */
@@ -146,6 +157,10 @@ void server__out_end(server *s, client *c, const proto_writer *w);
 void server__protocol_error(server *s, client *c, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
 /* The connected client of this session, or NULL (it may have left). */
 client *server__client_by_session(server *s, int64_t session);
+
+/* metrics_endpoint.c: the --metrics endpoint, if configured. */
+int metrics__start(server *s, char *err, size_t errlen);
+void metrics__stop(server *s);
 
 /* objects.c */
 int objects__start(server *s, char *err, size_t errlen);

@@ -10,7 +10,7 @@
 # (libclang-rt-14-dev), which fuzz-long links its targets with.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
-          libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev chromium)
+          libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev libhttp-parser-dev chromium)
 for arg in "$@"; do
   case "$arg" in
     --bench) packages+=(libopenvdb-dev libclang-rt-14-dev) ;;

@@ -1,0 +1,336 @@
+/* http_server.c: an HTTP/1.1 endpoint on the event loop (see http_server.h). */
+#define _GNU_SOURCE /* accept4 */
+#include "http_server.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "alloc.h"
+#include "conn.h"
+#include "log.h"
+#include "srv_limits.h"
+
+#define NS_PER_MS ((uint64_t)1000000)
+/* Connections accepted per wakeup of the listening socket: a burst past
+ * the cap is refused a few at a time, between the game's own events. */
+#define ACCEPT_BUDGET 16
+/* listen(2) backlog: scrapers come one at a time. */
+#define LISTEN_BACKLOG 64
+/* How often deadlines are checked: a deadline is met within this. */
+#define SWEEP_MS 100u
+/* Room for a response head: a status line and five short headers. */
+#define HEAD_ROOM 512u
+
+_Static_assert(HTTP_BODY_MAX + HEAD_ROOM <= SRV_OUTBUF_HARD, "a response fits in a connection's output");
+
+/* READING the request head; WRITING the response; DRAINING: the response
+ * is out and the write side shut, reading (and dropping) until the peer
+ * closes, so that the close does not reset a response it has not read. */
+typedef enum { HC_READING, HC_WRITING, HC_DRAINING } hc_state;
+
+typedef struct http_conn {
+    conn c;
+    http_server *h;
+    http_request *req;
+    hc_state state;
+    int dead;    /* reaped at the next safe point */
+    int eof;     /* the peer shut its write side */
+    int writing; /* EV_WRITE armed */
+    uint64_t deadline_ns;
+    char peer[80];
+} http_conn;
+
+struct http_server {
+    ev_loop *loop;
+    char name[32];
+    uint32_t max_conns;
+    http_handler_fn *fn;
+    void *data;
+    int listen_fd;
+    int sweep_timer;
+    int reap_timer; /* a pending zero-delay timer, or -1 */
+    char address[80];
+    http_conn **conns;
+    uint32_t nconns;
+};
+
+const char *http_server_address(const http_server *h) { return h->address; }
+
+static void reap_dead(http_server *h)
+{
+    for (uint32_t i = 0; i < h->nconns;) {
+        http_conn *hc = h->conns[i];
+        if (!hc->dead) {
+            i++;
+            continue;
+        }
+        ev_io_del(h->loop, hc->c.fd);
+        conn_free(&hc->c);
+        http_request_free(hc->req);
+        free(hc);
+        h->conns[i] = h->conns[--h->nconns];
+    }
+}
+
+static void on_reap(ev_loop *loop, void *data)
+{
+    (void)loop;
+    http_server *h = data;
+    h->reap_timer = -1;
+    reap_dead(h);
+}
+
+/* Marks hc for reaping once the callbacks of this loop iteration are over
+ * (the sweep reaps it if no timer could be started). */
+static void kill_conn(http_conn *hc)
+{
+    http_server *h = hc->h;
+    hc->dead = 1;
+    if (h->reap_timer < 0)
+        h->reap_timer = ev_timer_start(h->loop, 0, 0, on_reap, h);
+}
+
+static void watch(http_conn *hc)
+{
+    unsigned events = (hc->eof ? 0u : (unsigned)EV_READ) | (hc->writing ? (unsigned)EV_WRITE : 0u);
+    ev_io_mod(hc->h->loop, hc->c.fd, events);
+}
+
+/* Writes what is pending; once all of it is out, shuts the write side and
+ * drains, or closes if the peer has shut its side already. */
+static void flush(http_conn *hc)
+{
+    ssize_t left = conn_flush(&hc->c);
+    if (left < 0) {
+        kill_conn(hc);
+        return;
+    }
+    hc->writing = left > 0;
+    watch(hc);
+    if (left > 0)
+        return;
+    if (hc->eof) {
+        kill_conn(hc);
+        return;
+    }
+    shutdown(hc->c.fd, SHUT_WR);
+    hc->state = HC_DRAINING;
+}
+
+/* The one-line body of a reply that has none: "404 Not Found\n". */
+static size_t status_body(int status, char *out, size_t cap)
+{
+    int n = snprintf(out, cap, "%d %s\n", status, http_reason(status));
+    return n < 0 ? 0 : (size_t)n < cap ? (size_t)n : cap - 1;
+}
+
+/* Queues the response and writes what the socket takes now; frees the
+ * reply's body. complete: it answers a whole request (for the log). */
+static void respond(http_conn *hc, http_reply *rep, int complete)
+{
+    char head[HEAD_ROOM], line[64];
+    if (rep->body_len > HTTP_BODY_MAX) {
+        log_error("%s: a response of %zu bytes is over the limit of %u", hc->h->name, rep->body_len, HTTP_BODY_MAX);
+        free(rep->body);
+        *rep = (http_reply){.status = 500};
+    }
+    const char *body = rep->body;
+    size_t body_len = rep->body_len;
+    if (!body) {
+        body_len = status_body(rep->status, line, sizeof line);
+        body = line;
+        rep->content_type = "text/plain; charset=utf-8";
+    }
+    int n = http_response_head(head, sizeof head, rep->status, rep->content_type, body_len, rep->extra);
+    proto_writer w;
+    if (n < 0 || conn_out_begin(&hc->c, (size_t)n + body_len, &w) < 0) {
+        log_error("%s: cannot queue a response of %zu bytes", hc->h->name, body_len);
+        free(rep->body);
+        kill_conn(hc);
+        return;
+    }
+    memcpy(w.buf, head, (size_t)n);
+    memcpy(w.buf + n, body, body_len);
+    w.len = (size_t)n + body_len;
+    conn_out_end(&hc->c, &w);
+    free(rep->body);
+    if (complete)
+        log_debug("%s: %s: %s %s: %d", hc->h->name, hc->peer, http_request_method(hc->req),
+                  http_request_target(hc->req), rep->status);
+    else
+        log_debug("%s: %s: %d", hc->h->name, hc->peer, rep->status);
+    hc->state = HC_WRITING;
+    hc->deadline_ns = ev_now(hc->h->loop) + HTTP_LINGER_MS * NS_PER_MS;
+    flush(hc);
+}
+
+static void on_conn_io(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)loop;
+    (void)fd;
+    http_conn *hc = data;
+    if (!hc->dead && (events & EV_WRITE))
+        flush(hc);
+    if (hc->dead || !(events & (EV_READ | EV_ERROR)))
+        return;
+    ssize_t n = conn_read(&hc->c, HTTP_HEAD_MAX, HTTP_HEAD_MAX);
+    if (n == -EAGAIN)
+        return;
+    if (n == 0 && hc->state == HC_WRITING) { /* half-closed: it may still read */
+        hc->eof = 1;
+        watch(hc);
+        return;
+    }
+    if (n <= 0) { /* gone before asking, done after the answer, or broken */
+        kill_conn(hc);
+        return;
+    }
+    int rc = hc->state == HC_READING ? http_request_feed(hc->req, hc->c.in, hc->c.in_len) : HTTP_INCOMPLETE;
+    conn_consume(&hc->c, hc->c.in_len); /* the request keeps what it needs */
+    if (rc == HTTP_INCOMPLETE)
+        return;
+    http_reply rep = {.status = rc};
+    if (rc == HTTP_COMPLETE) {
+        rep.status = 200;
+        hc->h->fn(hc->h->data, hc->req, &rep);
+    }
+    respond(hc, &rep, rc == HTTP_COMPLETE);
+}
+
+/* Deadlines: a request head that has not arrived gets 408; a response
+ * not taken (or a peer that does not close) is cut off. Then the dead
+ * are reaped. */
+static void on_sweep(ev_loop *loop, void *data)
+{
+    http_server *h = data;
+    uint64_t now = ev_now(loop);
+    for (uint32_t i = 0; i < h->nconns; i++) {
+        http_conn *hc = h->conns[i];
+        if (hc->dead || now <= hc->deadline_ns)
+            continue;
+        if (hc->state == HC_READING) {
+            http_reply rep = {.status = 408};
+            respond(hc, &rep, 0);
+        } else {
+            kill_conn(hc);
+        }
+    }
+    reap_dead(h);
+}
+
+/* Best effort, on a fresh socket: the status, then the close. */
+static void refuse(int fd, int status)
+{
+    char out[HEAD_ROOM], body[64];
+    size_t body_len = status_body(status, body, sizeof body);
+    int n = http_response_head(out, sizeof out - body_len, status, "text/plain; charset=utf-8", body_len, NULL);
+    if (n > 0) {
+        memcpy(out + n, body, body_len);
+        ssize_t w = write(fd, out, (size_t)n + body_len);
+        (void)w;
+    }
+    close(fd);
+}
+
+static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)events;
+    http_server *h = data;
+    for (int k = 0; k < ACCEPT_BUDGET; k++) {
+        struct sockaddr_storage sa;
+        socklen_t len = sizeof sa;
+        int cfd = accept4(fd, (struct sockaddr *)&sa, &len, SOCK_NONBLOCK | SOCK_CLOEXEC);
+        if (cfd < 0) {
+            if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
+                log_warn("%s: accept: %s", h->name, strerror(errno));
+            return;
+        }
+        char peer[80];
+        conn_peer_name(&sa, len, peer, sizeof peer);
+        if (h->nconns >= h->max_conns) {
+            log_debug("%s: %s refused: %u connections open", h->name, peer, h->nconns);
+            refuse(cfd, 503);
+            continue;
+        }
+        http_conn *hc = cvre_calloc(1, sizeof *hc);
+        if (!hc) {
+            refuse(cfd, 503);
+            continue;
+        }
+        if (conn_init(&hc->c, cfd) < 0 || !(hc->req = http_request_new()) ||
+            ev_io_add(loop, cfd, EV_READ, on_conn_io, hc) < 0) {
+            log_warn("%s: %s refused: cannot register the connection", h->name, peer);
+            http_request_free(hc->req);
+            conn_free(&hc->c); /* closes cfd */
+            free(hc);
+            continue;
+        }
+        hc->h = h;
+        memcpy(hc->peer, peer, sizeof hc->peer);
+        hc->deadline_ns = ev_now(loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;
+        h->conns[h->nconns++] = hc;
+    }
+}
+
+http_server *http_server_start(ev_loop *loop, const http_server_config *cfg, http_handler_fn *fn, void *data,
+                               char *err, size_t errlen)
+{
+    http_server *h = cvre_calloc(1, sizeof *h);
+    if (!h) {
+        snprintf(err, errlen, "%s: out of memory", cfg->name);
+        return NULL;
+    }
+    h->loop = loop;
+    snprintf(h->name, sizeof h->name, "%s", cfg->name);
+    h->max_conns = cfg->max_conns;
+    h->fn = fn;
+    h->data = data;
+    h->listen_fd = h->sweep_timer = h->reap_timer = -1;
+    h->conns = cvre_calloc(cfg->max_conns, sizeof *h->conns);
+    if (!h->conns) {
+        snprintf(err, errlen, "%s: out of memory", cfg->name);
+        goto fail;
+    }
+    char msg[256];
+    h->listen_fd = conn_listen(cfg->host, cfg->port, LISTEN_BACKLOG, h->address, sizeof h->address, msg, sizeof msg);
+    if (h->listen_fd < 0) {
+        snprintf(err, errlen, "%s: %s", cfg->name, msg);
+        goto fail;
+    }
+    int rc = ev_io_add(loop, h->listen_fd, EV_READ, on_accept, h);
+    if (rc == 0) {
+        h->sweep_timer = ev_timer_start(loop, SWEEP_MS * NS_PER_MS, SWEEP_MS * NS_PER_MS, on_sweep, h);
+        rc = h->sweep_timer < 0 ? h->sweep_timer : 0;
+    }
+    if (rc < 0) {
+        snprintf(err, errlen, "%s: event loop: %s", cfg->name, strerror(-rc));
+        goto fail;
+    }
+    return h;
+fail:
+    http_server_stop(h);
+    return NULL;
+}
+
+void http_server_stop(http_server *h)
+{
+    if (!h)
+        return;
+    if (h->listen_fd >= 0) {
+        ev_io_del(h->loop, h->listen_fd);
+        close(h->listen_fd);
+    }
+    if (h->sweep_timer >= 0)
+        ev_timer_stop(h->loop, h->sweep_timer);
+    if (h->reap_timer >= 0)
+        ev_timer_stop(h->loop, h->reap_timer);
+    for (uint32_t i = 0; i < h->nconns; i++)
+        h->conns[i]->dead = 1;
+    reap_dead(h);
+    free(h->conns);
+    free(h);
+}

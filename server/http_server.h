@@ -1,0 +1,82 @@
+/*
+ * http_server.h: a small HTTP/1.1 endpoint on the server's event loop, on
+ * raw sockets: it accepts, reads one request head per connection within
+ * a deadline (http.h parses it), hands a complete request to its handler,
+ * writes the response with Connection: close, and closes. Bad requests get
+ * their 4xx from http.h's checks, a request that does not arrive in time
+ * 408, a connection past the cap 503; none of it reaches the handler.
+ *
+ * Everything runs on the loop's thread, from the loop's callbacks; a
+ * connection is never freed inside its own callback (a zero-delay timer
+ * reaps it).
+ */
+#ifndef CVRE_HTTP_SERVER_H
+#define CVRE_HTTP_SERVER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "ev.h"
+#include "http.h"
+
+/* Connections served at once, by default. A scraper holds one; a few
+ * more cover overlapping scrapes and a person with curl. Past the cap a
+ * connection gets 503 and is closed, so the endpoint's memory (an input
+ * buffer and a request head each) stays bounded however many connect. */
+#ifndef HTTP_CONNS_DEFAULT
+#define HTTP_CONNS_DEFAULT 16u
+#endif
+/* The whole request head must arrive within this: a slowloris holds a
+ * slot for 5 s at most, and gets 408. */
+#ifndef HTTP_REQUEST_TIMEOUT_MS
+#define HTTP_REQUEST_TIMEOUT_MS 5000u
+#endif
+/* After the response: time to take it and close. A peer that neither
+ * reads nor closes is cut off then. */
+#ifndef HTTP_LINGER_MS
+#define HTTP_LINGER_MS 5000u
+#endif
+/* Largest response body: the metrics text is about 10 KiB. A handler's
+ * larger body gets 500 instead. */
+#ifndef HTTP_BODY_MAX
+#define HTTP_BODY_MAX (1024u * 1024u)
+#endif
+
+_Static_assert(HTTP_CONNS_DEFAULT >= 1, "at least one connection");
+_Static_assert(HTTP_REQUEST_TIMEOUT_MS >= 100 && HTTP_LINGER_MS >= 100, "deadlines a real client can meet");
+
+/* What a handler answers. The server sets status 200 and the rest empty
+ * before the call. A reply without a body gets a one-line text body
+ * naming its status. */
+typedef struct http_reply {
+    int status;
+    const char *content_type; /* static; NULL: none */
+    const char *extra;        /* static header lines, each ending in CRLF; NULL: none */
+    char *body;               /* malloc'd; the server frees it */
+    size_t body_len;
+} http_reply;
+
+/* Answers a complete, well-formed request (any method and path). */
+typedef void http_handler_fn(void *data, const http_request *req, http_reply *reply);
+
+typedef struct http_server_config {
+    const char *name; /* in log lines: "metrics" */
+    const char *host;
+    uint16_t port;    /* 0: any free port */
+    uint32_t max_conns;
+} http_server_config;
+
+typedef struct http_server http_server;
+
+/* Listens and starts serving on loop. The loop must be able to watch the
+ * connections' fds (ev_create's max_fd; past it a connection is refused
+ * like one past the cap). NULL with a message in err on failure. */
+http_server *http_server_start(ev_loop *loop, const http_server_config *cfg, http_handler_fn *fn, void *data,
+                               char *err, size_t errlen);
+/* "HOST:PORT" as bound. */
+const char *http_server_address(const http_server *h);
+/* Closes the listener and every connection, stops its timers, frees h.
+ * Call it before the loop is destroyed. NULL is a no-op. */
+void http_server_stop(http_server *h);
+
+#endif
