@@ -110,6 +110,7 @@ struct dblog {
     /* Written by the writer only. */
     _Atomic uint64_t tail; /* rows ever retired (committed or lost) */
     _Atomic uint64_t written, lost, batches, failures;
+    _Atomic int64_t committed_id;
     _Atomic int last_error;
     char pad2[DBLOG_CACHE_LINE];
     /* The writer's wake-up request: 0 while it runs, otherwise the queue
@@ -137,6 +138,9 @@ struct dblog {
     uint64_t reported_dropped, reported_lost;
     uint64_t report_due_ms;
     int failing; /* a batch was lost and none has succeeded since */
+    uint64_t lost_before_failing; /* l->lost when failing began */
+    int moved;   /* the path no longer names the file opened (check_file) */
+    uint64_t checked_ms; /* when check_file last ran */
     int64_t next_id; /* the id of the next row, as committed */
     struct group_slot *groups;
     struct user_slot *users;
@@ -227,6 +231,7 @@ void dblog_stats_get(const dblog *log, dblog_stats *out)
     out->failures = atomic_load_explicit(&log->failures, memory_order_relaxed);
     out->queued = head > tail ? head - tail : 0;
     out->high_water = atomic_load_explicit(&log->high_water, memory_order_relaxed);
+    out->committed_id = atomic_load_explicit(&log->committed_id, memory_order_acquire);
     out->last_error = atomic_load_explicit(&log->last_error, memory_order_relaxed);
 }
 
@@ -507,6 +512,8 @@ static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
         rc = sqlite3_exec(l->sql, "COMMIT", NULL, NULL, NULL);
     if (rc == SQLITE_OK) {
         l->next_id += (int64_t)*n;
+        /* Release: whoever reads this id may count on the rows up to it. */
+        atomic_store_explicit(&l->committed_id, l->next_id - 1, memory_order_release);
         uint64_t took = now_ms() - start;
         if (cap_ms && took > cap_ms) {
             uint64_t rows = (uint64_t)l->cap_rows * cap_ms / took;
@@ -518,42 +525,88 @@ static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
     }
     forget_groups(l); /* the groups this transaction made are rolled back */
     rc = sqlite3_extended_errcode(l->sql);
-    snprintf(l->errmsg, sizeof l->errmsg, "%s", sqlite3_errmsg(l->sql));
+    /* An I/O error says little without the system's reason (EPERM: the
+     * file was made immutable; EROFS: the file system went read-only). */
+    int sys = (rc & 0xff) == SQLITE_IOERR || (rc & 0xff) == SQLITE_CANTOPEN ? sqlite3_system_errno(l->sql) : 0;
+    if (sys)
+        snprintf(l->errmsg, sizeof l->errmsg, "%s (%s)", sqlite3_errmsg(l->sql), strerror(sys));
+    else
+        snprintf(l->errmsg, sizeof l->errmsg, "%s", sqlite3_errmsg(l->sql));
     if (!sqlite3_get_autocommit(l->sql))
         sqlite3_exec(l->sql, "ROLLBACK", NULL, NULL, NULL);
     return rc;
+}
+
+/* Whether the database's path no longer names the file the writer opened
+ * (deleted, or renamed and maybe replaced): SQLite's SQLITE_FCNTL_HAS_MOVED,
+ * one stat(). Logs each change, so the error is said once, when it happens. */
+static int check_file(dblog *l)
+{
+    int moved = 0;
+    l->checked_ms = now_ms();
+    if (sqlite3_file_control(l->sql, "main", SQLITE_FCNTL_HAS_MOVED, &moved) != SQLITE_OK)
+        moved = 0; /* a VFS that cannot tell */
+    const char *path = sqlite3_db_filename(l->sql, "main");
+    if (moved && !l->moved)
+        log_error("collision log: database file %s was deleted or replaced while the server runs: collisions are "
+                  "counted as lost, not stored, until that file is back (restart the server to log to a new one)",
+                  path);
+    else if (!moved && l->moved)
+        log_info("collision log: database file %s is back", path);
+    l->moved = moved;
+    return moved;
+}
+
+/* Counts n rows as lost to the failure rc, and says so: one by one until a
+ * batch is lost, then summed up by report() until a batch succeeds again. */
+static void lose_rows(dblog *l, uint64_t n, int rc)
+{
+    atomic_store_explicit(&l->last_error, rc, memory_order_relaxed);
+    atomic_fetch_add_explicit(&l->lost, n, memory_order_relaxed);
+    if (!l->failing) {
+        log_error("collision log: %llu rows lost; further failures are reported every %u s",
+                  (unsigned long long)n, DBLOG_REPORT_MS / 1000u);
+        l->lost_before_failing = atomic_load_explicit(&l->lost, memory_order_relaxed) - n;
+    }
+    l->failing = 1;
 }
 
 /* Commits up to n of the oldest queued rows (fewer if batch_ms has shrunk
  * transactions; the last one, at stop, takes all), retrying a failed batch,
  * and retires them from the ring, written or lost. Failures are logged one
  * by one until a batch is lost; from then on, until a batch succeeds again,
- * report() sums them up, so a full disk does not flood the log. */
+ * report() sums them up, so a full disk does not flood the log. While the
+ * database file is gone (check_file) nothing is tried. */
 static void commit_rows(dblog *l, uint64_t n, int stopping)
 {
     uint64_t tail = atomic_load_explicit(&l->tail, memory_order_relaxed);
     uint32_t delay = DBLOG_RETRY_MS;
     for (uint32_t attempt = 1;; attempt++) {
+        if (check_file(l)) {
+            atomic_fetch_add_explicit(&l->failures, 1, memory_order_relaxed);
+            snprintf(l->errmsg, sizeof l->errmsg, "the database file was deleted or replaced");
+            lose_rows(l, n, SQLITE_READONLY_DBMOVED);
+            break;
+        }
         int rc = write_batch(l, tail, &n, stopping ? 0 : l->batch_ms);
         if (rc == SQLITE_OK) {
             atomic_fetch_add_explicit(&l->written, n, memory_order_relaxed);
             atomic_fetch_add_explicit(&l->batches, 1, memory_order_relaxed);
             if (l->failing)
-                log_info("collision log: writing again");
+                log_info("collision log: writing again; %llu rows were lost while it failed",
+                         (unsigned long long)(atomic_load_explicit(&l->lost, memory_order_relaxed) -
+                                              l->lost_before_failing));
             l->failing = 0;
             break;
         }
         atomic_fetch_add_explicit(&l->failures, 1, memory_order_relaxed);
         atomic_store_explicit(&l->last_error, rc, memory_order_relaxed);
         if (!l->failing)
-            log_error("collision log: batch of %llu rows failed (attempt %u of %u): %s", (unsigned long long)n,
-                      attempt, DBLOG_ATTEMPTS, l->errmsg);
+            log_error("collision log: batch of %llu rows to %s failed (attempt %u of %u): %s",
+                      (unsigned long long)n, sqlite3_db_filename(l->sql, "main"), attempt, DBLOG_ATTEMPTS,
+                      l->errmsg);
         if (attempt == DBLOG_ATTEMPTS) {
-            atomic_fetch_add_explicit(&l->lost, n, memory_order_relaxed);
-            if (!l->failing)
-                log_error("collision log: %llu rows lost; further failures are reported every %u s",
-                          (unsigned long long)n, DBLOG_REPORT_MS / 1000u);
-            l->failing = 1;
+            lose_rows(l, n, rc);
             break;
         }
         sleep_ms(delay);
@@ -600,7 +653,9 @@ static void *writer_main(void *arg)
             if (stopping)
                 break;
             first_ms = 0;
-            wait_for(l, 1, -1);
+            if (now_ms() - l->checked_ms >= DBLOG_CHECK_MS)
+                check_file(l);
+            wait_for(l, 1, DBLOG_CHECK_MS);
             continue;
         }
         uint64_t now = now_ms();
@@ -799,6 +854,7 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
     }
     l->next_id = sqlite3_column_int64(q, 0);
     sqlite3_finalize(q);
+    atomic_store_explicit(&l->committed_id, l->next_id - 1, memory_order_relaxed);
 
     /* The writer takes no signals: a server that reads them from a signalfd
      * must find them pending, not delivered to this thread. */

@@ -31,10 +31,24 @@
  * checkpointer thread with its own connection checkpoints the WAL beside
  * the writer. Rows stay in
  * the ring until their transaction commits, so a failed batch is retried
- * as is: a database error (disk full, locked beyond the busy timeout) is
- * logged and the same batch retried up to DBLOG_ATTEMPTS times, then its rows
- * are counted as lost. Every batch is one transaction: an error can lose a
- * batch, never leave half of one or a collision without its group.
+ * as is: a database error (disk full, locked beyond the busy timeout, a
+ * file made read-only) is logged and the same batch retried up to
+ * DBLOG_ATTEMPTS times, then its rows are counted as lost, and the next
+ * batch tries again, so logging resumes by itself once the cause is gone.
+ * Every batch is one transaction: an error can lose a batch, never leave
+ * half of one or a collision without its group.
+ *
+ * A database file deleted or renamed under a running writer would take
+ * every later row with it (SQLite goes on writing to the unlinked file), so
+ * the writer checks before each batch, and every DBLOG_CHECK_MS while
+ * idle, that the path still names the file it opened; while it does not,
+ * rows are counted as lost and not written, and the log says why.
+ *
+ * What was committed is published only after COMMIT returned
+ * (dblog_stats.committed_id): a crash can lose rows still queued or in an
+ * open transaction, never one at or below the committed id reported before
+ * it (WAL with synchronous=NORMAL: a commit survives the process; only the
+ * operating system's crash can undo the last ones).
  *
  * Error convention (as db.h): functions return 0 or -1, or NULL with the
  * message in the caller's buffer.
@@ -102,6 +116,12 @@
 #ifndef DBLOG_REPORT_MS
 #define DBLOG_REPORT_MS 10000u
 #endif
+/* How often an idle writer checks that its database file is still there:
+ * one stat() a second costs nothing, and an operator who deleted the file
+ * learns it from the log within a second even when nobody collides. */
+#ifndef DBLOG_CHECK_MS
+#define DBLOG_CHECK_MS 1000u
+#endif
 
 _Static_assert((DBLOG_QUEUE_ROWS_DEFAULT & (DBLOG_QUEUE_ROWS_DEFAULT - 1)) == 0, "queue must be a power of two");
 _Static_assert(DBLOG_QUEUE_ROWS_DEFAULT <= DBLOG_QUEUE_ROWS_MAX, "queue too large");
@@ -110,6 +130,7 @@ _Static_assert(DBLOG_BATCH_ROWS_DEFAULT >= 1 && DBLOG_BATCH_ROWS_DEFAULT <= DBLO
 _Static_assert(DBLOG_BATCH_MS_DEFAULT >= 1 && DBLOG_BATCH_MS_DEFAULT <= DBLOG_BATCH_MS_MAX, "batch time out of range");
 _Static_assert(DBLOG_ATTEMPTS >= 1 && DBLOG_ATTEMPTS <= 10, "attempts out of range");
 _Static_assert(DBLOG_RETRY_MS <= 10000, "retry delay out of range");
+_Static_assert(DBLOG_CHECK_MS >= 10 && DBLOG_CHECK_MS <= 60000, "file check interval out of range");
 
 /* The collision log's groups (db/README.md, "Collision log storage"): rows
  * are gathered per object, ECM version, time bucket and cell of the world
@@ -179,8 +200,12 @@ typedef struct dblog_stats {
     uint64_t failures;   /* failed attempts (each one is logged) */
     uint64_t queued;     /* in the ring now, committed or not yet */
     uint64_t high_water; /* most rows ever in the ring */
+    int64_t committed_id; /* every collision id up to this one is in the table: the
+                             highest at dblog_open, then the last row of each batch
+                             once its COMMIT has returned (ids have no gaps) */
     int last_error;      /* SQLite extended result code of the last failure, 0 if none;
-                            sqlite3_errstr() names it */
+                            sqlite3_errstr() names it (SQLITE_READONLY_DBMOVED: the file
+                            was deleted or renamed) */
 } dblog_stats;
 
 /* Opens a connection to the database at path (creating and migrating it like

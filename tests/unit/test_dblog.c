@@ -16,6 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -427,6 +428,7 @@ static void test_disk_full(void **state)
     assert_int_equal(st.pushed, 13000);
     assert_int_equal(st.written + st.lost, 13000);
     assert_true(st.written >= 3000); /* before the limit, and after it was lifted */
+    assert_int_equal(st.committed_id, st.written); /* ids have no gaps: lost batches took none */
 
     sqlite3 *s = open_ro();
     assert_int_equal(testdb_scalar(s, "SELECT count(*) FROM collisions"), st.written);
@@ -437,6 +439,170 @@ static void test_disk_full(void **state)
     assert_string_equal((const char *)sqlite3_column_text(q, 0), "ok");
     sqlite3_finalize(q);
     sqlite3_close(s);
+}
+
+/* Waits (up to 60 s) until the writer has retired every row pushed. */
+static dblog_stats settle(dblog *l)
+{
+    dblog_stats st;
+    for (int i = 0; i < 60000; i++) {
+        dblog_stats_get(l, &st);
+        if (st.queued == 0)
+            return st;
+        usleep(1000);
+    }
+    fail_msg("the writer did not retire its rows within 60 s");
+    return st;
+}
+
+static void push_rows(dblog *l, uint32_t from, uint32_t to)
+{
+    dblog_row r;
+    for (uint32_t i = from; i < to; i++) {
+        make_row(&r, i);
+        assert_int_equal(dblog_push(l, &r), 0);
+    }
+}
+
+/* The committed id is published only after COMMIT returned: whenever it is
+ * read, every id up to it is in the table, for a reader in another
+ * connection too; it starts at the highest id already stored. */
+static void test_committed_id(void **state)
+{
+    (void)state;
+    char err[256];
+    dblog_config cfg = {.queue_rows = 1u << 14, .batch_rows = 64, .batch_ms = 2};
+    dblog *l = dblog_open(path, &cfg, err, sizeof err);
+    assert_non_null(l);
+    dblog_stats st;
+    dblog_stats_get(l, &st);
+    assert_int_equal(st.committed_id, 0);
+    sqlite3 *s = open_ro();
+    int64_t last = 0, reads = 0;
+    for (uint32_t round = 0; round < 40; round++) {
+        push_rows(l, round * 100, round * 100 + 100);
+        for (int k = 0; k < 5; k++) {
+            dblog_stats_get(l, &st);
+            assert_true(st.committed_id >= last); /* never goes back */
+            assert_true(st.committed_id <= (int64_t)st.written);
+            last = st.committed_id;
+            char sql[96];
+            snprintf(sql, sizeof sql, "SELECT count(*) FROM collisions WHERE id <= %lld", (long long)last);
+            assert_int_equal(testdb_scalar(s, sql), last);
+            reads++;
+            usleep(200);
+        }
+    }
+    sqlite3_close(s);
+    assert_int_equal(dblog_stop(l, &st), 0);
+    assert_int_equal(st.written, 4000);
+    assert_int_equal(st.committed_id, 4000);
+    assert_true(reads == 200);
+
+    l = dblog_open(path, &cfg, err, sizeof err); /* a restart: the next ids follow */
+    assert_non_null(l);
+    dblog_stats_get(l, &st);
+    assert_int_equal(st.committed_id, 4000);
+    push_rows(l, 4000, 4010);
+    assert_int_equal(dblog_stop(l, &st), 0);
+    assert_int_equal(st.committed_id, 4010);
+    s = open_ro();
+    check_layout(s, 4010);
+    sqlite3_close(s);
+}
+
+/* stderr goes to a file while a test reads what the writer logs. */
+static int saved_stderr = -1;
+static char captured[80];
+
+static void capture_stderr(void)
+{
+    snprintf(captured, sizeof captured, "%s.log", path);
+    int fd = open(captured, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    assert_true(fd >= 0);
+    fflush(stderr);
+    saved_stderr = dup(2);
+    assert_true(saved_stderr >= 0);
+    assert_int_equal(dup2(fd, 2), 2);
+    close(fd);
+}
+
+static void restore_stderr(void)
+{
+    fflush(stderr);
+    assert_int_equal(dup2(saved_stderr, 2), 2);
+    close(saved_stderr);
+    saved_stderr = -1;
+    unlink(captured);
+}
+
+/* Waits (up to 30 s) until the captured log holds text n times. */
+static void wait_logged(const char *text, int n)
+{
+    for (int i = 0; i < 3000; i++) {
+        FILE *f = fopen(captured, "r");
+        assert_non_null(f);
+        char line[1200];
+        int seen = 0;
+        while (fgets(line, sizeof line, f))
+            seen += strstr(line, text) != NULL;
+        fclose(f);
+        if (seen >= n)
+            return;
+        usleep(10000);
+    }
+    restore_stderr();
+    fail_msg("the writer did not log \"%s\" %d times within 30 s", text, n);
+}
+
+/* The database file renamed away, then back, then deleted under a running
+ * writer: the writer says so once, within DBLOG_CHECK_MS even while idle,
+ * counts the rows it gets meanwhile as lost instead of writing them into a
+ * file nobody will read, and writes again when the file is back. */
+static void test_file_moved(void **state)
+{
+    (void)state;
+    char err[256], away[80];
+    snprintf(away, sizeof away, "%s.away", path);
+    dblog_config cfg = {.queue_rows = 1u << 12, .batch_rows = 100, .batch_ms = 5};
+    dblog *l = dblog_open(path, &cfg, err, sizeof err);
+    assert_non_null(l);
+    push_rows(l, 0, 300);
+    dblog_stats st = settle(l);
+    assert_int_equal(st.written, 300);
+
+    capture_stderr();
+    assert_int_equal(rename(path, away), 0);
+    wait_logged("was deleted or replaced while the server runs", 1); /* idle: no row pushed */
+    push_rows(l, 300, 500);
+    st = settle(l);
+    assert_int_equal(st.written, 300);
+    assert_int_equal(st.lost, 200);
+    assert_int_equal(st.committed_id, 300);
+    assert_int_equal(st.last_error, SQLITE_READONLY_DBMOVED);
+
+    assert_int_equal(rename(away, path), 0);
+    wait_logged("is back", 1);
+    push_rows(l, 500, 600);
+    st = settle(l);
+    assert_int_equal(st.written, 400);
+    assert_int_equal(st.committed_id, 400);
+    wait_logged("writing again; 200 rows were lost while it failed", 1);
+
+    /* Deleted, and a new file made at the path: not the file opened. */
+    assert_int_equal(unlink(path), 0);
+    FILE *other = fopen(path, "w");
+    assert_non_null(other);
+    fclose(other);
+    push_rows(l, 600, 650);
+    st = settle(l);
+    wait_logged("was deleted or replaced while the server runs", 2);
+    assert_int_equal(st.written, 400);
+    assert_int_equal(st.lost, 250);
+    assert_int_equal(dblog_stop(l, &st), -1);
+    restore_stderr();
+    assert_int_equal(st.pushed, 650);
+    assert_int_equal(st.written + st.lost, 650);
 }
 
 static void test_bad_config(void **state)
@@ -466,6 +632,8 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_hold_cap_cuts_batches, setup, teardown),
         cmocka_unit_test_setup_teardown(test_reader_beside_writer, setup, teardown),
         cmocka_unit_test_setup_teardown(test_disk_full, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_committed_id, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_file_moved, setup, teardown),
         cmocka_unit_test_setup_teardown(test_bad_config, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
