@@ -56,8 +56,11 @@ void http_request_free(http_request *r);
  *   414  target over HTTP_URL_MAX;
  *   431  head over HTTP_HEAD_MAX, or over HTTP_HEADERS_MAX fields;
  *   505  not HTTP/1.
- * Once the result is not HTTP_INCOMPLETE it is final: later calls return
- * it again and read nothing. Bytes after the head are not looked at. The
+ * A head both malformed and over a limit gets 400 or the limit's status,
+ * depending on where the reads cut it (http_parser stops at a bad byte
+ * without handing over the piece of a string read before it). Once the
+ * result is not HTTP_INCOMPLETE it is final: later calls return it again
+ * and read nothing. Bytes after the head are not looked at. The
  * caller may reuse its buffer after each call: what the request keeps is
  * copied. */
 int http_request_feed(http_request *r, const uint8_t *data, size_t len);

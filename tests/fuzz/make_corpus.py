@@ -7,7 +7,8 @@ For each model target, the sample models of ../shared/models cut under
 inputs known: type confusion in a GLB's JSON, deep nesting, node cycles and
 shared children, 2^31-1 STL triangles, 4e9 PLY vertices, 1e39 and 1e38
 coordinates, indices out of range... For fuzz_proto, the seeds that
-`fuzz_proto --write-seeds` writes plus hostile frames. Files named known-*
+`fuzz_proto --write-seeds` writes plus hostile frames; for fuzz_http,
+requests as clients send them and one of each class refused. Files named known-*
 trigger bugs reported and not yet fixed (each target's known() skips them).
 
 Deterministic: the same models make the same files. Existing files of the
@@ -461,6 +462,54 @@ def proto_corpus(out, fuzz_proto):
         write(out, t, name, data)
 
 
+# ---- HTTP request heads ------------------------------------------------------
+
+HTTP_HEAD_MAX, HTTP_URL_MAX, HTTP_HEADERS_MAX = 8192, 2048, 32  # server/http.h
+
+
+def http_corpus(out):
+    """Requests as scrapers, curl and browsers send them, and each class
+    server/http.c refuses, at and past every limit."""
+    def head(line, *headers, eol='\r\n'):
+        return eol.join((line,) + headers) + eol + eol
+
+    def filled(total):
+        start = 'GET /metrics HTTP/1.1\r\nHost: h\r\nX-Fill: '
+        return start + 'f' * (total - len(start) - 4) + '\r\n\r\n'
+
+    seeds = {
+        'prometheus': head('GET /metrics HTTP/1.1', 'Host: 127.0.0.1:9100', 'User-Agent: Prometheus/2.45.0',
+                           'Accept: application/openmetrics-text;version=1.0.0,text/plain;version=0.0.4;q=0.5',
+                           'Accept-Encoding: gzip', 'X-Prometheus-Scrape-Timeout-Seconds: 10'),
+        'curl': head('GET /metrics HTTP/1.1', 'Host: localhost:9100', 'User-Agent: curl/7.88.1', 'Accept: */*'),
+        'http10': head('GET /metrics HTTP/1.0'),
+        'absolute': head('GET http://h:9100/metrics?name[]=x HTTP/1.1', 'Host: h:9100'),
+        'options-star': head('OPTIONS * HTTP/1.1', 'Host: h'),
+        'connect': head('CONNECT h:443 HTTP/1.1', 'Host: h:443'),
+        'websocket': head('GET /ws HTTP/1.1', 'Host: h', 'Upgrade: websocket', 'Connection: Upgrade',
+                          'Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==', 'Sec-WebSocket-Version: 13'),
+        'folded': head('GET / HTTP/1.1', 'Host: h', 'X-Long: first', ' second'),
+        'lf-only': head('GET / HTTP/1.1', 'Host: h', eol='\n'),
+        'pipelined': head('GET /a HTTP/1.1', 'Host: h') + head('GET /b HTTP/1.1', 'Host: h'),
+        'no-host': head('GET / HTTP/1.1'),
+        'no-colon': head('GET / HTTP/1.1', 'Host: h', 'No colon'),
+        'nul': head('GET / HTTP/1.1', 'Host: h\0x'),
+        'version-2': head('GET / HTTP/2.0', 'Host: h'),
+        'body': head('POST /metrics HTTP/1.1', 'Host: h', 'Content-Length: 5') + 'hello',
+        'chunked': head('POST /metrics HTTP/1.1', 'Host: h', 'Transfer-Encoding: chunked') + '5\r\nhello\r\n0\r\n\r\n',
+        'two-lengths': head('GET / HTTP/1.1', 'Host: h', 'Content-Length: 0', 'Content-Length: 1'),
+        'head-at-cap': filled(HTTP_HEAD_MAX),
+        'head-past-cap': filled(HTTP_HEAD_MAX + 1),
+        'target-at-cap': head('GET /' + 'u' * (HTTP_URL_MAX - 1) + ' HTTP/1.1', 'Host: h'),
+        'target-past-cap': head('GET /' + 'u' * HTTP_URL_MAX + ' HTTP/1.1', 'Host: h'),
+        'headers-at-cap': head('GET / HTTP/1.1', 'Host: h', *[f'X-{i}: {i}' for i in range(1, HTTP_HEADERS_MAX)]),
+        'headers-past-cap': head('GET / HTTP/1.1', 'Host: h', *[f'X-{i}: {i}' for i in range(1, HTTP_HEADERS_MAX + 1)]),
+        'unfinished': 'GET /metrics HTTP/1.1\r\nHost: h\r\n',
+    }
+    for name, text in seeds.items():
+        write(out, 'fuzz_http', name, text)
+
+
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
     p = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -473,6 +522,7 @@ def main():
     ply_corpus(a.models, a.out)
     stl_corpus(a.models, a.out)
     proto_corpus(a.out, a.fuzz_proto)
+    http_corpus(a.out)
     total = 0
     for t in sorted(os.listdir(a.out)):
         files = os.listdir(os.path.join(a.out, t))
