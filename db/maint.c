@@ -165,7 +165,7 @@ int db_backup(db *d, const char *dest, int vacuum, db_backup_stats *out)
     snprintf(tmp, sizeof tmp, "%s.partial-XXXXXX", dest);
     int fd = mkstemp(tmp);
     if (fd < 0)
-        return db__fail(d, "cannot create %s: %s", tmp, strerror(errno));
+        return db__fail(d, "cannot write beside %s: %s", dest, strerror(errno));
     close(fd);
     if (copy_into(d, db_sqlite(d), tmp, vacuum) < 0 || check_copy(d, tmp, &st) < 0)
         goto fail;

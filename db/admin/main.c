@@ -16,6 +16,7 @@
 
 #include "account.h"
 #include "db.h"
+#include "maintain.h"
 #include "map.h"
 #include "moderate.h"
 #include "out.h"
@@ -36,7 +37,7 @@ static const char usage[] =
     "Answers questions about a cvre database: the collision log, objects and\n"
     "their collision maps (ECM), users and sessions, accounts. It opens the file\n"
     "read-only and can run while the server writes to it; only rollback, user\n"
-    "add, del and passwd, kick, ban and unban write.\n"
+    "add, del and passwd, kick, ban, unban and retention write.\n"
     "\n"
     "Commands:\n"
     "  collisions [filters]      collisions, newest first (--object, --user, --since,\n"
@@ -61,6 +62,10 @@ static const char usage[] =
     "                            and close its sessions\n"
     "  unban NAME                lift a name's ban\n"
     "  bans                      the bans in force\n"
+    "  backup FILE               copy the database to a new FILE, one consistent\n"
+    "                            snapshot, checked (--vacuum: compacted)\n"
+    "  retention --older-than DAYS\n"
+    "                            remove the collisions logged more than DAYS days ago\n"
     "  help [COMMAND]            this text, or a command's (same as COMMAND --help)\n"
     "\n"
     "Options (before or after the command):\n"
@@ -91,7 +96,7 @@ static const char usage[] =
     "  4  rollback refused, nothing written: the object was removed, the version\n"
     "     is already in force, or another writer changed the object meanwhile;\n"
     "     or a user command refused, nothing written: the name is taken, or the\n"
-    "     account is the reserved world account\n";
+    "     account is the reserved world account; or backup's FILE exists\n";
 
 struct command {
     const char *name;
@@ -104,7 +109,8 @@ struct command {
 #define ADMIN_POS_MAX 3
 
 enum { OPT_OBJECT = 1, OPT_USER = 2, OPT_SINCE = 4, OPT_UNTIL = 8, OPT_REGION = 16, OPT_LIMIT = 32, OPT_SVG = 64,
-       OPT_MAPVERSION = 128, OPT_ADMIN = 256, OPT_PASSWORD_STDIN = 512, OPT_MINUTES = 1024 };
+       OPT_MAPVERSION = 128, OPT_ADMIN = 256, OPT_PASSWORD_STDIN = 512, OPT_MINUTES = 1024, OPT_VACUUM = 2048,
+       OPT_OLDER_THAN = 4096 };
 
 static const struct command commands[] = {
     {"collisions", OPT_OBJECT | OPT_USER | OPT_SINCE | OPT_UNTIL | OPT_REGION | OPT_LIMIT, 0,
@@ -332,6 +338,8 @@ static const struct command commands[] = {
      "\n"
      "The bans in force, oldest first: name, until (when it ends, or never:\n"
      "until unbanned), since (when the name was banned).\n"},
+    {"backup", OPT_VACUUM, 0, maintain_backup_help},
+    {"retention", OPT_OLDER_THAN, 0, maintain_retention_help},
 };
 
 static const char *prog = "cvre-admin";
@@ -474,7 +482,7 @@ static const struct command *find_command(const char *name)
 }
 
 enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, O_UNTIL, O_REGION, O_LIMIT, O_SVG,
-       O_MAPVERSION, O_ADMIN, O_PASSWORD_STDIN, O_MINUTES };
+       O_MAPVERSION, O_ADMIN, O_PASSWORD_STDIN, O_MINUTES, O_VACUUM, O_OLDER_THAN };
 
 /* Every command's options but --version, whose meaning depends on it. */
 #define SHARED_OPTIONS                                                                                              \
@@ -484,7 +492,8 @@ enum { O_DB = 256, O_CSV, O_JSON, O_HELP, O_VERSION, O_OBJECT, O_USER, O_SINCE, 
         {"until", required_argument, 0, O_UNTIL}, {"region", required_argument, 0, O_REGION},                       \
         {"limit", required_argument, 0, O_LIMIT}, {"svg", required_argument, 0, O_SVG},                           \
         {"admin", no_argument, 0, O_ADMIN}, {"password-stdin", no_argument, 0, O_PASSWORD_STDIN},             \
-        {"minutes", required_argument, 0, O_MINUTES}
+        {"minutes", required_argument, 0, O_MINUTES}, {"vacuum", no_argument, 0, O_VACUUM},                       \
+        {"older-than", required_argument, 0, O_OLDER_THAN}
 
 static const struct option options[] = {
     SHARED_OPTIONS,
@@ -507,6 +516,7 @@ struct args {
     uint32_t map_version; /* map --version; 0: none given */
     user_request user;    /* user: --admin, --password-stdin (the verb and name come later) */
     moderate_request mod; /* kick, ban, unban, bans: --minutes (the rest comes later) */
+    maintain_request maint; /* backup --vacuum, retention --older-than (the file comes later) */
 };
 
 /* Parses options from argv[1..] (argv[0] names the program or the command).
@@ -520,7 +530,8 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
                                    [O_REGION - O_OBJECT] = OPT_REGION, [O_LIMIT - O_OBJECT] = OPT_LIMIT,
                                    [O_SVG - O_OBJECT] = OPT_SVG,       [O_MAPVERSION - O_OBJECT] = OPT_MAPVERSION,
                                    [O_ADMIN - O_OBJECT] = OPT_ADMIN,   [O_PASSWORD_STDIN - O_OBJECT] = OPT_PASSWORD_STDIN,
-                                   [O_MINUTES - O_OBJECT] = OPT_MINUTES};
+                                   [O_MINUTES - O_OBJECT] = OPT_MINUTES, [O_VACUUM - O_OBJECT] = OPT_VACUUM,
+                                   [O_OLDER_THAN - O_OBJECT] = OPT_OLDER_THAN};
     const struct option *table = cmd && (cmd->opts & OPT_MAPVERSION) ? map_options : options;
     const char *where = cmd ? cmd->name : NULL;
     int o, li = 0;
@@ -588,6 +599,13 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
                 return usage_error(where, "--minutes wants a whole number from 1 to %lld, not \"%s\"",
                                    MODERATE_MINUTES_MAX, optarg);
             a->mod.minutes = n;
+            break;
+        case O_VACUUM: a->maint.vacuum = 1; break;
+        case O_OLDER_THAN:
+            if (parse_int(optarg, 1, MAINTAIN_DAYS_MAX, &n) < 0)
+                return usage_error(where, "--older-than wants a whole number of days from 1 to %lld, not \"%s\"",
+                                   MAINTAIN_DAYS_MAX, optarg);
+            a->maint.days = n;
             break;
         }
     }
@@ -679,6 +697,22 @@ static int moderate_arguments(const char *cmd, int argc, char **argv, struct arg
     return 0;
 }
 
+/* Checks the words after backup or retention (argv[0..argc)) into a->maint:
+ * backup's file; retention takes none, but --older-than. Returns 0 or the
+ * usage exit status. */
+static int maintain_arguments(const char *cmd, int argc, char **argv, struct args *a)
+{
+    int want = a->maint.verb == MAINTAIN_BACKUP ? 1 : 0;
+    if (argc > want)
+        return usage_error(cmd, "unexpected argument \"%s\"", argv[want]);
+    if (argc < want || (want && !*argv[0]))
+        return usage_error(cmd, "%s", "wants the file to copy the database to");
+    if (!want && !a->maint.days)
+        return usage_error(cmd, "%s", "wants --older-than DAYS");
+    a->maint.file = want ? argv[0] : NULL;
+    return 0;
+}
+
 static int run_command(const struct command *cmd, db *d, struct args *a, const int64_t *pos)
 {
     sqlite3 *s = db_sqlite(d);
@@ -752,8 +786,11 @@ int main(int argc, char **argv)
     a.mod.verb = moderate_verb(cmd->name);
     if (a.mod.verb >= 0 && (rc = moderate_arguments(cmd->name, positional, sub_argv + optind, &a)) != 0)
         return rc;
-    if (strcmp(cmd->name, "user") == 0 || a.mod.verb >= 0)
-        positional = 0; /* taken: a verb, a name or a session, not object ids */
+    a.maint.verb = maintain_verb(cmd->name);
+    if (a.maint.verb >= 0 && (rc = maintain_arguments(cmd->name, positional, sub_argv + optind, &a)) != 0)
+        return rc;
+    if (strcmp(cmd->name, "user") == 0 || a.mod.verb >= 0 || a.maint.verb >= 0)
+        positional = 0; /* taken: a verb, a name, a session or a file, not object ids */
     if (positional > cmd->npos)
         return usage_error(cmd->name, "unexpected argument \"%s\"", sub_argv[optind + cmd->npos]);
     if (positional < cmd->npos)
@@ -805,6 +842,10 @@ int main(int argc, char **argv)
     }
     if (a.mod.verb >= 0) {
         rc = moderate_run(d, a.db, &a.mod, a.format, err, sizeof err);
+        return exit_status(rc, err);
+    }
+    if (a.maint.verb >= 0) {
+        rc = maintain_run(d, a.db, &a.maint, a.format, err, sizeof err);
         return exit_status(rc, err);
     }
     rc = run_command(cmd, d, &a, pos);
