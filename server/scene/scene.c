@@ -19,6 +19,13 @@ typedef struct object {
 struct scene {
     object **objects; /* sorted by id: collisions look objects up every tick */
     uint32_t n, cap;
+    /* Objects by slot (NULL: free), and their bounds in a broadphase of
+     * their own under the slot as handle: areas of interest ask for objects,
+     * not boxes. Free slots are reused. */
+    object **by_slot;
+    uint32_t nslots, slots_cap;
+    uint32_t *free_slots, nfree_slots;
+    bp *objs;
     bp *bp;
     /* Every world box by broadphase handle; free handles are chained
      * through free_next. */
@@ -28,6 +35,10 @@ struct scene {
 };
 
 #define NO_HANDLE UINT32_MAX
+/* Cell side of the objects' broadphase: objects are larger than their
+ * boxes (a room, a desk, a building) and are asked for by areas of
+ * interest tens of metres wide. */
+#define SCENE_OBJECT_CELL 16.0f
 
 scene *scene_create(const float world_min[3], const float world_max[3])
 {
@@ -36,8 +47,9 @@ scene *scene_create(const float world_min[3], const float world_max[3])
         return NULL;
     s->free_head = NO_HANDLE;
     s->bp = bp_create(world_min, world_max, BP_CELL_DEFAULT);
-    if (!s->bp) {
-        free(s);
+    s->objs = bp_create(world_min, world_max, SCENE_OBJECT_CELL);
+    if (!s->bp || !s->objs) {
+        scene_destroy(s);
         return NULL;
     }
     return s;
@@ -72,6 +84,33 @@ static void handle_give(scene *s, uint32_t h)
     s->free_head = h;
 }
 
+/* A free slot for a new object, or NO_HANDLE when out of memory. */
+static uint32_t slot_take(scene *s)
+{
+    if (s->nfree_slots)
+        return s->free_slots[--s->nfree_slots];
+    if (s->nslots == s->slots_cap) {
+        uint32_t cap = s->slots_cap ? s->slots_cap * 2 : 64;
+        object **by_slot = cvre_realloc(s->by_slot, cap * sizeof *by_slot);
+        if (!by_slot)
+            return NO_HANDLE;
+        s->by_slot = by_slot;
+        uint32_t *free_slots = cvre_realloc(s->free_slots, cap * sizeof *free_slots);
+        if (!free_slots)
+            return NO_HANDLE;
+        s->free_slots = free_slots;
+        s->slots_cap = cap;
+    }
+    s->by_slot[s->nslots] = NULL;
+    return s->nslots++;
+}
+
+static void slot_give(scene *s, uint32_t slot)
+{
+    s->by_slot[slot] = NULL;
+    s->free_slots[s->nfree_slots++] = slot;
+}
+
 static void object_free(object *o)
 {
     if (!o)
@@ -90,6 +129,9 @@ void scene_destroy(scene *s)
     for (uint32_t i = 0; i < s->n; i++)
         object_free(s->objects[i]);
     free(s->objects);
+    free(s->by_slot);
+    free(s->free_slots);
+    bp_destroy(s->objs);
     bp_destroy(s->bp);
     free(s->boxes);
     free(s->free_next);
@@ -148,11 +190,60 @@ static object *find(const scene *s, uint32_t id, uint32_t *index)
     return lo < s->n && s->objects[lo]->pub.id == id ? s->objects[lo] : NULL;
 }
 
-/* Sets o's transform and its world boxes, in the box table and in the
- * broadphase too once they have handles. */
-static void place(scene *s, object *o, const proto_transform *at)
+/* The world AABB of n local boxes under at. Returns 0, or -EINVAL if a
+ * coordinate of a world box would not be finite (fminf would hide a NaN,
+ * so every box is checked). */
+static int bounds_at(const scene_box *local, uint32_t n, const proto_transform *at, scene_box *out)
 {
+    *out = (scene_box){{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+    for (uint32_t i = 0; i < n; i++) {
+        scene_box w;
+        scene_box_to_world(at, &local[i], &w);
+        for (int k = 0; k < 3; k++) {
+            if (!isfinite(w.min[k]) || !isfinite(w.max[k]))
+                return -EINVAL;
+            out->min[k] = fminf(out->min[k], w.min[k]);
+            out->max[k] = fmaxf(out->max[k], w.max[k]);
+        }
+    }
+    return 0;
+}
+
+int scene_check_fit(const scene_box *local, uint32_t n, const proto_transform *at, const scene_limits *lim,
+                    char *why, size_t whylen)
+{
+    scene_box b;
+    if (bounds_at(local, n, at, &b) < 0) {
+        snprintf(why, whylen, "its boxes would not be finite");
+        return -EINVAL;
+    }
+    static const char axis[] = "xyz";
+    for (int k = 0; k < 3; k++) {
+        if (b.max[k] - b.min[k] > lim->max_size) {
+            snprintf(why, whylen, "it would be %.0f m long along %c; at most %.0f m", (double)(b.max[k] - b.min[k]),
+                     axis[k], (double)lim->max_size);
+            return -EINVAL;
+        }
+        if (b.min[k] < lim->min[k] || b.max[k] > lim->max[k]) {
+            snprintf(why, whylen, "it would reach %c %.1f..%.1f, past the world's %.0f..%.0f", axis[k],
+                     (double)b.min[k], (double)b.max[k], (double)lim->min[k], (double)lim->max[k]);
+            return -EINVAL;
+        }
+    }
+    return 0;
+}
+
+/* Sets o's transform, its world boxes and bounds, in the box table and the
+ * broadphases too once they are filed there. Returns 0, or -EINVAL (a box
+ * would not be finite) leaving o as it was. */
+static int place(scene *s, object *o, const proto_transform *at)
+{
+    scene_box bounds;
+    if (bounds_at(o->local, o->pub.box_count, at, &bounds) < 0)
+        return -EINVAL;
     o->pub.at = *at;
+    o->pub.bounds = bounds;
+    o->pub.rev++;
     for (uint32_t i = 0; i < o->pub.box_count; i++) {
         scene_box_to_world(at, &o->local[i], &o->world[i]);
         uint32_t h = o->handles[i];
@@ -163,6 +254,9 @@ static void place(scene *s, object *o, const proto_transform *at)
          * before the next tick could use a stale box. */
         (void)bp_update(s->bp, o->world[i].min, o->world[i].max, h);
     }
+    if (s->by_slot && o->pub.slot < s->nslots && s->by_slot[o->pub.slot] == o)
+        (void)bp_update(s->objs, bounds.min, bounds.max, o->pub.slot);
+    return 0;
 }
 
 /* Gives o's boxes handles and files them in the broadphase. */
@@ -173,9 +267,10 @@ static int file_boxes(scene *s, object *o)
         if (h == NO_HANDLE)
             return -ENOMEM;
         s->boxes[h] = (scene_box_ref){.object_id = o->pub.id, .box_index = i, .world = o->world[i]};
-        if (bp_insert(s->bp, o->world[i].min, o->world[i].max, h) < 0) {
+        int rc = bp_insert(s->bp, o->world[i].min, o->world[i].max, h);
+        if (rc < 0) {
             handle_give(s, h);
-            return -ENOMEM;
+            return rc;
         }
         o->handles[i] = h;
     }
@@ -228,13 +323,21 @@ int scene_add(scene *s, const scene_object_def *d)
     o->pub.world = o->world;
     for (uint32_t i = 0; i < d->box_count; i++)
         o->handles[i] = NO_HANDLE;
-    place(s, o, &d->at);
-    int rc = file_boxes(s, o);
+    int rc = place(s, o, &d->at);
+    if (rc == 0)
+        rc = file_boxes(s, o);
+    uint32_t slot = rc == 0 ? slot_take(s) : NO_HANDLE;
+    if (rc == 0 && slot == NO_HANDLE)
+        rc = -ENOMEM;
+    if (rc == 0 && (rc = bp_insert(s->objs, o->pub.bounds.min, o->pub.bounds.max, slot)) < 0)
+        slot_give(s, slot);
     if (rc < 0) {
         unfile_boxes(s, o);
         object_free(o);
         return rc;
     }
+    o->pub.slot = slot;
+    s->by_slot[slot] = o;
     uint32_t at;
     find(s, o->pub.id, &at);
     memmove(s->objects + at + 1, s->objects + at, (s->n - at) * sizeof *s->objects);
@@ -250,6 +353,8 @@ int scene_remove(scene *s, uint32_t id)
     if (!o)
         return -ENOENT;
     unfile_boxes(s, o);
+    bp_remove(s->objs, o->pub.slot);
+    slot_give(s, o->pub.slot);
     object_free(o);
     memmove(s->objects + i, s->objects + i + 1, (--s->n - i) * sizeof *s->objects);
     return 0;
@@ -260,8 +365,7 @@ int scene_place(scene *s, uint32_t id, const proto_transform *at)
     object *o = find(s, id, NULL);
     if (!o)
         return -ENOENT;
-    place(s, o, at);
-    return 0;
+    return place(s, o, at);
 }
 
 int scene_set_owner(scene *s, uint32_t id, const char *owner)
@@ -270,6 +374,7 @@ int scene_set_owner(scene *s, uint32_t id, const char *owner)
     if (!o)
         return -ENOENT;
     snprintf(o->pub.owner, sizeof o->pub.owner, "%s", owner);
+    o->pub.rev++;
     return 0;
 }
 
@@ -278,7 +383,8 @@ int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxe
     object *o = find(s, id, NULL);
     if (!o)
         return -ENOENT;
-    if (count == 0 || count > PROTO_OBJECT_BOXES_MAX)
+    scene_box bounds;
+    if (count == 0 || count > PROTO_OBJECT_BOXES_MAX || bounds_at(boxes, count, &o->pub.at, &bounds) < 0)
         return -EINVAL;
     scene_box *local = cvre_malloc(count * sizeof *local), *world = cvre_malloc(count * sizeof *world);
     uint32_t *handles = cvre_malloc(count * sizeof *handles);
@@ -297,7 +403,7 @@ int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxe
     o->pub.world = o->world = world;
     o->handles = handles;
     o->pub.box_count = count;
-    place(s, o, &o->pub.at);
+    (void)place(s, o, &o->pub.at); /* finite: checked above */
     int rc = file_boxes(s, o);
     if (rc < 0) {
         /* Back to the old boxes: the handles just given back make room. */
@@ -307,6 +413,7 @@ int scene_set_ecm(scene *s, uint32_t id, uint32_t version, const scene_box *boxe
         free(handles);
         *o = old;
         (void)file_boxes(s, o);
+        (void)bp_update(s->objs, o->pub.bounds.min, o->pub.bounds.max, o->pub.slot);
         return rc;
     }
     o->pub.ecm_version = version;
@@ -325,6 +432,19 @@ const scene_object *scene_get(const scene *s, uint32_t id)
 uint32_t scene_count(const scene *s) { return s->n; }
 
 const scene_object *scene_at(const scene *s, uint32_t i) { return &s->objects[i]->pub; }
+
+uint32_t scene_slots(const scene *s) { return s->nslots; }
+
+const scene_object *scene_at_slot(const scene *s, uint32_t slot)
+{
+    return slot < s->nslots && s->by_slot[slot] ? &s->by_slot[slot]->pub : NULL;
+}
+
+uint32_t scene_query_objects(const scene *s, const float min[3], const float max[3], uint32_t *out,
+                             uint32_t out_max)
+{
+    return bp_query(s->objs, min, max, out, out_max);
+}
 
 uint32_t scene_query(const scene *s, const float min[3], const float max[3], uint32_t *out, uint32_t out_max)
 {

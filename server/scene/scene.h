@@ -24,6 +24,8 @@ typedef struct scene_box {
 /* A read-only view of one object. */
 typedef struct scene_object {
     uint32_t id;
+    uint32_t slot;           /* dense, below scene_slots(); reused after a removal */
+    uint32_t rev;            /* grows with every change a client sees (place, boxes, owner) */
     char owner[PROTO_NAME_MAX + 1];
     char name[PROTO_OBJECT_NAME_MAX + 1];
     proto_transform at;
@@ -33,6 +35,7 @@ typedef struct scene_object {
     uint32_t box_count;
     const scene_box *local;  /* ECM boxes, local */
     const scene_box *world;  /* the same, as world AABBs */
+    scene_box bounds;        /* the world AABB around all of them */
 } scene_object;
 
 /* What a new object, or a new ECM version, is made of. The scene copies
@@ -61,12 +64,26 @@ scene *scene_create(const float world_min[3], const float world_max[3]);
 void scene_destroy(scene *s);
 
 /* Adds an object. Returns 0, -EEXIST if the id is taken, -EINVAL for no
- * boxes or more than PROTO_OBJECT_BOXES_MAX, or -ENOMEM. */
+ * boxes, more than PROTO_OBJECT_BOXES_MAX or a world box that is not finite,
+ * or -ENOMEM. */
 int scene_add(scene *s, const scene_object_def *def);
 /* Removes an object; -ENOENT if there is none with that id. */
 int scene_remove(scene *s, uint32_t id);
-/* Moves, turns or rescales an object (its world boxes follow). */
+/* Moves, turns or rescales an object (its world boxes follow). Returns 0,
+ * -ENOENT, -EINVAL if a world box would not be finite, or -ENOMEM; on an
+ * error the object stays where it was. */
 int scene_place(scene *s, uint32_t id, const proto_transform *at);
+/* Where objects may stand: inside [min, max], and at most max_size long
+ * along any axis. */
+typedef struct scene_limits {
+    float min[3], max[3];
+    float max_size;
+} scene_limits;
+/* Checks what n local boxes would become under transform at (nothing is
+ * changed): every world box finite, their bounds inside lim. Returns 0, or
+ * -EINVAL with the reason in why (a sentence without a final stop). */
+int scene_check_fit(const scene_box *local, uint32_t n, const proto_transform *at, const scene_limits *lim,
+                    char *why, size_t whylen);
 
 /* Replaces an object's boxes with those of ECM version `version` (local
  * boxes, copied), between ticks: the next query sees only the new ones.
@@ -82,6 +99,15 @@ const scene_object *scene_get(const scene *s, uint32_t id);
 uint32_t scene_count(const scene *s);
 /* Object i in 0..scene_count()-1, in id order. */
 const scene_object *scene_at(const scene *s, uint32_t i);
+/* One more than the largest slot in use: the size of a per-slot table. */
+uint32_t scene_slots(const scene *s);
+/* The object in a slot, or NULL for a free slot. */
+const scene_object *scene_at_slot(const scene *s, uint32_t slot);
+/* Writes to out (room for out_max) the slots of the objects whose bounds
+ * overlap [min, max], each once; returns how many there are, which may
+ * exceed out_max. */
+uint32_t scene_query_objects(const scene *s, const float min[3], const float max[3], uint32_t *out,
+                             uint32_t out_max);
 
 /* Writes to out (room for out_max) the handles of the world boxes that overlap
  * [min, max]; returns how many there are, which may exceed out_max. */

@@ -7,6 +7,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 #include <math.h>
+#include <string.h>
 
 #include "scene/scene.h"
 
@@ -97,12 +98,93 @@ static void test_world_boxes_follow_placement(void **state)
     scene_destroy(s);
 }
 
+/* Objects by slot and by area: slots are dense and reused, the objects'
+ * broadphase follows every change, revisions count what a client must be
+ * told again. */
+static void test_objects_by_slot_and_area(void **state)
+{
+    (void)state;
+    scene *s = scene_create(WMIN, WMAX);
+    add(s, 1, 0);
+    add(s, 2, 100);
+    add(s, 3, 200);
+    assert_int_equal(scene_slots(s), 3);
+    uint32_t slot2 = scene_get(s, 2)->slot;
+    assert_ptr_equal(scene_at_slot(s, slot2), scene_get(s, 2));
+    assert_null(scene_at_slot(s, 3));
+    float lo[3] = {90, -10, -10}, hi[3] = {110, 10, 10};
+    uint32_t out[4];
+    assert_int_equal(scene_query_objects(s, lo, hi, out, 4), 1);
+    assert_int_equal(out[0], slot2);
+    assert_true(scene_get(s, 2)->bounds.min[0] == 99 && scene_get(s, 2)->bounds.max[2] == 2);
+
+    uint32_t rev = scene_get(s, 2)->rev;
+    proto_transform far = {.pos = {-300, 0, 0}, .scale = 2};
+    assert_int_equal(scene_place(s, 2, &far), 0);
+    assert_int_equal(scene_get(s, 2)->rev, rev + 1);
+    assert_int_equal(scene_query_objects(s, lo, hi, out, 4), 0);
+    float lo2[3] = {-310, -10, -10}, hi2[3] = {-290, 10, 10};
+    assert_int_equal(scene_query_objects(s, lo2, hi2, out, 4), 1);
+    assert_int_equal(scene_set_owner(s, 2, "world"), 0);
+    scene_box two[2] = {{{-1, 0, -2}, {0, 3, 2}}, {{0, 0, -2}, {1, 1, 2}}};
+    assert_int_equal(scene_set_ecm(s, 2, 2, two, 2), 0);
+    assert_int_equal(scene_get(s, 2)->rev, rev + 3);
+    assert_true(scene_get(s, 2)->bounds.max[1] == 6); /* scale 2 */
+
+    assert_int_equal(scene_remove(s, 2), 0);
+    assert_null(scene_at_slot(s, slot2));
+    assert_int_equal(scene_query_objects(s, lo2, hi2, out, 4), 0);
+    add(s, 4, 50);
+    assert_int_equal(scene_get(s, 4)->slot, slot2); /* reused */
+    assert_int_equal(scene_slots(s), 3);
+    scene_destroy(s);
+}
+
+/* A transform that overflows a box to infinity is refused and changes
+ * nothing; scene_check_fit says why a placement would not fit. */
+static void test_boxes_stay_finite_and_fit(void **state)
+{
+    (void)state;
+    scene *s = scene_create(WMIN, WMAX);
+    add(s, 1, 0);
+    const scene_object *o = scene_get(s, 1);
+    scene_box before = o->world[0];
+    uint32_t rev = o->rev;
+    proto_transform huge = {.pos = {0, 0, 0}, .scale = 2e38f}; /* 3 m tall: 6e38, past FLT_MAX */
+    assert_int_equal(scene_place(s, 1, &huge), -22); /* EINVAL */
+    assert_int_equal(memcmp(&o->world[0], &before, sizeof before), 0);
+    assert_int_equal(o->rev, rev);
+    scene_box inf_box = {{0, 0, 0}, {1e38f, 1, 1}};
+    scene_object_def d = {.id = 9, .owner = "ann", .name = "far", .at = {.scale = 1000}, .ecm_version = 1,
+                          .box_count = 1, .boxes = &inf_box};
+    assert_int_equal(scene_add(s, &d), -22);
+    assert_null(scene_get(s, 9));
+    assert_int_equal(scene_set_ecm(s, 1, 2, &inf_box, 1), 0); /* finite at scale 1 */
+    assert_int_equal(scene_place(s, 1, &(proto_transform){.scale = 10}), -22);
+
+    scene_limits lim = {{-50, -10, -50}, {50, 10, 50}, 20};
+    scene_box desk = {{-1, 0, -0.5f}, {1, 1, 0.5f}};
+    char why[160];
+    assert_int_equal(scene_check_fit(&desk, 1, &(proto_transform){.pos = {10, 0, 0}, .scale = 1}, &lim, why,
+                                     sizeof why), 0);
+    assert_int_equal(scene_check_fit(&desk, 1, &(proto_transform){.scale = 1000}, &lim, why, sizeof why), -22);
+    assert_non_null(strstr(why, "long along x"));
+    assert_int_equal(scene_check_fit(&desk, 1, &(proto_transform){.pos = {49.5f, 0, 0}, .scale = 1}, &lim, why,
+                                     sizeof why), -22);
+    assert_non_null(strstr(why, "past the world"));
+    assert_int_equal(scene_check_fit(&inf_box, 1, &(proto_transform){.scale = 10}, &lim, why, sizeof why), -22);
+    assert_non_null(strstr(why, "would not be finite"));
+    scene_destroy(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_lookup_in_any_order),
         cmocka_unit_test(test_transforms_round_trip),
         cmocka_unit_test(test_world_boxes_follow_placement),
+        cmocka_unit_test(test_objects_by_slot_and_area),
+        cmocka_unit_test(test_boxes_stay_finite_and_fit),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
