@@ -618,6 +618,7 @@ const char *proto_strerror(int status)
     case PROTO_ERR_AUTH: return "login failed";
     case PROTO_ERR_AUTH_REQUIRED: return "login required";
     case PROTO_ERR_RATE_LIMITED: return "rate limited";
+    case PROTO_ERR_PLACEMENT: return "placement refused";
     default: return "unknown status";
     }
 }

@@ -132,7 +132,8 @@ enum proto_status {
     /* Sent in ERROR before a close. */
     PROTO_ERR_AUTH = 40,           /* wrong name, password or token; or a guest took an account's name */
     PROTO_ERR_AUTH_REQUIRED = 41,  /* this server admits accounts only */
-    PROTO_ERR_RATE_LIMITED = 42    /* too many logins or connections from this address */
+    PROTO_ERR_RATE_LIMITED = 42,   /* too many logins or connections from this address */
+    PROTO_ERR_PLACEMENT = 43       /* the object would not fit: past the world, too large, not finite */
 };
 
 /* What a join proves (proto_join.credential). */

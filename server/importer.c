@@ -47,6 +47,16 @@ static void import_one(importer *im, import_job *job, import_result *r)
         snprintf(r->message, sizeof r->message, "%s", theirs ? err : "the server could not import the model");
         return;
     }
+    scene_box mbr;
+    memcpy(mbr.min, mesh.min, sizeof mbr.min);
+    memcpy(mbr.max, mesh.max, sizeof mbr.max);
+    char why[160];
+    if (scene_check_fit(&mbr, 1, &job->at, &im->limits.placement, why, sizeof why) < 0) {
+        r->status = PROTO_ERR_PLACEMENT;
+        snprintf(r->message, sizeof r->message, "the object cannot go there: %s", why);
+        import_mesh_free(&mesh);
+        return;
+    }
     uint32_t count;
     uint64_t tris;
     if (db_owner_usage(im->db, job->owner, &count, &tris) < 0) {

@@ -17,6 +17,7 @@
 
 #include "proto.h"
 #include "scene/import_proc.h"
+#include "scene/scene.h"
 
 typedef struct importer importer;
 
@@ -49,11 +50,13 @@ typedef struct import_result {
 
 /* What one account may put in the world: max_triangles in one model, and
  * at most quota_objects objects of quota_bytes of mesh (36 bytes a
- * triangle) at once, counted from the store when an import is stored. */
+ * triangle) at once, counted from the store when an import is stored; and
+ * the model's box, under the upload's transform, must fit placement. */
 typedef struct importer_limits {
     uint32_t max_triangles;
     uint32_t quota_objects;
     uint64_t quota_bytes;
+    scene_limits placement; /* where the new object may stand */
 } importer_limits;
 
 /* Starts the worker with its own connection to db_path; each model is

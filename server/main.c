@@ -12,6 +12,8 @@
 #include "srv_limits.h"
 #include "server.h"
 
+_Static_assert(ECM_MAX_BOXES_LIMIT <= PROTO_OBJECT_BOXES_MAX, "--refine-max-boxes fits one OBJECT_INFO");
+
 static const char usage[] =
     "usage: cvre-server [options]\n"
     "\n"
@@ -36,14 +38,17 @@ static const char usage[] =
     "  --max-clients N           connections at once, 1..65535 (default 10000)\n"
     "  --aoi-radius M            area-of-interest radius in metres (default 64)\n"
     "  --max-speed M             avatar speed limit in m/s (default 5)\n"
-    "  --world-size M            world extent in x and z, centred on 0 (default 1000)\n"
-    "  --spawn-radius M          avatars spawn within M of the centre (default 8)\n"
+    "  --world-size M            world extent in x and z, centred on 0, 10..8192\n"
+    "                            (default 1000)\n"
+    "  --spawn-radius M          avatars spawn within M of the centre, outside every\n"
+    "                            object, at most half the world size (default 8)\n"
     "  --handshake-timeout MS    hello and join must arrive within MS (default 5000)\n"
     "  --idle-timeout MS         close clients silent for MS (default 30000)\n"
     "  --seed N                  seed for spawn points (default 1)\n"
     "  --world FILE              preload the objects a world file lists (see server/worlds/)\n"
-    "  --max-upload BYTES        largest model file a client may upload (default 16777216)\n"
-    "  --max-triangles N         most triangles in one model (default 4000000)\n"
+    "  --max-upload BYTES        largest model file a client may upload, at most\n"
+    "                            67108864 (default 16777216)\n"
+    "  --max-triangles N         most triangles in one model, at most 4000000 (default)\n"
     "  --importer PATH           the isolated importer every model is parsed in\n"
     "                            (default: cvre-import beside cvre-server)\n"
     "  --import-memory MB        the importer's address space (default 4096)\n"
@@ -158,20 +163,22 @@ int main(int argc, char **argv)
         case O_HOST: cfg.host = optarg; break;
         case O_PORT: cfg.port = (uint16_t)integer("port", optarg, 0, 65535); break;
         case O_DB: cfg.db_path = optarg; break;
-        case O_TICK: cfg.tick_hz = (int)integer("tick-hz", optarg, 1, SRV_TICK_HZ_MAX); break;
+        case O_TICK: cfg.tick_hz = (int)integer("tick-hz", optarg, SRV_TICK_HZ_MIN, SRV_TICK_HZ_MAX); break;
         case O_MAXC: cfg.max_clients = (uint32_t)integer("max-clients", optarg, 1, SRV_MAX_CLIENTS_LIMIT); break;
         case O_AOI: cfg.aoi_radius = (float)number("aoi-radius", optarg, 1, SRV_AOI_RADIUS_MAX); break;
-        case O_SPEED: cfg.max_speed = (float)number("max-speed", optarg, 0.1, 10000); break;
-        case O_WORLD: cfg.world_size = (float)number("world-size", optarg, 10, 100000); break;
-        case O_SPAWN: cfg.spawn_radius = (float)number("spawn-radius", optarg, 0, 100000); break;
+        case O_SPEED: cfg.max_speed = (float)number("max-speed", optarg, 0.1, SRV_MAX_SPEED_LIMIT); break;
+        case O_WORLD:
+            cfg.world_size = (float)number("world-size", optarg, SRV_WORLD_SIZE_MIN, SRV_WORLD_SIZE_MAX);
+            break;
+        case O_SPAWN: cfg.spawn_radius = (float)number("spawn-radius", optarg, 0, SRV_WORLD_SIZE_MAX / 2); break;
         case O_HS: cfg.handshake_timeout_ms = (uint32_t)integer("handshake-timeout", optarg, 10, 3600000); break;
         case O_IDLE: cfg.idle_timeout_ms = (uint32_t)integer("idle-timeout", optarg, 10, 86400000); break;
         case O_SEED: cfg.seed = (uint64_t)integer("seed", optarg, 0, 9007199254740992.0); break;
         case O_STATS: cfg.stats_file = optarg; break;
         case O_METRICS: host_port("metrics", optarg, &cfg.metrics_host, &cfg.metrics_port); break;
         case O_WORLD_FILE: cfg.world_file = optarg; break;
-        case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, 1024.0 * 1024 * 1024); break;
-        case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, 100000000); break;
+        case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, SRV_MAX_UPLOAD_LIMIT); break;
+        case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, SRV_MAX_TRIANGLES_LIMIT); break;
         case O_IMPORTER: cfg.importer.helper = optarg; break;
         case O_LOGIN_BURST: cfg.login_burst = integer("login-burst", optarg, 1, 1000000); break;
         case O_Q_OBJ: cfg.quota_objects = (uint32_t)integer("quota-objects", optarg, 0, 100000000); break;
@@ -215,6 +222,11 @@ int main(int argc, char **argv)
     }
     if (optind < argc) {
         fprintf(stderr, "cvre-server: unexpected argument \"%s\"; try --help\n", argv[optind]);
+        return 2;
+    }
+    if (cfg.spawn_radius > cfg.world_size * 0.5f) {
+        fprintf(stderr, "cvre-server: --spawn-radius %g reaches past the world's edge: at most half of --world-size %g\n",
+                (double)cfg.spawn_radius, (double)cfg.world_size);
         return 2;
     }
     raise_fd_limit(cfg.max_clients);

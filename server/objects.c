@@ -5,6 +5,7 @@
  * the refiner thread, and OBJECT_INFO for every client.
  */
 #include <errno.h>
+#include <float.h>
 #include <libgen.h>
 #include <math.h>
 #include <stdarg.h>
@@ -20,15 +21,22 @@
 #include "serverInt.h"
 #include "srv_limits.h"
 
-/* ---- telling clients -------------------------------------------------- */
+/* Where objects may stand in this server's world (srv_limits.h). */
+static scene_limits world_limits(const server *s)
+{
+    float half = s->cfg.world_size * 0.5f;
+    return (scene_limits){{-half, -SRV_WORLD_HEIGHT, -half}, {half, SRV_WORLD_HEIGHT, half}, SRV_OBJECT_SIZE_MAX};
+}
+
+/* ---- telling clients: each one the objects near it ------------------- */
 
 /* Appends an OBJECT_INFO for o to c's output; upload_id is non-zero only for
- * the uploader's copy. */
-static void send_info(server *s, client *c, const scene_object *o, uint32_t upload_id)
+ * the uploader's copy. Returns 0, or -1 when c is being disconnected. */
+static int send_info(server *s, client *c, const scene_object *o, uint32_t upload_id)
 {
     proto_writer w;
     if (server__out_begin(s, c, PROTO_SIZE_OBJECT_INFO(o->box_count), &w) < 0)
-        return;
+        return -1;
     float(*lo)[3] = xmalloc(o->box_count * sizeof *lo), (*hi)[3] = xmalloc(o->box_count * sizeof *hi);
     for (uint32_t i = 0; i < o->box_count; i++) {
         memcpy(lo[i], o->world[i].min, sizeof lo[i]);
@@ -43,22 +51,179 @@ static void send_info(server *s, client *c, const scene_object *o, uint32_t uplo
     free(lo);
     free(hi);
     server__out_end(s, c, &w);
+    return 0;
 }
 
-/* Sends o to every joined client; the uploader's copy names its upload. */
-static void broadcast_info(server *s, const scene_object *o, const client *uploader, uint32_t upload_id)
+/* Tells c to forget object id: it was removed, or is out of c's view. */
+static void send_removed(server *s, client *c, uint32_t id)
 {
-    for (uint32_t i = 0; i < s->nclients; i++) {
-        client *c = s->clients[i];
-        if (c->state == ST_JOINED && !c->closing)
-            send_info(s, c, o, c == uploader ? upload_id : 0);
+    proto_writer w;
+    if (server__out_begin(s, c, PROTO_SIZE_OBJECT_REMOVED, &w) < 0)
+        return;
+    proto_put_object_removed(&w, id);
+    server__out_end(s, c, &w);
+}
+
+/* Records that c was told of o, which it did not know. */
+static void known_append(client *c, const scene_object *o)
+{
+    if (c->nobjs == c->objs_cap) {
+        c->objs_cap = c->objs_cap ? c->objs_cap * 2 : 64;
+        c->objs = xrealloc(c->objs, c->objs_cap * sizeof *c->objs);
+    }
+    c->objs[c->nobjs++] = (known_object){o->id, o->slot, o->rev};
+}
+
+/* Records that c was told of o as it is now. */
+static void known_set(client *c, const scene_object *o)
+{
+    for (uint32_t k = 0; k < c->nobjs; k++)
+        if (c->objs[k].id == o->id) {
+            c->objs[k].rev = o->rev;
+            return;
+        }
+    known_append(c, o);
+}
+
+/* Records that c was told to forget object id. */
+static void known_drop(client *c, uint32_t id)
+{
+    for (uint32_t k = 0; k < c->nobjs; k++)
+        if (c->objs[k].id == id) {
+            c->objs[k] = c->objs[--c->nobjs];
+            return;
+        }
+}
+
+/* Squared horizontal distance from p to the nearest point of b. */
+static float dist2_xz(const scene_box *b, const float p[3])
+{
+    float dx = fmaxf(fmaxf(b->min[0] - p[0], p[0] - b->max[0]), 0.0f);
+    float dz = fmaxf(fmaxf(b->min[2] - p[2], p[2] - b->max[2]), 0.0f);
+    return dx * dx + dz * dz;
+}
+
+static int owns(const client *c, const world_avatar *me, const scene_object *o)
+{
+    return c->account_id != 0 && strcmp(o->owner, me->name) == 0;
+}
+
+static int pick_nearer(const void *a, const void *b)
+{
+    float x = ((const object_pick *)a)->d2, y = ((const object_pick *)b)->d2;
+    return (x > y) - (x < y);
+}
+
+/* Makes room in the view's scratch for the scene's slots, n found objects
+ * and n picks. */
+static void view_scratch(server *s, uint32_t n)
+{
+    uint32_t slots = scene_slots(s->scene);
+    if (slots > s->obj_stamps) {
+        s->obj_stamp = xrealloc(s->obj_stamp, slots * sizeof *s->obj_stamp);
+        memset(s->obj_stamp + s->obj_stamps, 0, (slots - s->obj_stamps) * sizeof *s->obj_stamp);
+        s->obj_stamps = slots;
+    }
+    if (n > s->obj_found_cap) {
+        s->obj_found = xrealloc(s->obj_found, n * sizeof *s->obj_found);
+        s->obj_found_cap = n;
+    }
+    if (n > s->picks_cap) {
+        s->picks = xrealloc(s->picks, n * sizeof *s->picks);
+        s->picks_cap = n;
     }
 }
 
-void objects__send_all(server *s, client *c)
+/*
+ * The objects' area of interest. What c knows is checked first: objects
+ * removed, or now farther than aoi_radius + 2 STEP (unless c owns them),
+ * are forgotten (OBJECT_REMOVED); those changed since c was told are sent
+ * again. Then the objects within aoi_radius + STEP that c does not know,
+ * and after a join every object c owns, are sent nearest first. Sending
+ * stops while c's output holds SRV_OBJECT_VIEW_BUDGET bytes; the view is
+ * then made again next tick, so a join in a crowded place streams as fast
+ * as the client reads. Known objects are stamped per slot, so the work is
+ * linear in what c knows plus what is near.
+ */
+void objects__view(server *s, client *c, int force)
 {
-    for (uint32_t i = 0; i < scene_count(s->scene); i++)
-        send_info(s, c, scene_at(s->scene, i), 0);
+    const world_avatar *me = world_get(s->world, c->avatar_id);
+    const float step = SRV_OBJECT_VIEW_STEP;
+    float dx = me->pos[0] - c->objs_at[0], dz = me->pos[2] - c->objs_at[1];
+    if (!force && !c->objs_more && c->objs_gen == s->scene_gen && dx * dx + dz * dz < step * step)
+        return;
+    c->objs_more = 1;
+    if (conn_out_pending(&c->c) >= SRV_OBJECT_VIEW_BUDGET)
+        return;
+    float r_in = s->cfg.aoi_radius + step, r_out = s->cfg.aoi_radius + 2.0f * step;
+    view_scratch(s, 0);
+    if (++s->obj_stamp_now == 0) { /* wrapped: forget every old stamp */
+        memset(s->obj_stamp, 0, s->obj_stamps * sizeof *s->obj_stamp);
+        s->obj_stamp_now = 1;
+    }
+    uint32_t S = s->obj_stamp_now, kept = 0;
+    int whole = 1;
+    for (uint32_t k = 0; k < c->nobjs; k++) {
+        known_object ko = c->objs[k];
+        const scene_object *o = scene_at_slot(s->scene, ko.slot);
+        if (!o || o->id != ko.id || (!owns(c, me, o) && dist2_xz(&o->bounds, me->pos) > r_out * r_out)) {
+            send_removed(s, c, ko.id);
+            continue;
+        }
+        if (o->rev != ko.rev) {
+            if (conn_out_pending(&c->c) < SRV_OBJECT_VIEW_BUDGET) {
+                if (send_info(s, c, o, 0) < 0)
+                    return;
+                ko.rev = o->rev;
+            } else {
+                whole = 0;
+            }
+        }
+        s->obj_stamp[o->slot] = S;
+        c->objs[kept++] = ko;
+    }
+    c->nobjs = kept;
+
+    float lo[3] = {me->pos[0] - r_in, -FLT_MAX, me->pos[2] - r_in};
+    float hi[3] = {me->pos[0] + r_in, FLT_MAX, me->pos[2] + r_in};
+    uint32_t n = scene_query_objects(s->scene, lo, hi, s->obj_found, s->obj_found_cap);
+    if (n > s->obj_found_cap) {
+        view_scratch(s, n);
+        n = scene_query_objects(s->scene, lo, hi, s->obj_found, s->obj_found_cap);
+    }
+    uint32_t npicks = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        const scene_object *o = scene_at_slot(s->scene, s->obj_found[i]);
+        float d2 = dist2_xz(&o->bounds, me->pos);
+        if (s->obj_stamp[o->slot] != S && d2 <= r_in * r_in) {
+            s->obj_stamp[o->slot] = S;
+            s->picks[npicks++] = (object_pick){o->slot, d2};
+        }
+    }
+    if (c->objs_owned) {
+        view_scratch(s, npicks + scene_count(s->scene));
+        for (uint32_t i = 0; i < scene_count(s->scene); i++) {
+            const scene_object *o = scene_at(s->scene, i);
+            if (s->obj_stamp[o->slot] != S && owns(c, me, o)) {
+                s->obj_stamp[o->slot] = S;
+                s->picks[npicks++] = (object_pick){o->slot, dist2_xz(&o->bounds, me->pos)};
+            }
+        }
+    }
+    qsort(s->picks, npicks, sizeof *s->picks, pick_nearer);
+    uint32_t sent = 0;
+    while (sent < npicks && conn_out_pending(&c->c) < SRV_OBJECT_VIEW_BUDGET) {
+        const scene_object *o = scene_at_slot(s->scene, s->picks[sent++].slot);
+        if (send_info(s, c, o, 0) < 0)
+            return;
+        known_append(c, o);
+    }
+    if (sent == npicks)
+        c->objs_owned = 0;
+    c->objs_more = !whole || sent < npicks;
+    c->objs_gen = s->scene_gen;
+    c->objs_at[0] = me->pos[0];
+    c->objs_at[1] = me->pos[2];
 }
 
 /* Refuses a request without closing the connection. */
@@ -93,6 +258,9 @@ static void drop_upload(server *s, client *c)
 
 void objects__client_gone(server *s, client *c)
 {
+    free(c->objs);
+    c->objs = NULL;
+    c->nobjs = c->objs_cap = 0;
     if (c->upload.id) {
         log_info("%s (session %lld): upload %u abandoned after %u of %u bytes", c->peer, (long long)c->session_id,
                  c->upload.id, c->upload.received, c->upload.total);
@@ -205,7 +373,9 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
         s->st.imports_ok++;
         const scene_object *o = scene_get(s->scene, r.object_id);
         log_info("object %u \"%s\" of %s imported: %u triangles", o->id, o->name, o->owner, o->tri_count);
-        broadcast_info(s, o, c, r.upload_id);
+        s->scene_gen++; /* the others see it in their next view */
+        if (c && c->state == ST_JOINED && !c->closing && send_info(s, c, o, r.upload_id) == 0)
+            known_set(c, o);
     }
 }
 
@@ -237,7 +407,7 @@ static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *dat
         o = scene_get(s->scene, u.object_id);
         log_info("object %u \"%s\": collision map v%u -> v%u in force, %u -> %u boxes", o->id, o->name, old_version,
                  o->ecm_version, before, o->box_count);
-        broadcast_info(s, o, NULL, 0);
+        s->scene_gen++;
     }
 }
 
@@ -263,11 +433,25 @@ static const scene_object *owned(server *s, client *c, uint32_t id)
 
 static void on_place(server *s, client *c, const proto_object_place *m)
 {
-    if (!owned(s, c, m->object_id))
+    const scene_object *o = owned(s, c, m->object_id);
+    if (!o)
         return;
+    char why[160];
+    scene_limits lim = world_limits(s);
+    if (scene_check_fit(o->local, o->box_count, &m->at, &lim, why, sizeof why) < 0) {
+        reject(s, c, m->object_id, PROTO_ERR_PLACEMENT, "object %u cannot go there: %s", m->object_id, why);
+        return;
+    }
+    int rc = scene_place(s->scene, m->object_id, &m->at);
+    if (rc < 0) {
+        reject(s, c, m->object_id, PROTO_ERR_INTERNAL, "object %u could not be placed: %s", m->object_id,
+               strerror(-rc));
+        return;
+    }
     server__event_push(s, EVT_PLACE, m->object_id)->at_place = m->at;
-    scene_place(s->scene, m->object_id, &m->at);
-    broadcast_info(s, scene_get(s->scene, m->object_id), NULL, 0);
+    s->scene_gen++; /* the others see it in their next view; the sender now */
+    if (send_info(s, c, o, 0) == 0)
+        known_set(c, o);
 }
 
 static void on_remove(server *s, client *c, uint32_t id)
@@ -276,16 +460,10 @@ static void on_remove(server *s, client *c, uint32_t id)
         return;
     server__event_push(s, EVT_REMOVE, id);
     scene_remove(s->scene, id);
+    s->scene_gen++;
+    send_removed(s, c, id);
+    known_drop(c, id);
     log_info("object %u removed by %s", id, c->peer);
-    for (uint32_t i = 0; i < s->nclients; i++) {
-        client *other = s->clients[i];
-        proto_writer w;
-        if (other->state != ST_JOINED || other->closing ||
-            server__out_begin(s, other, PROTO_SIZE_OBJECT_REMOVED, &w) < 0)
-            continue;
-        proto_put_object_removed(&w, id);
-        server__out_end(s, other, &w);
-    }
 }
 
 /* The request id a refusal of m names. */
@@ -308,7 +486,7 @@ void objects__owner_gone(server *s, const char *owner)
             continue;
         scene_set_owner(s->scene, o->id, WORLD_OWNER);
         log_info("object %u \"%s\": its owner %s was deleted; it is the world's now", o->id, o->name, owner);
-        broadcast_info(s, o, NULL, 0);
+        s->scene_gen++;
     }
 }
 
@@ -330,9 +508,12 @@ void objects__on_message(server *s, client *c, const proto_msg *m)
 
 /* ---- the scene at start-up -------------------------------------------- */
 
-static int restore_one(void *ctx, const db_object *o)
+/* Adds a stored object to the scene. Returns 0, -EINVAL when its boxes
+ * are not finite under its placement (no world can hold it), or -ENOMEM.
+ * One that lies past this world's limits (stored before they were
+ * checked, or under a larger --world-size) is added, with a warning. */
+static int add_stored(server *s, const db_object *o)
 {
-    server *s = ctx;
     scene_box *boxes = xcalloc(o->box_count ? o->box_count : 1, sizeof *boxes);
     for (uint32_t i = 0; i < o->box_count; i++) {
         memcpy(boxes[i].min, o->boxes[i], sizeof boxes[i].min);
@@ -343,20 +524,119 @@ static int restore_one(void *ctx, const db_object *o)
                             .ecm_version = o->ecm_version, .tri_count = o->tri_count, .tris = o->tris,
                             .box_count = o->box_count, .boxes = boxes};
     int rc = scene_add(s->scene, &def);
+    char why[160];
+    scene_limits lim = world_limits(s);
+    if (rc == 0 && scene_check_fit(boxes, o->box_count, &def.at, &lim, why, sizeof why) < 0)
+        log_warn("object %lld \"%s\" of %s restored, but %s", (long long)o->id, o->name, o->owner, why);
     free(boxes);
-    if (rc < 0)
-        log_error("object %lld not restored: %s", (long long)o->id, strerror(-rc));
+    return rc;
+}
+
+/* The objects restore found broken, to be marked removed once the scan of
+ * the store is over. */
+typedef struct restore {
+    server *s;
+    int64_t *broken;
+    uint32_t nbroken, cap;
+} restore;
+
+static int restore_one(void *ctx, const db_object *o)
+{
+    restore *r = ctx;
+    int rc = add_stored(r->s, o);
+    if (rc == -EINVAL) {
+        log_error("object %lld \"%s\" of %s not restored: its collision boxes are not finite where it stands; "
+                  "it is marked removed (its rows stay in the database)",
+                  (long long)o->id, o->name, o->owner);
+        if (r->nbroken == r->cap) {
+            r->cap = r->cap ? r->cap * 2 : 8;
+            r->broken = xrealloc(r->broken, r->cap * sizeof *r->broken);
+        }
+        r->broken[r->nbroken++] = o->id;
+    } else if (rc < 0) {
+        log_error("object %lld \"%s\" not restored: %s", (long long)o->id, o->name, strerror(-rc));
+    }
     return 0;
 }
 
-static int world_has(const server *s, const char *name)
+/* Restores the scene from the store. Returns 0, or -1 (the store failed:
+ * db_error). */
+static int restore_all(server *s)
 {
-    for (uint32_t i = 0; i < scene_count(s->scene); i++) {
-        const scene_object *o = scene_at(s->scene, i);
-        if (strcmp(o->owner, WORLD_OWNER) == 0 && strcmp(o->name, name) == 0)
-            return 1;
+    restore r = {.s = s};
+    int rc = db_objects_load(s->db, restore_one, &r);
+    for (uint32_t i = 0; rc == 0 && i < r.nbroken; i++)
+        rc = db_object_remove(s->db, r.broken[i], db_now());
+    free(r.broken);
+    return rc;
+}
+
+/* What loading a world file keeps from line to line: the names of the
+ * world's objects (restored or loaded: a name is loaded once), in an
+ * open-addressing set, and each model file imported once however many
+ * lines place it. A world of 100,000 objects loads in time linear in its
+ * lines. */
+typedef struct world_model {
+    char *path;
+    int z_up;
+    float unit_scale;
+    import_mesh mesh;
+} world_model;
+
+typedef struct world_load {
+    char **names;
+    uint32_t nnames, names_cap; /* a power of two, at most half full */
+    world_model *models;
+    uint32_t nmodels;
+    uint32_t loaded, present;
+} world_load;
+
+static uint32_t name_hash(const char *name)
+{
+    uint32_t h = 2166136261u; /* FNV-1a */
+    for (; *name; name++)
+        h = (h ^ (uint8_t)*name) * 16777619u;
+    return h;
+}
+
+/* Adds name to the set; 1 if it was new, 0 if it was there already. */
+static int name_add(world_load *wl, const char *name)
+{
+    if (2 * (wl->nnames + 1) > wl->names_cap) {
+        world_load grown = {.names_cap = wl->names_cap ? wl->names_cap * 2 : 64};
+        grown.names = xcalloc(grown.names_cap, sizeof *grown.names);
+        for (uint32_t i = 0; i < wl->names_cap; i++)
+            for (uint32_t j = wl->names[i] ? name_hash(wl->names[i]) : 0; wl->names[i]; j++)
+                if (!grown.names[j & (grown.names_cap - 1)]) {
+                    grown.names[j & (grown.names_cap - 1)] = wl->names[i];
+                    break;
+                }
+        free(wl->names);
+        wl->names = grown.names;
+        wl->names_cap = grown.names_cap;
     }
-    return 0;
+    for (uint32_t j = name_hash(name);; j++) {
+        char **slot = &wl->names[j & (wl->names_cap - 1)];
+        if (!*slot) {
+            *slot = xstrdup(name);
+            wl->nnames++;
+            return 1;
+        }
+        if (strcmp(*slot, name) == 0)
+            return 0;
+    }
+}
+
+static void world_load_free(world_load *wl)
+{
+    for (uint32_t i = 0; i < wl->names_cap; i++)
+        free(wl->names[i]);
+    free(wl->names);
+    for (uint32_t i = 0; i < wl->nmodels; i++) {
+        free(wl->models[i].path);
+        import_mesh_free(&wl->models[i].mesh);
+    }
+    free(wl->models);
 }
 
 /* Reads a whole file into a new buffer (at most max bytes). */
@@ -390,42 +670,73 @@ static uint8_t *slurp(const char *path, size_t max, size_t *len, char *err, size
     return buf;
 }
 
-/* Imports one model file into the world now (start-up, before serving). */
-static int preload(server *s, const char *path, const char *name, const import_options *opt,
-                   const proto_transform *at, char *err, size_t errlen)
+/* The mesh of a model file as opt imports it: from the isolated importer
+ * the first time, from wl after. NULL with a message in err. */
+static const import_mesh *world_model_mesh(server *s, world_load *wl, const char *path, const import_options *opt,
+                                           char *err, size_t errlen)
 {
+    for (uint32_t i = 0; i < wl->nmodels; i++) {
+        world_model *m = &wl->models[i];
+        if (strcmp(m->path, path) == 0 && m->z_up == opt->z_up && m->unit_scale == opt->unit_scale)
+            return &m->mesh;
+    }
     size_t len;
     uint8_t *data = slurp(path, s->cfg.max_upload, &len, err, errlen);
     if (!data)
-        return -1;
+        return NULL;
     const char *dot = strrchr(path, '.');
     import_mesh mesh = {0};
     int rc = import_isolated(&s->cfg.importer, data, len, dot ? dot + 1 : NULL, opt, &mesh, err, errlen);
     free(data);
     if (rc < 0)
+        return NULL;
+    wl->models = xrealloc(wl->models, (wl->nmodels + 1) * sizeof *wl->models);
+    wl->models[wl->nmodels] = (world_model){xstrdup(path), opt->z_up, opt->unit_scale, mesh};
+    return &wl->models[wl->nmodels++].mesh;
+}
+
+/* Puts one model file into the world now (start-up, before serving). */
+static int preload(server *s, world_load *wl, const char *path, const char *name, const import_options *opt,
+                   const proto_transform *at, char *err, size_t errlen)
+{
+    const import_mesh *mesh = world_model_mesh(s, wl, path, opt, err, errlen);
+    if (!mesh)
         return -1;
-    float box[1][6] = {{mesh.min[0], mesh.min[1], mesh.min[2], mesh.max[0], mesh.max[1], mesh.max[2]}};
-    db_object o = {.owner = WORLD_OWNER, .name = name, .format = dot ? dot + 1 : "detected", .yaw = at->yaw,
-                   .scale = at->scale, .tri_count = mesh.ntris, .tris = mesh.tris, .box_count = 1,
-                   .boxes = (const float(*)[6])box};
-    memcpy(o.pos, at->pos, sizeof o.pos);
-    memcpy(o.min, mesh.min, sizeof o.min);
-    memcpy(o.max, mesh.max, sizeof o.max);
-    if (db_object_create(s->db, &o, db_now()) < 0) {
-        snprintf(err, errlen, "%s: %s", path, db_error(s->db));
-        import_mesh_free(&mesh);
+    scene_box mbr;
+    memcpy(mbr.min, mesh->min, sizeof mbr.min);
+    memcpy(mbr.max, mesh->max, sizeof mbr.max);
+    char why[160];
+    scene_limits lim = world_limits(s);
+    if (scene_check_fit(&mbr, 1, at, &lim, why, sizeof why) < 0) {
+        snprintf(err, errlen, "%s cannot go there: %s", path, why);
         return -1;
     }
-    rc = restore_one(s, &o);
-    import_mesh_free(&mesh);
-    log_info("world: object %lld \"%s\" loaded from %s (%u triangles)", (long long)o.id, name, path, o.tri_count);
-    return rc;
+    const char *dot = strrchr(path, '.');
+    float box[1][6] = {{mbr.min[0], mbr.min[1], mbr.min[2], mbr.max[0], mbr.max[1], mbr.max[2]}};
+    db_object o = {.owner = WORLD_OWNER, .name = name, .format = dot ? dot + 1 : "detected", .yaw = at->yaw,
+                   .scale = at->scale, .tri_count = mesh->ntris, .tris = mesh->tris, .box_count = 1,
+                   .boxes = (const float(*)[6])box};
+    memcpy(o.pos, at->pos, sizeof o.pos);
+    memcpy(o.min, mbr.min, sizeof o.min);
+    memcpy(o.max, mbr.max, sizeof o.max);
+    if (db_object_create(s->db, &o, db_now()) < 0) {
+        snprintf(err, errlen, "%s: %s", path, db_error(s->db));
+        return -1;
+    }
+    int rc = add_stored(s, &o);
+    if (rc < 0) {
+        snprintf(err, errlen, "%s: %s", path, strerror(-rc));
+        return -1;
+    }
+    log_debug("world: object %lld \"%s\" loaded from %s (%u triangles)", (long long)o.id, name, path, o.tri_count);
+    wl->loaded++;
+    return 0;
 }
 
 /* Parses one world-file line:
  *   object PATH [name NAME] [up y|z] [units S] at X Y Z [yaw DEGREES] [scale S]
  * A relative PATH is relative to the world file's folder. */
-static int world_line(server *s, const char *dir, char *line, int lineno, char *err, size_t errlen)
+static int world_line(server *s, world_load *wl, const char *dir, char *line, int lineno, char *err, size_t errlen)
 {
     char *save = NULL, *tok = strtok_r(line, " \t\r\n", &save);
     if (!tok || tok[0] == '#')
@@ -483,9 +794,16 @@ static int world_line(server *s, const char *dir, char *line, int lineno, char *
         snprintf(copy, sizeof copy, "%s", path);
         snprintf(name, sizeof name, "%s", basename(copy));
     }
-    if (world_has(s, name))
-        return 0; /* restored from the database already */
-    return preload(s, path, name, &opt, &at, err, errlen);
+    if (!name_add(wl, name)) {
+        wl->present++; /* restored from the database already */
+        return 0;
+    }
+    char msg[sizeof path + 1024];
+    if (preload(s, wl, path, name, &opt, &at, msg, sizeof msg) < 0) {
+        snprintf(err, errlen, "line %d: %s", lineno, msg);
+        return -1;
+    }
+    return 0;
 bad:
     snprintf(err, errlen, "line %d: expected: object PATH [name NAME] [up y|z] [units S] at X Y Z [yaw DEG] [scale S]",
              lineno);
@@ -499,6 +817,12 @@ static int load_world_file(server *s, const char *file, char *err, size_t errlen
         snprintf(err, errlen, "world file %s: %s", file, strerror(errno));
         return -1;
     }
+    world_load wl = {0};
+    for (uint32_t i = 0; i < scene_count(s->scene); i++) {
+        const scene_object *o = scene_at(s->scene, i);
+        if (strcmp(o->owner, WORLD_OWNER) == 0)
+            name_add(&wl, o->name);
+    }
     char copy[4096], line[8192];
     snprintf(copy, sizeof copy, "%s", file);
     const char *dir = dirname(copy);
@@ -506,11 +830,15 @@ static int load_world_file(server *s, const char *file, char *err, size_t errlen
     while (rc == 0 && fgets(line, sizeof line, f)) {
         char msg[8192];
         lineno++;
-        rc = world_line(s, dir, line, lineno, msg, sizeof msg);
+        rc = world_line(s, &wl, dir, line, lineno, msg, sizeof msg);
         if (rc < 0)
             snprintf(err, errlen, "world file %s: %s", file, msg);
     }
     fclose(f);
+    if (rc == 0)
+        log_info("world file %s: %u objects loaded from %u model files, %u already in the database", file, wl.loaded,
+                 wl.nmodels, wl.present);
+    world_load_free(&wl);
     return rc;
 }
 
@@ -525,7 +853,7 @@ int objects__start(server *s, char *err, size_t errlen)
     }
     /* Changes after this point reach the scene through the refiner. */
     int64_t feed_head;
-    if (db_ecm_events_head(s->db, &feed_head) < 0 || db_objects_load(s->db, restore_one, s) < 0) {
+    if (db_ecm_events_head(s->db, &feed_head) < 0 || restore_all(s) < 0) {
         snprintf(err, errlen, "database %s: %s", s->cfg.db_path, db_error(s->db));
         return -1;
     }
@@ -533,7 +861,7 @@ int objects__start(server *s, char *err, size_t errlen)
         log_info("restored %u objects from %s", scene_count(s->scene), s->cfg.db_path);
     if (s->cfg.world_file && load_world_file(s, s->cfg.world_file, err, errlen) < 0)
         return -1;
-    importer_limits lim = {s->cfg.max_triangles, s->cfg.quota_objects, s->cfg.quota_bytes};
+    importer_limits lim = {s->cfg.max_triangles, s->cfg.quota_objects, s->cfg.quota_bytes, world_limits(s)};
     s->importer = importer_start(s->cfg.db_path, &s->cfg.importer, &lim, err, errlen);
     if (!s->importer)
         return -1;
@@ -578,4 +906,7 @@ void objects__stop(server *s)
     }
     scene_destroy(s->scene);
     s->scene = NULL;
+    free(s->obj_stamp);
+    free(s->obj_found);
+    free(s->picks);
 }

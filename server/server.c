@@ -326,11 +326,15 @@ static void on_join(server *s, client *c, const proto_join *m)
  * its collisions carry its users row (r->user_id). */
 static void admit(server *s, client *c, const auth_result *r)
 {
-    const world_avatar *a = world_add(s->world, r->name, (uint32_t)strlen(r->name), c->join_box);
+    int crowded;
+    const world_avatar *a = world_add(s->world, s->scene, r->name, (uint32_t)strlen(r->name), c->join_box, &crowded);
     if (!a) {
         server__protocol_error(s, c, PROTO_ERR_SERVER_FULL, "the world is full (%u avatars)", world_count(s->world));
         return;
     }
+    if (crowded)
+        log_warn("%s (session %lld): no free spawn point within %.0f m of (%.1f, %.1f); it starts inside an object",
+                 c->peer, (long long)c->session_id, (double)WORLD_SPAWN_SEARCH, (double)a->pos[0], (double)a->pos[2]);
     c->avatar_id = a->id;
     c->user_id = r->user_id;
     c->account_id = r->account_id;
@@ -353,7 +357,8 @@ static void admit(server *s, client *c, const auth_result *r)
     proto_put_join_ok(&w, &ok);
     server__out_end(s, c, &w);
     sodium_memzero(ok.token, sizeof ok.token);
-    objects__send_all(s, c);
+    c->objs_owned = c->account_id != 0;
+    objects__view(s, c, 1);
 }
 
 static void on_auth_results(ev_loop *loop, int fd, unsigned events, void *data)
@@ -732,8 +737,10 @@ static void on_tick(ev_loop *loop, void *data)
     uint32_t tick = world_tick(s->world);
     for (uint32_t i = 0; i < s->nclients; i++) {
         client *c = s->clients[i];
-        if (c->state == ST_JOINED && !c->closing)
+        if (c->state == ST_JOINED && !c->closing) {
             update_view(s, c, tick);
+            objects__view(s, c, 0);
+        }
     }
     uint64_t us = (ev_clock(loop) - t0) / 1000u;
     s->st.ticks++;

@@ -41,6 +41,17 @@ typedef struct client_upload {
 /* ST_AUTH: the join waits for the auth worker (auth.h). */
 typedef enum { ST_HELLO, ST_JOIN, ST_AUTH, ST_JOINED } client_state;
 
+/* An object a client has been told of, at the revision it was told. */
+typedef struct known_object {
+    uint32_t id, slot, rev;
+} known_object;
+
+/* An object a view is about to tell a client of, nearest first. */
+typedef struct object_pick {
+    uint32_t slot;
+    float d2;
+} object_pick;
+
 typedef struct client {
     conn c;
     server *srv;
@@ -72,6 +83,13 @@ typedef struct client {
     uint64_t connected_ns, last_frame_ns, close_deadline_ns, soft_since_ns;
     char end_reason[PROTO_MESSAGE_MAX + 16];
     client_upload upload;
+    /* The objects it knows (objects__view). */
+    known_object *objs;
+    uint32_t nobjs, objs_cap;
+    uint32_t objs_gen;  /* server.scene_gen when the view was last made */
+    float objs_at[2];   /* where (x, z) */
+    int objs_more;      /* the view is not whole yet: made again next tick */
+    int objs_owned;     /* its own objects, wherever they are, still to be sent */
 } client;
 
 enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE, EVT_PLACE, EVT_REMOVE };
@@ -142,6 +160,13 @@ struct server {
     int64_t admin_feed_last;  /* the last admin action applied (db/moderation.h) */
     refiner *refiner;    /* new collision maps from the online loop and the store */
     size_t upload_bytes; /* held by unfinished uploads, all clients */
+    uint32_t scene_gen;  /* grows with every change to the scene a client may see */
+    /* objects__view's scratch: a stamp per object slot, the slots a query
+     * found, and the objects to send. */
+    uint32_t *obj_stamp, obj_stamps, obj_stamp_now;
+    uint32_t *obj_found, obj_found_cap;
+    object_pick *picks;
+    uint32_t picks_cap;
 };
 
 uint64_t server__now(const server *s);
@@ -167,12 +192,14 @@ int objects__start(server *s, char *err, size_t errlen);
 void objects__stop(server *s);
 /* Handles an object request from a joined client. */
 void objects__on_message(server *s, client *c, const proto_msg *m);
-/* Sends c every object in the world (after its join). */
-void objects__send_all(server *s, client *c);
+/* Brings what c knows of the objects up to date with where its avatar
+ * is (see SRV_OBJECT_VIEW_STEP): each tick, and at its join with force set.
+ * Cheap when nothing changed and the avatar did not move far. */
+void objects__view(server *s, client *c, int force);
 /* The objects of a deleted account pass to the world (the store did the
  * same); every client hears of the new owner. */
 void objects__owner_gone(server *s, const char *owner);
-/* Frees what c's unfinished upload holds. */
+/* Frees what c's unfinished upload and its view hold. */
 void objects__client_gone(server *s, client *c);
 
 #endif

@@ -7,6 +7,8 @@
 #define CVRE_SRV_LIMITS_H
 
 #include "proto.h"
+#include "scene/import.h"
+#include "scene/move.h"
 
 /* Avatar ids are slot | generation << 16 (world.c), so slots fit in 16 bits. */
 #ifndef SRV_MAX_CLIENTS_LIMIT
@@ -60,13 +62,22 @@
 
 /* Simulation defaults. 20 Hz is the usual rate for walking avatars. */
 #define SRV_TICK_HZ_DEFAULT 20
+#define SRV_TICK_HZ_MIN 1
 #define SRV_TICK_HZ_MAX 240
 /* A move is limited to max speed x elapsed time; elapsed is capped so that a
  * client silent for a minute cannot jump a minute's worth of distance. */
 #define SRV_MAX_SPEED_DEFAULT 5.0f /* m/s: a brisk run */
 #define SRV_MOVE_MAX_DT 0.25f      /* s */
-/* World: 1 km x 1 km, 256 m tall, floor at y = 0. */
+/* Fastest --max-speed, m/s: a move covers at most this x SRV_MOVE_MAX_DT,
+ * which must stay within the movement code's range (MOVE_MAX_COORD). */
+#define SRV_MAX_SPEED_LIMIT 10000.0f
+/* World: 1 km x 1 km, 256 m tall, floor at y = 0. --world-size may go up to
+ * twice MOVE_MAX_COORD: the world is centred on 0, and the movement code
+ * refuses positions past MOVE_MAX_COORD (an avatar there could never move
+ * again). */
 #define SRV_WORLD_SIZE_DEFAULT 1000.0f
+#define SRV_WORLD_SIZE_MIN 10.0f
+#define SRV_WORLD_SIZE_MAX (2.0f * MOVE_MAX_COORD)
 #define SRV_WORLD_HEIGHT 256.0f
 #define SRV_AOI_RADIUS_DEFAULT 64.0f
 #define SRV_AOI_RADIUS_MAX 1000.0f
@@ -80,10 +91,35 @@
  * that many clients uploading at once cannot exhaust memory. */
 #define SRV_MAX_UPLOAD_DEFAULT (16u * 1024u * 1024u)
 #define SRV_UPLOAD_BUDGET (64u * 1024u * 1024u)
+/* Largest --max-upload: a file over the budget of all uploads could never
+ * be accepted. */
+#define SRV_MAX_UPLOAD_LIMIT SRV_UPLOAD_BUDGET
 /* Triangles in one model: 4 million (144 MB of floats) is far beyond any
  * model here (the city block has 400,020) and still fits in memory. */
 #define SRV_MAX_TRIANGLES_DEFAULT 4000000u
+/* Largest --max-triangles: what the importer itself accepts. */
+#define SRV_MAX_TRIANGLES_LIMIT IMPORT_MAX_TRIANGLES
 
+/* Where an object may stand: x and z within the world, y within
+ * +-SRV_WORLD_HEIGHT (sunk below the floor is harmless), and at most
+ * SRV_OBJECT_SIZE_MAX long along any axis: the city block model is 230 m
+ * across, and a placement 1,000 times a desk's size or one that covers the
+ * default world is a mistake or an attack. Checked at upload, placement
+ * and restore (scene_check_fit). */
+#define SRV_OBJECT_SIZE_MAX 512.0f
+
+/* Objects have an area of interest like avatars (objects.c): a client is
+ * told of the objects whose bounds come within aoi_radius + STEP of where
+ * its view was last made, which is made again once the avatar has moved
+ * STEP metres (or the scene changed), and forgets those past aoi_radius +
+ * 2 x STEP of it. So every object within aoi_radius of the avatar is
+ * known, none past aoi_radius + 3 x STEP is, and one at the edge does not
+ * flicker in and out. */
+#define SRV_OBJECT_VIEW_STEP 4.0f
+/* A view sends new objects only while the client's output holds less than
+ * this: a join in a crowded place is streamed over ticks as the client
+ * reads, never queued past the output limits at once. */
+#define SRV_OBJECT_VIEW_BUDGET (SRV_OUTBUF_SOFT / 2u)
 /* The online loop looks for clusters every 10 s: a crowd stopped at a
  * doorway gets it opened within seconds, and a quiet world costs one
  * indexed read of new rows per interval. */
@@ -131,5 +167,15 @@ _Static_assert(SRV_MAX_CLIENTS_LIMIT <= 65535, "avatar ids keep the slot in 16 b
 _Static_assert(SRV_OUTBUF_SOFT < SRV_OUTBUF_HARD, "soft below hard");
 _Static_assert(SRV_OUTBUF_HARD >= 4u * PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES), "a tick must fit");
 _Static_assert(SRV_INBUF_INITIAL <= SRV_INBUF_CAP_PREJOIN, "initial within prejoin cap");
+_Static_assert(SRV_WORLD_SIZE_DEFAULT <= SRV_WORLD_SIZE_MAX, "the default world fits the movement range");
+_Static_assert(SRV_WORLD_HEIGHT <= MOVE_MAX_COORD, "the world's top fits the movement range");
+_Static_assert(SRV_MAX_SPEED_LIMIT * SRV_MOVE_MAX_DT <= MOVE_MAX_COORD, "one move fits the movement range");
+_Static_assert(SRV_MOVE_MAX_DT <= MOVE_MAX_DT && 1.0f / SRV_TICK_HZ_MIN <= MOVE_MAX_DT, "ticks fit the movement code");
+_Static_assert(SRV_MAX_UPLOAD_DEFAULT <= SRV_MAX_UPLOAD_LIMIT, "the default upload fits the budget");
+_Static_assert(SRV_UPLOAD_BUDGET <= IMPORT_MAX_BYTES, "an upload the server takes, the importer reads");
+_Static_assert(SRV_MAX_TRIANGLES_DEFAULT <= SRV_MAX_TRIANGLES_LIMIT, "default triangles within the importer's");
+_Static_assert(SRV_OBJECT_SIZE_MAX <= SRV_WORLD_SIZE_DEFAULT, "an object fits the default world");
+_Static_assert(SRV_OBJECT_VIEW_BUDGET + PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX) < SRV_OUTBUF_SOFT,
+               "streaming objects never reaches the soft output limit");
 
 #endif

@@ -110,7 +110,41 @@ static void clamp_into_world(const world *w, const float box[3], float p[3])
     p[2] = clampf(p[2], lo[2] + box[2] * 0.5f, hi[2] - box[2] * 0.5f);
 }
 
-const world_avatar *world_add(world *w, const char *name, uint32_t name_len, const float box[3])
+/* Whether a box of size box standing at p overlaps no box of sc. */
+static int free_at(world *w, const scene *sc, const float box[3], const float p[3])
+{
+    float lo[3] = {p[0] - box[0] * 0.5f, p[1], p[2] - box[2] * 0.5f};
+    float hi[3] = {p[0] + box[0] * 0.5f, p[1] + box[1], p[2] + box[2] * 0.5f};
+    return scene_query(sc, lo, hi, w->handles, 0) == 0;
+}
+
+/* Moves p (on the floor, inside the world) to the nearest point free of
+ * sc's boxes on rings around it, one avatar width apart, up to
+ * WORLD_SPAWN_SEARCH. Returns 0, or -1 leaving p as it was when every
+ * point tried is taken. */
+static int find_free_spot(world *w, const scene *sc, const float box[3], float p[3])
+{
+    if (free_at(w, sc, box, p))
+        return 0;
+    float step = fmaxf(fmaxf(box[0], box[2]), 0.25f);
+    for (float r = step; r <= WORLD_SPAWN_SEARCH; r += step) {
+        uint32_t n = (uint32_t)ceilf(2.0f * (float)M_PI * r / step);
+        for (uint32_t i = 0; i < n; i++) {
+            float ang = 2.0f * (float)M_PI * (float)i / (float)n;
+            float q[3] = {p[0] + r * cosf(ang), p[1], p[2] + r * sinf(ang)};
+            float inside[3] = {q[0], q[1], q[2]};
+            clamp_into_world(w, box, inside);
+            if (inside[0] != q[0] || inside[2] != q[2] || !free_at(w, sc, box, q))
+                continue;
+            memcpy(p, q, sizeof q);
+            return 0;
+        }
+    }
+    return -1;
+}
+
+const world_avatar *world_add(world *w, const scene *sc, const char *name, uint32_t name_len, const float box[3],
+                              int *crowded)
 {
     if (!w->nfree || name_len > PROTO_NAME_MAX)
         return NULL;
@@ -129,6 +163,7 @@ const world_avatar *world_add(world *w, const char *name, uint32_t name_len, con
     a->pub.pos[1] = w->cfg.min[1];
     a->pub.pos[2] = (w->cfg.min[2] + w->cfg.max[2]) * 0.5f + (float)(r * sin(ang));
     clamp_into_world(w, box, a->pub.pos);
+    *crowded = find_free_spot(w, sc, box, a->pub.pos) < 0;
     a->pub.changed_tick = w->step;
     a->pub.grounded = 1;
     a->moved_at_step = w->step;

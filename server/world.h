@@ -18,6 +18,13 @@
 
 typedef struct world world;
 
+/* How far from its random spawn point an avatar's free spot is looked for,
+ * in metres: a large object at the spawn point (a building users start
+ * outside of) is tens of metres across. */
+#ifndef WORLD_SPAWN_SEARCH
+#define WORLD_SPAWN_SEARCH 64.0f
+#endif
+
 /* An avatar id is its slot (below the world's capacity) plus a generation
  * in the upper bits, so per-avatar tables can be indexed by slot. */
 #define WORLD_SLOT_BITS 16u
@@ -49,10 +56,16 @@ typedef struct world_avatar {
 world *world_create(const world_config *cfg);
 void world_destroy(world *w);
 
-/* Adds an avatar at a spawn point. name is name_len bytes (<= PROTO_NAME_MAX).
- * Returns the new avatar, or NULL when the world is full or out of memory.
- * Ids are never 0 and are not reused soon (the slot's generation changes). */
-const world_avatar *world_add(world *w, const char *name, uint32_t name_len, const float box[3]);
+/* Adds an avatar at a spawn point: a random point within spawn_radius of
+ * the centre, or if the avatar's box would overlap a box of sc there, the
+ * nearest free point found searching outward from it (up to
+ * WORLD_SPAWN_SEARCH metres). *crowded is set to 1 when none was free and
+ * the avatar stands inside an object, else 0. name is name_len bytes
+ * (<= PROTO_NAME_MAX). Returns the new avatar, or NULL when the world is
+ * full or out of memory. Ids are never 0 and are not reused soon (the
+ * slot's generation changes). */
+const world_avatar *world_add(world *w, const scene *sc, const char *name, uint32_t name_len, const float box[3],
+                              int *crowded);
 void world_remove(world *w, uint32_t id);
 /* The avatar with this id, or NULL if it is gone. */
 const world_avatar *world_get(const world *w, uint32_t id);

@@ -1,6 +1,7 @@
 #include "alloc.h"
 
 #include <stdlib.h>
+#include <string.h>
 
 #include "log.h"
 
@@ -39,3 +40,9 @@ void *xmalloc(size_t size) { return or_abort(cvre_malloc(size), size); }
 void *xcalloc(size_t n, size_t size) { return or_abort(cvre_calloc(n, size), n * size); }
 
 void *xrealloc(void *p, size_t size) { return or_abort(cvre_realloc(p, size), size); }
+
+char *xstrdup(const char *s)
+{
+    size_t n = strlen(s) + 1;
+    return memcpy(xmalloc(n), s, n);
+}

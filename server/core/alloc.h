@@ -18,6 +18,8 @@ void *cvre_realloc(void *p, size_t size);
 void *xmalloc(size_t size);
 void *xcalloc(size_t n, size_t size);
 void *xrealloc(void *p, size_t size);
+/* A copy of the string s, as xmalloc. */
+char *xstrdup(const char *s);
 void alloc_fail_after(long n);
 
 #endif

@@ -40,9 +40,11 @@ class Witness(threading.Thread):
     def finish(self):
         self.stopping.set()
         self.join(10)
-        for m in self.c.poll(1.0):  # the last pongs in flight
+        for m in self.c.poll(1.0):  # the last pongs and objects in flight
             if m["type"] == "pong":
                 self.pongs.append(time.time())
+            elif m["type"] == "object":
+                self.objects.append(m)
         gaps = [b - a for a, b in zip(self.pongs, self.pongs[1:])]
         return max(gaps, default=0.0)
 

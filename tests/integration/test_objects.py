@@ -40,9 +40,12 @@ def glb(json):
 
 def test_upload_place_remove_and_ownership():
     srv = Server(A.bin)
-    ann, bob = Raw(srv.port), Raw(srv.port)
-    ann.handshake("ann", srv.account("ann"))
-    bob.handshake("bob", srv.account("bob"))
+    # accounts first: a connection waiting on them could outlast the handshake timeout
+    ann_pw, bob_pw = srv.account("ann"), srv.account("bob")
+    ann = Raw(srv.port)
+    ann.handshake("ann", ann_pw)
+    bob = Raw(srv.port)
+    bob.handshake("bob", bob_pw)
     obj = upload(ann, 7, read(ROOM), "room.stl", fmt="stl", up=1, pos=(10, 0, 0))
     assert obj["owner"] == "ann" and obj["name"] == "room.stl" and obj["triangles"] == 54, obj
     assert obj["ecm_version"] == 1 and len(obj["boxes"]) == 1
