@@ -64,6 +64,7 @@ class Walker:
         self.closed = False
         self.errors = []
         self.infos = 0
+        self.last_info = None  # time.time() of the latest OBJECT_INFO
 
     def fileno(self):
         return self.s.fileno()
@@ -89,6 +90,7 @@ class Walker:
             elif kind == "object":
                 self.known[m["id"]] = m["name"]
                 self.infos += 1
+                self.last_info = time.time()
             elif kind == "object_removed":
                 self.known.pop(m["id"], None)
             elif kind == "error":
