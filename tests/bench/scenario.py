@@ -31,6 +31,8 @@ collisions do not depend on timing.
 
 Usage: scenario.py --bin BUILD_DIR --out DIR [--scenes all|room,...]
                    [--rounds 3] [--moves 400] [--users 6] [--seed 1]
+
+Exit status: 0 when every target in the report is met, 1 when one is not.
 """
 import argparse
 import json
@@ -728,11 +730,15 @@ def report(a, scenes, rounds, bump):
               "dashed; the collisions against the version before it, coloured by cluster, noise grey)."]
     with open(os.path.join(a.out, "report.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
+    met = all(verdicts) and leaks == 0 and boxes <= 64
     with open(os.path.join(a.out, "report.json"), "w") as f:
-        json.dump(dict(seed=a.seed, rounds=rounds, leaks=leaks, max_boxes=boxes,
-                       targets_met=all(verdicts) and leaks == 0 and boxes <= 64), f, indent=1, default=float)
+        json.dump(dict(seed=a.seed, rounds=rounds, leaks=leaks, max_boxes=boxes, targets_met=met), f, indent=1,
+                  default=float)
     print("\n".join(lines[-len(names) - 6:]))
+    if not met:
+        print("scenario: targets NOT met (see report.md)", file=sys.stderr)
+    return 0 if met else 1
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
