@@ -70,8 +70,19 @@ static const char usage[] =
     "  --help                    show this help\n"
     "  --version                 show the version\n"
     "\n"
-    "When ready it prints one line, \"listening on HOST:PORT\", on stdout.\n"
-    "SIGINT or SIGTERM: clients get bye, sessions are closed, the database too.\n";
+    "When ready it prints one line, \"listening on HOST:PORT\", on stdout; its log\n"
+    "goes to stderr, a line per event with a UTC time and a level.\n"
+    "SIGINT or SIGTERM: clients get bye, sessions are closed, the collision log is\n"
+    "written out and the database closed.\n"
+    "\n"
+    "Files:\n"
+    "  FILE, FILE-wal, FILE-shm  the database (--db) in SQLite's WAL mode; read it\n"
+    "                            with cvre-admin (also while the server runs), copy\n"
+    "                            it with cvre-admin backup, never with cp\n"
+    "  cvre-import               the importer, beside cvre-server unless --importer\n"
+    "\n"
+    "Exit status: 0 stopped by a signal, 1 could not start (the message says why)\n"
+    "or a fatal error, 2 bad flags.\n";
 
 /* Parses a number in [lo, hi] or exits with a message naming the flag. */
 static double number(const char *flag, const char *text, double lo, double hi)
