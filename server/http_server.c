@@ -177,7 +177,15 @@ static void on_conn_io(ev_loop *loop, int fd, unsigned events, void *data)
         flush(hc);
     if (hc->dead || !(events & (EV_READ | EV_ERROR)))
         return;
-    ssize_t n = conn_read(&hc->c, HTTP_HEAD_MAX, HTTP_HEAD_MAX);
+    ssize_t n;
+    if (hc->state == HC_READING) {
+        n = conn_read(&hc->c, HTTP_HEAD_MAX, HTTP_HEAD_MAX);
+    } else { /* answered: what comes now is dropped, a sink's worth at a time */
+        char sink[16384];
+        n = read(hc->c.fd, sink, sizeof sink);
+        if (n < 0)
+            n = errno == EAGAIN || errno == EINTR ? -EAGAIN : -errno;
+    }
     if (n == -EAGAIN)
         return;
     if (n == 0 && hc->state == HC_WRITING) { /* half-closed: it may still read */
@@ -189,7 +197,9 @@ static void on_conn_io(ev_loop *loop, int fd, unsigned events, void *data)
         kill_conn(hc);
         return;
     }
-    int rc = hc->state == HC_READING ? http_request_feed(hc->req, hc->c.in, hc->c.in_len) : HTTP_INCOMPLETE;
+    if (hc->state != HC_READING)
+        return;
+    int rc = http_request_feed(hc->req, hc->c.in, hc->c.in_len);
     conn_consume(&hc->c, hc->c.in_len); /* the request keeps what it needs */
     if (rc == HTTP_INCOMPLETE)
         return;

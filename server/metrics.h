@@ -58,6 +58,7 @@ typedef struct metrics_snapshot {
     uint64_t log_dropped;        /* refused: the queue was full */
     uint64_t log_invalid;        /* refused: a number not finite */
     uint64_t log_lost;           /* in batches the writer gave up on */
+    uint64_t log_failures;       /* failed attempts to commit a batch */
     uint64_t imports_ok, imports_failed;
     uint64_t refine_rounds;      /* online clustering rounds */
     uint64_t versions_written;   /* collision maps the online loop stored */

@@ -30,6 +30,7 @@ static void snapshot(server *s, metrics_snapshot *m)
         .moves_dropped = st->moves_dropped, .bytes_in = st->bytes_in, .bytes_out = st->bytes_out,
         .timeouts = st->timeouts, .slow_readers = st->slow_readers, .collisions = st->collisions,
         .log_written = ls.written, .log_dropped = ls.dropped, .log_invalid = ls.invalid, .log_lost = ls.lost,
+        .log_failures = ls.failures,
         .imports_ok = st->imports_ok, .imports_failed = st->imports_failed,
         .refine_rounds = rs.rounds, .versions_written = rs.versions_written,
         .versions_published = st->versions_published, .tick = st->tick_hist};

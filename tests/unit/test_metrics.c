@@ -179,7 +179,7 @@ static void fill(metrics_snapshot *m)
     uint64_t *fields[] = {&m->clients, &m->avatars, &m->objects, &m->log_queue, &m->log_queue_high,
                           &m->connections, &m->ticks, &m->frames_in, &m->moves, &m->moves_dropped,
                           &m->bytes_in, &m->bytes_out, &m->timeouts, &m->slow_readers, &m->collisions,
-                          &m->log_written, &m->log_dropped, &m->log_invalid, &m->log_lost, &m->imports_ok,
+                          &m->log_written, &m->log_dropped, &m->log_invalid, &m->log_lost, &m->log_failures, &m->imports_ok,
                           &m->imports_failed, &m->refine_rounds, &m->versions_written, &m->versions_published};
     for (size_t i = 0; i < sizeof fields / sizeof fields[0]; i++)
         *fields[i] = 1000 + i;
@@ -200,7 +200,7 @@ static void test_render(void **state)
     size_t len = 0;
     char *text = metrics_render(&m, &len);
     assert_non_null(text);
-    assert_int_equal(check_format(text, len), 23);
+    assert_int_equal(check_format(text, len), 24);
     static const struct {
         const char *series;
         size_t offset;
@@ -224,6 +224,7 @@ static void test_render(void **state)
         {"cvre_collision_log_rows_total{outcome=\"dropped\"}", offsetof(metrics_snapshot, log_dropped)},
         {"cvre_collision_log_rows_total{outcome=\"invalid\"}", offsetof(metrics_snapshot, log_invalid)},
         {"cvre_collision_log_rows_total{outcome=\"lost\"}", offsetof(metrics_snapshot, log_lost)},
+        {"cvre_collision_log_write_failures_total", offsetof(metrics_snapshot, log_failures)},
         {"cvre_imports_total{result=\"ok\"}", offsetof(metrics_snapshot, imports_ok)},
         {"cvre_imports_total{result=\"failed\"}", offsetof(metrics_snapshot, imports_failed)},
         {"cvre_refine_rounds_total", offsetof(metrics_snapshot, refine_rounds)},
