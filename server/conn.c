@@ -1,3 +1,4 @@
+#define _GNU_SOURCE /* accept4 */
 #include "conn.h"
 
 #include <errno.h>
@@ -123,6 +124,17 @@ void conn_peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out,
         snprintf(out, outlen, "[%s]:%s", host, port);
     else
         snprintf(out, outlen, "%s:%s", host, port);
+}
+
+int conn_accept(int listen_fd, char *peer, size_t peerlen)
+{
+    struct sockaddr_storage sa;
+    socklen_t len = sizeof sa;
+    int fd = accept4(listen_fd, (struct sockaddr *)&sa, &len, SOCK_NONBLOCK | SOCK_CLOEXEC);
+    if (fd < 0)
+        return errno == EINTR || errno == ECONNABORTED ? -EAGAIN : -errno;
+    conn_peer_name(&sa, len, peer, peerlen);
+    return fd;
 }
 
 int conn_listen(const char *host, uint16_t port, int backlog, char *address, size_t addrlen, char *err,

@@ -56,6 +56,12 @@ ssize_t conn_flush(conn *c);
  * Every endpoint (the protocol's, the metrics one) listens through here. */
 int conn_listen(const char *host, uint16_t port, int backlog, char *address, size_t addrlen, char *err,
                 size_t errlen);
+/* Accepts a connection waiting on listen_fd, non-blocking and
+ * close-on-exec, and names its peer as conn_peer_name does. Returns the
+ * socket, or -EAGAIN when none is waiting (also after EINTR or a
+ * connection aborted before it was taken), or another -errno (-EMFILE:
+ * out of file descriptors). */
+int conn_accept(int listen_fd, char *peer, size_t peerlen);
 /* "HOST:PORT" of a socket address, numeric, IPv6 in brackets; "?" if it
  * cannot be named. */
 void conn_peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t outlen);

@@ -1,5 +1,4 @@
 /* http_server.c: an HTTP/1.1 endpoint on the event loop (see http_server.h). */
-#define _GNU_SOURCE /* accept4 */
 #include "http_server.h"
 
 #include <errno.h>
@@ -251,16 +250,13 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
     (void)events;
     http_server *h = data;
     for (int k = 0; k < ACCEPT_BUDGET; k++) {
-        struct sockaddr_storage sa;
-        socklen_t len = sizeof sa;
-        int cfd = accept4(fd, (struct sockaddr *)&sa, &len, SOCK_NONBLOCK | SOCK_CLOEXEC);
+        char peer[80];
+        int cfd = conn_accept(fd, peer, sizeof peer);
         if (cfd < 0) {
-            if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
-                log_warn("%s: accept: %s", h->name, strerror(errno));
+            if (cfd != -EAGAIN)
+                log_warn("%s: accept: %s", h->name, strerror(-cfd));
             return;
         }
-        char peer[80];
-        conn_peer_name(&sa, len, peer, sizeof peer);
         if (h->nconns >= h->max_conns) {
             log_debug("%s: %s refused: %u connections open", h->name, peer, h->nconns);
             refuse(cfd, 503);

@@ -1,4 +1,3 @@
-#define _GNU_SOURCE /* accept4 */
 #include "server.h"
 
 #include <errno.h>
@@ -793,18 +792,15 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
     (void)events;
     server *s = data;
     for (int k = 0; k < ACCEPT_BUDGET; k++) {
-        struct sockaddr_storage sa;
-        socklen_t len = sizeof sa;
-        int cfd = accept4(fd, (struct sockaddr *)&sa, &len, SOCK_NONBLOCK | SOCK_CLOEXEC);
+        char peer[80], addr[80];
+        int cfd = conn_accept(fd, peer, sizeof peer);
         if (cfd < 0) {
-            if (errno == EMFILE || errno == ENFILE)
-                log_warn("accept: %s; raise the file limit (ulimit -n)", strerror(errno));
-            else if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
-                log_warn("accept: %s", strerror(errno));
+            if (cfd == -EMFILE || cfd == -ENFILE)
+                log_warn("accept: %s; raise the file limit (ulimit -n)", strerror(-cfd));
+            else if (cfd != -EAGAIN)
+                log_warn("accept: %s", strerror(-cfd));
             return;
         }
-        char peer[80], addr[80];
-        conn_peer_name(&sa, len, peer, sizeof peer);
         ratelimit_address(peer, addr, sizeof addr);
         if (s->nclients >= s->cfg.max_clients || cfd >= s->max_fd) {
             log_warn("%s refused: server full (%u clients)", peer, s->nclients);

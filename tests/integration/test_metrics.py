@@ -42,21 +42,27 @@ def metrics_port(srv):
     return int(m.group(1))
 
 
-def http(port, data, timeout=30):
-    """Sends data on a new connection and reads until the server closes it;
-    returns (status, headers, body). Every answer closes its connection."""
-    s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
-    s.sendall(data)
+def drain(s):
+    """Everything s receives until the server closes (or resets) it."""
     buf = b""
     while True:
         try:
-            d = s.recv(65536)
+            d = s.recv(4096)
         except ConnectionResetError:
             break
         if not d:
             break
         buf += d
     s.close()
+    return buf
+
+
+def http(port, data, timeout=30):
+    """Sends data on a new connection and reads until the server closes it;
+    returns (status, headers, body). Every answer closes its connection."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+    s.sendall(data)
+    buf = drain(s)
     head, sep, body = buf.partition(b"\r\n\r\n")
     assert sep, buf[:200]
     lines = head.decode().split("\r\n")
@@ -261,21 +267,6 @@ def test_figures_follow_the_game():
     assert srv.logtext().count("stats: clients=") >= 2
     assert srv.stop() == 0
     assert "stopped: 8 connections served" in srv.logtext(), srv.logtext()[-500:]
-
-
-def drain(s):
-    """Everything s receives until the server closes (or resets) it."""
-    buf = b""
-    while True:
-        try:
-            d = s.recv(4096)
-        except ConnectionResetError:
-            break
-        if not d:
-            break
-        buf += d
-    s.close()
-    return buf
 
 
 def test_slow_peers_and_bad_requests_leave_the_game_alone():
