@@ -67,18 +67,24 @@
 /* A move is limited to max speed x elapsed time; elapsed is capped so that a
  * client silent for a minute cannot jump a minute's worth of distance. */
 #define SRV_MAX_SPEED_DEFAULT 5.0f /* m/s: a brisk run */
-#define SRV_MOVE_MAX_DT 0.25f      /* s */
+#define SRV_MOVE_MAX_DT_MS 250
+#define SRV_MOVE_MAX_DT (SRV_MOVE_MAX_DT_MS / 1000.0f) /* s */
 /* Fastest --max-speed, m/s: a move covers at most this x SRV_MOVE_MAX_DT,
  * which must stay within the movement code's range (MOVE_MAX_COORD). */
-#define SRV_MAX_SPEED_LIMIT 10000.0f
+#define SRV_MAX_SPEED_LIMIT_M 10000
+#define SRV_MAX_SPEED_LIMIT ((float)SRV_MAX_SPEED_LIMIT_M)
 /* World: 1 km x 1 km, 256 m tall, floor at y = 0. --world-size may go up to
  * twice MOVE_MAX_COORD: the world is centred on 0, and the movement code
  * refuses positions past MOVE_MAX_COORD (an avatar there could never move
  * again). */
-#define SRV_WORLD_SIZE_DEFAULT 1000.0f
+/* (Whole metres in the _M twins: clang's static asserts take no floats.) */
+#define SRV_WORLD_SIZE_DEFAULT_M 1000
+#define SRV_WORLD_SIZE_DEFAULT ((float)SRV_WORLD_SIZE_DEFAULT_M)
 #define SRV_WORLD_SIZE_MIN 10.0f
-#define SRV_WORLD_SIZE_MAX (2.0f * MOVE_MAX_COORD)
-#define SRV_WORLD_HEIGHT 256.0f
+#define SRV_WORLD_SIZE_MAX_M (2 * MOVE_MAX_COORD_M)
+#define SRV_WORLD_SIZE_MAX ((float)SRV_WORLD_SIZE_MAX_M)
+#define SRV_WORLD_HEIGHT_M 256
+#define SRV_WORLD_HEIGHT ((float)SRV_WORLD_HEIGHT_M)
 #define SRV_AOI_RADIUS_DEFAULT 64.0f
 #define SRV_AOI_RADIUS_MAX 1000.0f
 #define SRV_SPAWN_RADIUS_DEFAULT 8.0f
@@ -106,7 +112,8 @@
  * across, and a placement 1,000 times a desk's size or one that covers the
  * default world is a mistake or an attack. Checked at upload, placement
  * and restore (scene_check_fit). */
-#define SRV_OBJECT_SIZE_MAX 512.0f
+#define SRV_OBJECT_SIZE_MAX_M 512
+#define SRV_OBJECT_SIZE_MAX ((float)SRV_OBJECT_SIZE_MAX_M)
 
 /* Objects have an area of interest like avatars (objects.c): a client is
  * told of the objects whose bounds come within aoi_radius + STEP of where
@@ -167,14 +174,14 @@ _Static_assert(SRV_MAX_CLIENTS_LIMIT <= 65535, "avatar ids keep the slot in 16 b
 _Static_assert(SRV_OUTBUF_SOFT < SRV_OUTBUF_HARD, "soft below hard");
 _Static_assert(SRV_OUTBUF_HARD >= 4u * PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES), "a tick must fit");
 _Static_assert(SRV_INBUF_INITIAL <= SRV_INBUF_CAP_PREJOIN, "initial within prejoin cap");
-_Static_assert(SRV_WORLD_SIZE_DEFAULT <= SRV_WORLD_SIZE_MAX, "the default world fits the movement range");
-_Static_assert(SRV_WORLD_HEIGHT <= MOVE_MAX_COORD, "the world's top fits the movement range");
-_Static_assert(SRV_MAX_SPEED_LIMIT * SRV_MOVE_MAX_DT <= MOVE_MAX_COORD, "one move fits the movement range");
-_Static_assert(SRV_MOVE_MAX_DT <= MOVE_MAX_DT && 1.0f / SRV_TICK_HZ_MIN <= MOVE_MAX_DT, "ticks fit the movement code");
+_Static_assert(SRV_WORLD_SIZE_DEFAULT_M <= SRV_WORLD_SIZE_MAX_M, "the default world fits the movement range");
+_Static_assert(SRV_WORLD_HEIGHT_M <= MOVE_MAX_COORD_M, "the world's top fits the movement range");
+_Static_assert(SRV_MAX_SPEED_LIMIT_M * SRV_MOVE_MAX_DT_MS <= MOVE_MAX_COORD_M * 1000, "one move fits the movement range");
+_Static_assert(SRV_MOVE_MAX_DT_MS <= MOVE_MAX_DT_MS && 1000 / SRV_TICK_HZ_MIN <= MOVE_MAX_DT_MS, "ticks fit the movement code");
 _Static_assert(SRV_MAX_UPLOAD_DEFAULT <= SRV_MAX_UPLOAD_LIMIT, "the default upload fits the budget");
 _Static_assert(SRV_UPLOAD_BUDGET <= IMPORT_MAX_BYTES, "an upload the server takes, the importer reads");
 _Static_assert(SRV_MAX_TRIANGLES_DEFAULT <= SRV_MAX_TRIANGLES_LIMIT, "default triangles within the importer's");
-_Static_assert(SRV_OBJECT_SIZE_MAX <= SRV_WORLD_SIZE_DEFAULT, "an object fits the default world");
+_Static_assert(SRV_OBJECT_SIZE_MAX_M <= SRV_WORLD_SIZE_DEFAULT_M, "an object fits the default world");
 _Static_assert(SRV_OBJECT_VIEW_BUDGET + PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX) < SRV_OUTBUF_SOFT,
                "streaming objects never reaches the soft output limit");
 

@@ -77,9 +77,11 @@
 #define MOVE_SKIN 0.001
 /* Largest |coordinate| of a position or displacement, in metres: four times
  * the default 1 km world, and where float spacing is still below 0.5 mm. */
-#define MOVE_MAX_COORD 4096.0f
+#define MOVE_MAX_COORD_M 4096 /* the same, a whole number for static asserts */
+#define MOVE_MAX_COORD ((float)MOVE_MAX_COORD_M)
 /* Longest tick, in seconds: the server caps elapsed time at 0.25 s. */
-#define MOVE_MAX_DT 1.0f
+#define MOVE_MAX_DT_MS 1000
+#define MOVE_MAX_DT (MOVE_MAX_DT_MS / 1000.0f)
 /* Fastest fall, m/s: a human body's terminal velocity in air. It also bounds
  * the swept volume, and so the broadphase query, of a long fall. */
 #define MOVE_MAX_FALL_SPEED 55.0f
