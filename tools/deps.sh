@@ -8,13 +8,15 @@
 # --bench also installs what only the benchmarks compare against: OpenVDB
 # (libopenvdb-dev, with TBB) for bench-voxel; and libFuzzer
 # (libclang-rt-14-dev), which fuzz-long links its targets with.
+# --coverage installs gcovr, which tools/coverage.sh reads gcc's counts with.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
           libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev libhttp-parser-dev chromium)
 for arg in "$@"; do
   case "$arg" in
     --bench) packages+=(libopenvdb-dev libclang-rt-14-dev) ;;
-    *) echo "usage: bash tools/deps.sh [--bench]" >&2; exit 2 ;;
+    --coverage) packages+=(gcovr) ;;
+    *) echo "usage: bash tools/deps.sh [--bench] [--coverage]" >&2; exit 2 ;;
   esac
 done
 missing=()
