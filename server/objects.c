@@ -210,7 +210,8 @@ void objects__view(server *s, client *c, int force)
             }
         }
     }
-    qsort(s->picks, npicks, sizeof *s->picks, pick_nearer);
+    if (npicks > 1) /* picks may still be NULL */
+        qsort(s->picks, npicks, sizeof *s->picks, pick_nearer);
     uint32_t sent = 0;
     while (sent < npicks && conn_out_pending(&c->c) < SRV_OBJECT_VIEW_BUDGET) {
         const scene_object *o = scene_at_slot(s->scene, s->picks[sent++].slot);
