@@ -21,17 +21,10 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "integration"))
+from bench_sessions import rss_mib  # noqa: E402
 from tiles import Walker, pump_until, write_world  # noqa: E402
 
 RADIUS = 64.0
-
-
-def rss_mb(pid):
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    return 0.0
 
 
 def measure(bindir, tmp, n, joins):
@@ -60,7 +53,7 @@ def measure(bindir, tmp, n, joins):
             counts.append(len(w.known))
             cut += w.closed or not whole
             w.close()
-        rss = rss_mb(proc.pid)
+        rss = rss_mib(proc.pid)
     finally:
         proc.terminate()
         proc.wait(30)
