@@ -58,6 +58,8 @@ def test_clients_know_the_objects_near_them_as_they_walk():
     assert srv.stop() == 0
     log = srv.logtext()
     assert "backlog" not in log and "not reading" not in log, log[-2000:]
+    # counted over the whole run, across stats intervals (every 10 s)
+    assert f"stopped: {CLIENTS} connections served" in log, log[-2000:]
 
 
 if __name__ == "__main__":
