@@ -104,13 +104,11 @@ int import_pipe_answer_encode(int status, const char *message, const import_mesh
     return 0;
 }
 
-/* The helper's message into err, one line of printable ASCII. */
+/* The helper's message into err (errlen >= 1), one line of printable ASCII. */
 static void copy_message(const uint8_t *p, size_t n, char *err, size_t errlen)
 {
     size_t k;
 
-    if (!errlen)
-        return;
     for (k = 0; k < n && k + 1 < errlen; k++)
         err[k] = p[k] >= 0x20 && p[k] <= 0x7e ? (char)p[k] : '?';
     err[k] = 0;
