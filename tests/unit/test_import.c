@@ -1,10 +1,12 @@
 /*
  * The model importer against the shared test models and hostile input.
  *
- * Usage: test_import MODELS_DIR (the shared/models folder). Triangle counts
- * and bounding boxes are compared with the table in MODELS_DIR/SOURCES.md,
- * read at run time, for every file in openings/, formats/, classic/ and
- * scenes/; every such file must be in the table.
+ * Usage: test_import MODELS_DIR [--only PATTERN]... [--skip PATTERN]...
+ * (MODELS_DIR: the shared/models folder). Triangle counts and bounding
+ * boxes are compared with the table in MODELS_DIR/SOURCES.md, read at run
+ * time, for every file in openings/, formats/, classic/ and scenes/, each
+ * a test named after the file (tests/models.h); the table and the folders
+ * must list the same files.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -12,7 +14,6 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
-#include <dirent.h>
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -23,6 +24,7 @@
 
 #include <assimp/cimport.h>
 
+#include "../models.h"
 #include "alloc.h"
 #include "scene/import.h"
 
@@ -266,62 +268,83 @@ static const model_row *find_row(const char *file)
     return NULL;
 }
 
-static const char *const folders[] = {"openings", "formats", "classic", "scenes"};
-
 /* ---- tests -------------------------------------------------------------- */
 
-static void test_models_match_sources(void **state)
+/* One model (state: its path under MODELS_DIR, from the folder listing):
+ * its SOURCES.md row's triangle count and box, with its extension as the
+ * format hint and with none; then the file cut short. */
+static void test_model(void **state)
 {
-    (void)state;
+    const char *file = *state, *hints[2];
+    const model_row *r;
+    buf b;
+
     load_table();
-    for (int i = 0; i < nrows; i++) {
-        const model_row *r = &rows[i];
-        buf b = read_model(r->file);
-        const char *hints[2] = {strrchr(r->file, '.') + 1, NULL};
-        for (int h = 0; h < 2; h++) {
-            import_mesh m;
-            char err[256];
-            double t0 = now(), t1;
-            int rc = run(b, hints[h], NULL, &m, err, sizeof err);
-            t1 = now();
-            if (rc != 0)
-                fail_msg("%s (hint %s): %d %s", r->file, hints[h] ? hints[h] : "NULL", rc, err);
-            if (m.ntris != r->tris)
-                fail_msg("%s: %u triangles, SOURCES.md says %u", r->file, m.ntris, r->tris);
-            for (int k = 0; k < 3; k++)
-                if (!close_to(m.min[k], r->min[k]) || !close_to(m.max[k], r->max[k]))
-                    fail_msg("%s: box axis %d [%g, %g], SOURCES.md says [%g, %g]", r->file, k,
-                             (double)m.min[k], (double)m.max[k], r->min[k], r->max[k]);
-            if (h == 0)
-                print_message("%-45s %7u triangles %8.1f ms\n", r->file, m.ntris, (t1 - t0) * 1e3);
-            import_mesh_free(&m);
-        }
-        free(b.p);
+    r = find_row(file);
+    if (!r)
+        fail_msg("%s is not in SOURCES.md's table", file);
+    b = read_model(file);
+    hints[0] = strrchr(file, '.') + 1;
+    hints[1] = NULL;
+    for (int h = 0; h < 2; h++) {
+        import_mesh m;
+        char err[256];
+        double t0 = now(), t1;
+        int rc = run(b, hints[h], NULL, &m, err, sizeof err);
+        t1 = now();
+        if (rc != 0)
+            fail_msg("%s (hint %s): %d %s", file, hints[h] ? hints[h] : "NULL", rc, err);
+        if (m.ntris != r->tris)
+            fail_msg("%s: %u triangles, SOURCES.md says %u", file, m.ntris, r->tris);
+        for (int k = 0; k < 3; k++)
+            if (!close_to(m.min[k], r->min[k]) || !close_to(m.max[k], r->max[k]))
+                fail_msg("%s: box axis %d [%g, %g], SOURCES.md says [%g, %g]", file, k, (double)m.min[k],
+                         (double)m.max[k], r->min[k], r->max[k]);
+        if (h == 0)
+            print_message("%-45s %7u triangles %8.1f ms\n", file, m.ntris, (t1 - t0) * 1e3);
+        import_mesh_free(&m);
     }
+    /* Cut short at several lengths, with and without the hint: an error
+     * or a mesh. The big scenes are cut at half their length and later only. */
+    {
+        size_t cuts[] = {1, 2, 10, 20, 83, 84, 100, 134, b.n / 4, b.n / 2, b.n - b.n / 4, b.n - 1};
+        int big = strncmp(file, "scenes/", 7) == 0;
+        for (size_t c = big ? 9 : 0; c < sizeof cuts / sizeof cuts[0]; c++)
+            for (int h = 0; h < 2; h++) {
+                import_mesh m;
+                char err[256];
+                if (cuts[c] == 0 || cuts[c] >= b.n)
+                    continue;
+                if (run((buf){b.p, cuts[c]}, hints[h], NULL, &m, err, sizeof err) == 0)
+                    import_mesh_free(&m);
+            }
+    }
+    free(b.p);
 }
 
-/* A model added to the folders without a row would go untested. */
+/* The table and the folders agree: a model without a row would go
+ * untested, a row without its file would test nothing. */
 static void test_every_model_is_listed(void **state)
 {
+    size_t n;
+    char **files = models_list(models_dir, &n);
+
     (void)state;
+    assert_non_null(files);
     load_table();
-    for (size_t f = 0; f < sizeof folders / sizeof folders[0]; f++) {
-        char path[4096];
-        DIR *d;
-        struct dirent *e;
-        snprintf(path, sizeof path, "%s/%s", models_dir, folders[f]);
-        d = opendir(path);
-        assert_non_null(d);
-        while ((e = readdir(d)) != NULL) {
-            char rel[512];
-            if (e->d_name[0] == '.')
-                continue;
-            snprintf(rel, sizeof rel, "%s/%s", folders[f], e->d_name);
-            if (!find_row(rel))
-                fail_msg("%s is not in SOURCES.md's table", rel);
-        }
-        closedir(d);
+    for (size_t i = 0; i < n; i++)
+        if (!find_row(files[i]))
+            fail_msg("%s is not in SOURCES.md's table", files[i]);
+    for (int i = 0; i < nrows; i++) {
+        size_t k = 0;
+        while (k < n && strcmp(files[k], rows[i].file) != 0)
+            k++;
+        if (k == n)
+            fail_msg("SOURCES.md lists %s, which is not in %s", rows[i].file, models_dir);
     }
+    for (size_t i = 0; i < n; i++)
+        free(files[i]);
+    free(files);
 }
 
 static void test_up_axis_and_scale(void **state)
@@ -834,30 +857,6 @@ static void test_options_and_triangle_limit(void **state)
     free(b.p);
 }
 
-/* Every model cut short at several lengths: an error or a valid mesh. */
-static void test_truncated(void **state)
-{
-    (void)state;
-    load_table();
-    for (int i = 0; i < nrows; i++) {
-        buf b = read_model(rows[i].file);
-        const char *ext = strrchr(rows[i].file, '.') + 1;
-        size_t cuts[] = {1, 2, 10, 20, 83, 84, 100, 134, b.n / 4, b.n / 2, b.n - b.n / 4, b.n - 1};
-        int big = strncmp(rows[i].file, "scenes/", 7) == 0;
-        for (size_t c = big ? 9 : 0; c < sizeof cuts / sizeof cuts[0]; c++) {
-            for (int h = 0; h < 2; h++) {
-                import_mesh m;
-                char err[256];
-                if (cuts[c] == 0 || cuts[c] >= b.n)
-                    continue;
-                if (run((buf){b.p, cuts[c]}, h ? ext : NULL, NULL, &m, err, sizeof err) == 0)
-                    import_mesh_free(&m);
-            }
-        }
-        free(b.p);
-    }
-}
-
 /* Assimp's logger stays off: nothing on stderr, good input or bad. */
 static void test_stderr_quiet(void **state)
 {
@@ -937,8 +936,7 @@ static void test_formats_and_free(void **state)
 
 int main(int argc, char **argv)
 {
-    const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_models_match_sources),
+    const struct CMUnitTest fixed[] = {
         cmocka_unit_test(test_every_model_is_listed),
         cmocka_unit_test(test_up_axis_and_scale),
         cmocka_unit_test(test_node_transforms),
@@ -947,16 +945,31 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_glb_json_types),
         cmocka_unit_test(test_work_limits),
         cmocka_unit_test(test_options_and_triangle_limit),
-        cmocka_unit_test(test_truncated),
         cmocka_unit_test(test_stderr_quiet),
         cmocka_unit_test(test_alloc_failure),
         cmocka_unit_test(test_formats_and_free),
     };
+    models_select sel;
+    size_t n, nmodels;
+    char **models;
+    struct CMUnitTest *tests;
+    int failed;
 
-    if (argc != 2) {
-        fprintf(stderr, "usage: %s MODELS_DIR (shared/models)\n", argv[0]);
+    models_args(argc, argv, "The model importer against the shared models and hostile input.", &models_dir, &sel);
+    models = models_list(models_dir, &nmodels);
+    if (!models)
         return 2;
-    }
-    models_dir = argv[1];
-    return cmocka_run_group_tests(tests, NULL, NULL);
+    n = sizeof fixed / sizeof fixed[0];
+    tests = calloc(n + nmodels, sizeof *tests);
+    if (!tests)
+        return 2;
+    memcpy(tests, fixed, sizeof fixed);
+    for (size_t i = 0; i < nmodels; i++)
+        tests[n + i] = (struct CMUnitTest){models[i], test_model, NULL, NULL, models[i]};
+    failed = models_run("test_import", tests, n + nmodels, &sel);
+    free(tests);
+    for (size_t i = 0; i < nmodels; i++)
+        free(models[i]);
+    free(models);
+    return failed;
 }

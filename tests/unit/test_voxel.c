@@ -10,8 +10,10 @@
  * tolerance (TOL_REL of the grid's extent, far above voxel.c's eps, far
  * below a cell).
  *
- * Usage: test_voxel [MODELS_DIR] (default: the shared models folder next to
- * the repository, set at build time).
+ * Usage: test_voxel [MODELS_DIR] [--only PATTERN]... [--skip PATTERN]...
+ * (MODELS_DIR defaults to the shared models folder next to the repository,
+ * set at build time). The real model's case is named after its file, so
+ * that ctest runs it as an entry of its own (tests/models.h).
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -25,6 +27,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../models.h"
 #include "alloc.h"
 #include "scene/import.h"
 #include "voxel.h"
@@ -835,12 +838,15 @@ static float *load_model(const char *rel, import_mesh *m)
     return m->tris;
 }
 
+/* The real model's test, named after its file (tests/models.h). */
+#define BUNNY "classic/stanford-bunny.obj"
+
 static void test_bunny(void **state)
 {
     (void)state;
     import_mesh m;
     voxel_grid g, h;
-    load_model("classic/stanford-bunny.obj", &m);
+    load_model(BUNNY, &m);
     assert_int_equal(m.ntris, 69451);
     assert_int_equal(voxel_grid_init(&g, 6, m.min, m.max), 0);
     assert_int_equal(voxel_mark(&g, m.tris, m.ntris), 0);
@@ -892,9 +898,10 @@ static void test_bunny(void **state)
 
 int main(int argc, char **argv)
 {
-    if (argc > 1)
-        models_dir = argv[1];
-    const struct CMUnitTest tests[] = {
+    models_select sel;
+    models_args(argc, argv, "The voxelizer against an independent reference, and on a real model.", &models_dir,
+                &sel);
+    struct CMUnitTest tests[] = {
         cmocka_unit_test(test_overlap_truth_table),
         cmocka_unit_test(test_triangle_on_cell_face),
         cmocka_unit_test(test_triangle_on_outer_faces),
@@ -910,7 +917,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_large_triangles_against_reference),
         cmocka_unit_test(test_one_call_equals_union),
         cmocka_unit_test(test_threads_equal_one_thread),
-        cmocka_unit_test(test_bunny),
+        {BUNNY, test_bunny, NULL, NULL, NULL},
     };
-    return cmocka_run_group_tests(tests, NULL, NULL);
+    return models_run("test_voxel", tests, sizeof tests / sizeof tests[0], &sel);
 }
