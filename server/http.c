@@ -48,6 +48,10 @@ static int fail(http_request *r, int status)
     return -1;
 }
 
+/* Adds n bytes to the string being built, keeping a byte for its NUL.
+ * The text has room for a whole head and a path (see its size), so the
+ * 431 here is a guard against a parser that hands over more than it
+ * read, not a limit a request can reach. */
 static int append(http_request *r, const char *at, size_t n)
 {
     if (memchr(at, 0, n))
@@ -61,25 +65,19 @@ static int append(http_request *r, const char *at, size_t n)
 
 static int is_blank(char c) { return c == ' ' || c == '\t'; }
 
-/* Ends the string being added to: a header value loses its surrounding
- * blanks (obsolete line folding can leave some), and every string gets
- * its NUL. */
-static int end_piece(http_request *r)
+/* Ends the string being added to: a header value loses its trailing
+ * blanks (http_parser drops the leading ones, also those of a folded
+ * line), and every string gets its NUL, in the byte append kept for it. */
+static void end_piece(http_request *r)
 {
     if (r->in == IN_VALUE) {
-        header *h = &r->headers[r->nheaders - 1];
+        const header *h = &r->headers[r->nheaders - 1];
         while (r->len > h->value && is_blank(r->text[r->len - 1]))
             r->len--;
-        while (h->value < r->len && is_blank(r->text[h->value]))
-            h->value++;
     }
-    if (r->in != IN_NONE) {
-        if (r->len == sizeof r->text)
-            return fail(r, 431);
+    if (r->in != IN_NONE)
         r->text[r->len++] = 0;
-    }
     r->in = IN_NONE;
-    return 0;
 }
 
 static int on_url(http_parser *p, const char *at, size_t n)
@@ -98,8 +96,7 @@ static int on_header_field(http_parser *p, const char *at, size_t n)
 {
     http_request *r = p->data;
     if (r->in != IN_FIELD) {
-        if (end_piece(r) < 0)
-            return -1;
+        end_piece(r);
         if (r->nheaders == HTTP_HEADERS_MAX)
             return fail(r, 431);
         r->headers[r->nheaders++] = (header){.name = (uint16_t)r->len, .value = NO_VALUE};
@@ -112,8 +109,7 @@ static int on_header_value(http_parser *p, const char *at, size_t n)
 {
     http_request *r = p->data;
     if (r->in != IN_VALUE) {
-        if (end_piece(r) < 0)
-            return -1;
+        end_piece(r);
         r->headers[r->nheaders - 1].value = (uint16_t)r->len;
         r->in = IN_VALUE;
     }
@@ -145,15 +141,15 @@ static int copy_path(http_request *r, int is_connect)
     r->in = IN_URL; /* for end_piece's NUL */
     if (append(r, path, len) < 0)
         return -1;
-    return end_piece(r);
+    end_piece(r);
+    return 0;
 }
 
 /* The head is all there: refuse what these endpoints do not serve. */
 static int on_headers_complete(http_parser *p)
 {
     http_request *r = p->data;
-    if (end_piece(r) < 0)
-        return -1;
+    end_piece(r);
     if (p->http_major != 1)
         return fail(r, 505);
     if (p->http_minor >= 1 && !http_request_header(r, "host"))

@@ -21,6 +21,11 @@
 #define LISTEN_BACKLOG 64
 /* How often deadlines are checked: a deadline is met within this. */
 #define SWEEP_MS 100u
+/* Kernel send buffer per connection: a metrics response (about 10 KiB)
+ * goes in one write; a larger one waits in the connection's own buffer,
+ * bounded by HTTP_BODY_MAX, rather than in up to 4 MiB of the kernel's
+ * per socket (tcp_wmem). */
+#define SOCKET_SNDBUF (64 * 1024)
 /* Room for a response head: a status line and five short headers. */
 #define HEAD_ROOM 512u
 
@@ -275,6 +280,8 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
             free(hc);
             continue;
         }
+        int sndbuf = SOCKET_SNDBUF;
+        setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
         hc->h = h;
         memcpy(hc->peer, peer, sizeof hc->peer);
         hc->deadline_ns = ev_now(loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;

@@ -16,8 +16,8 @@
  * Each input is fed three ways, whole, a byte at a time, and in chunks
  * whose sizes the input decides, and the results must agree (same_result):
  * one of http.h's, and for a complete request the same method, target,
- * path and Host, a target within HTTP_URL_MAX, and a response head that
- * fits.
+ * path and Host, a target within HTTP_URL_MAX, a Host without surrounding
+ * blanks, and a response head that fits.
  */
 #include <stdio.h>
 #include <string.h>
@@ -29,6 +29,7 @@
  * hostile ones. */
 static const char *const templates[] = {
     "Host: %n",
+    "Host: \t %n \t",
     "User-Agent: %n/%f",
     "Accept: */*",
     "Content-Length: 0",
@@ -55,7 +56,7 @@ static const char *const templates[] = {
     "GET http://%n/%n?%n=%f HTTP/1.0",
 };
 #define NTEMPLATES (sizeof templates / sizeof templates[0])
-#define GOOD 13
+#define GOOD 14
 
 /* Request line parts: the first GOOD_* of each are well-formed. */
 static const char *const methods[] = {"GET", "POST", "HEAD", "PUT", "DELETE", "OPTIONS", "PATCH", "CONNECT",
@@ -155,6 +156,8 @@ static int feed(const uint8_t *data, size_t size, size_t step, char kept[HTTP_HE
         FZ_CHECK(strlen(http_request_target(r)) <= HTTP_URL_MAX);
         FZ_CHECK(strlen(http_request_path(r)) <= strlen(http_request_target(r)));
         FZ_CHECK(http_response_head(head, sizeof head, 200, "text/plain", size, NULL) > 0);
+        if (host && *host) /* values come without surrounding blanks */
+            FZ_CHECK(!strchr(" \t", host[0]) && !strchr(" \t", host[strlen(host) - 1]));
         snprintf(kept, HTTP_HEAD_MAX, "%s %s %s %s", http_request_method(r), http_request_target(r),
                  http_request_path(r), host ? host : "-");
     }

@@ -68,6 +68,8 @@ static void test_get_is_kept(void **state)
                        "User-Agent: Prometheus/2.45.0\r\n"
                        "Accept:   text/plain  \t\r\n"
                        "X-Empty:\r\n"
+                       "X-Folded: first\r\n  second\r\n"
+                       "X-Folded-Empty:\r\n  only\r\n"
                        "x-twice: first\r\n"
                        "X-Twice: second\r\n"
                        "\r\n";
@@ -83,6 +85,10 @@ static void test_get_is_kept(void **state)
         assert_string_equal(http_request_header(r, "USER-AGENT"), "Prometheus/2.45.0");
         assert_string_equal(http_request_header(r, "Accept"), "text/plain");
         assert_string_equal(http_request_header(r, "x-empty"), "");
+        /* Obsolete line folding (RFC 9112 5.2): the continuation's blanks
+         * stay inside a value, and go at its start. */
+        assert_string_equal(http_request_header(r, "x-folded"), "first  second");
+        assert_string_equal(http_request_header(r, "x-folded-empty"), "only");
         assert_string_equal(http_request_header(r, "X-Twice"), "first");
         assert_null(http_request_header(r, "Cookie"));
         assert_null(http_request_header(r, "Hos"));
