@@ -7,6 +7,7 @@ no lock error; bad arguments and an existing file are refused."""
 import json
 import math
 import os
+import re
 import sqlite3
 import time
 from datetime import datetime
@@ -184,6 +185,23 @@ def test_refusals():
     assert "cannot write beside" in err, err
     rc, _, err = admin("--db", os.path.join(srv.tmp, "none.db"), "backup", os.path.join(srv.tmp, "y.db"), check=3)
     assert not os.path.exists(os.path.join(srv.tmp, "y.db"))
+    # Stopped part way (a trigger refuses the last old row, beyond what one
+    # transaction may take): what went stays gone, the message says so, and
+    # the next run finishes.
+    old_rows = add_old_log(srv.db)[0]
+    db = sqlite3.connect(srv.db)
+    db.execute(f"CREATE TRIGGER stop BEFORE DELETE ON collisions WHEN old.id = {old_rows} "
+               "BEGIN SELECT RAISE(ABORT, 'refused by a test'); END")
+    db.commit()
+    rc, _, err = admin("--db", srv.db, "retention", "--older-than", "30", check=3)
+    m = re.search(r"retention stopped: refused by a test; (\d+) collisions were removed before \(run it again", err)
+    assert m and 0 < int(m.group(1)) < old_rows, err
+    db.execute("DROP TRIGGER stop")
+    db.commit()
+    db.close()
+    _, out, _ = admin("--db", srv.db, "--json", "retention", "--older-than", "30")
+    assert json.loads(out)[0]["collisions"] == old_rows - int(m.group(1)), out
+    assert scalar(srv.db, "SELECT count(*) FROM collisions") == 0
     _, out, _ = admin("backup", "--help")
     assert out.startswith("usage: cvre-admin backup FILE") and "WAL" in out
     _, out, _ = admin("help", "retention")

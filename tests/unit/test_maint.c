@@ -490,6 +490,40 @@ static void test_backup_is_one_snapshot(void **state)
     sqlite3_close(w);
 }
 
+/* A damaged database: the page copy succeeds but fails its check, the
+ * compacting copy fails while reading; neither leaves a file behind. */
+static void test_backup_of_a_damaged_database(void **state)
+{
+    (void)state;
+    log_rows(3000, BASE, 500);
+    sqlite3 *s = raw();
+    assert_int_equal(sqlite3_exec(s, "PRAGMA wal_checkpoint(TRUNCATE)", NULL, NULL, NULL), SQLITE_OK);
+    int64_t page = testdb_scalar(s, "PRAGMA page_size"), pages = testdb_scalar(s, "PRAGMA page_count");
+    sqlite3_close(s);
+    /* Scribble over the middle of the file: the collisions' b-tree pages. */
+    FILE *f = fopen(testdb_path, "r+b");
+    assert_non_null(f);
+    char junk[512];
+    memset(junk, 0x5a, sizeof junk);
+    for (int64_t p = pages / 3; p < pages / 3 + 8; p++) {
+        assert_int_equal(fseek(f, (long)(p * page), SEEK_SET), 0);
+        assert_int_equal(fwrite(junk, 1, sizeof junk, f), sizeof junk);
+    }
+    fclose(f);
+    db *d = open_readonly();
+    char a[128], b[128];
+    snprintf(a, sizeof a, "%s/pages.db", dir);
+    snprintf(b, sizeof b, "%s/vacuum.db", dir);
+    db_backup_stats st;
+    assert_int_equal(db_backup(d, a, 0, &st), -1);
+    assert_non_null(strstr(db_error(d), "integrity_check"));
+    assert_int_equal(db_backup(d, b, 1, &st), -1);
+    assert_non_null(strstr(db_error(d), "VACUUM INTO"));
+    assert_int_equal(access(a, F_OK), -1);
+    assert_int_equal(access(b, F_OK), -1);
+    db_close(d);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -500,6 +534,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_retention_beside_the_writer, testdb_setup, testdb_teardown),
         cmocka_unit_test_setup_teardown(test_backup_copies_and_checks, backup_setup, backup_teardown),
         cmocka_unit_test_setup_teardown(test_backup_is_one_snapshot, backup_setup, backup_teardown),
+        cmocka_unit_test_setup_teardown(test_backup_of_a_damaged_database, backup_setup, backup_teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
