@@ -282,6 +282,16 @@ static void test_retention_refusals(void **state)
     bad = (db_retention_config){.txn_ms = 0, .pause_ms = 0, .units_max = 100};
     assert_int_equal(db_retention(d, BASE + 100, &bad, &st), -1);
     assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM collisions"), 10);
+    /* Another connection holding the write lock past the busy timeout:
+     * an error that says so, nothing removed. */
+    sqlite3 *w = raw();
+    assert_int_equal(sqlite3_exec(w, "BEGIN IMMEDIATE", NULL, NULL, NULL), SQLITE_OK);
+    db_set_busy_timeout(d, 20);
+    assert_int_equal(db_retention(d, BASE + 100, NULL, &st), -1);
+    assert_true(db_busy(d));
+    assert_int_equal(st.transactions, 0);
+    assert_int_equal(sqlite3_exec(w, "ROLLBACK", NULL, NULL, NULL), SQLITE_OK);
+    sqlite3_close(w);
     /* Before any bucket: nothing to remove. */
     assert_int_equal(db_retention(d, BASE - 3600, NULL, &st), 0);
     assert_int_equal(st.collisions, 0);
