@@ -184,6 +184,23 @@ def split_frames(buf):
     return out, buf
 
 
+def listening_port(proc, timeout=60):
+    """The port in the first line of a starting cvre-server's stdout
+    ("listening on 127.0.0.1:PORT"), waited for at most timeout seconds (a
+    big world loads first). The line is read from the descriptor, not through
+    proc.stdout's buffer, which stays empty for later reads."""
+    fd, line, end = proc.stdout.fileno(), b"", time.time() + timeout
+    while not line.endswith(b"\n"):
+        left = end - time.time()
+        assert left > 0 and select.select([fd], [], [], left)[0], f"no listening line within {timeout}s"
+        c = os.read(fd, 1)
+        assert c, f"the server exited before listening (exit {proc.wait(timeout)}), first line {line!r}"
+        line += c
+    line = line.decode()
+    assert line.startswith("listening on 127.0.0.1:"), f"unexpected first line {line!r}"
+    return int(line.rsplit(":", 1)[1])
+
+
 class Server:
     """The real cvre-server on 127.0.0.1 and a free port, with a fresh
     database unless one is given."""
@@ -198,9 +215,7 @@ class Server:
             [os.path.join(bindir, "cvre-server"), "--port", "0", "--db", self.db, *extra],
             stdout=subprocess.PIPE, stderr=self.log, text=True)
         atexit.register(self.proc.kill)  # a failed test must not leave it running
-        line = self.proc.stdout.readline()
-        assert line.startswith("listening on 127.0.0.1:"), f"unexpected first line {line!r}"
-        self.port = int(line.rsplit(":", 1)[1])
+        self.port = listening_port(self.proc)
 
     def alive(self):
         return self.proc.poll() is None
@@ -273,6 +288,12 @@ class Raw:
     def expect(self, kind, timeout=5, where=None):
         """Consumes messages in order until one of this kind (for which
         where(msg) holds, if given) arrives; earlier ones are dropped."""
+        return self.collect(kind, timeout, where)[-1]
+
+    def collect(self, kind, timeout=5, where=None):
+        """As expect(), but returns every message consumed, the one
+        expected last: a barrier (the pong to a ping, the snapshot that acks
+        a move) after which everything sent before it has been read."""
         end = time.time() + timeout
         seen = []
         while True:
@@ -280,7 +301,7 @@ class Raw:
                 m = self.queue.pop(0)
                 seen.append(m)
                 if m["type"] == kind and (where is None or where(m)):
-                    return m
+                    return seen
             if time.time() >= end or self.closed:
                 raise AssertionError(f"no {kind} within {timeout}s; saw {seen[-5:]}")
             self.queue += self.poll(min(0.2, end - time.time()), first=True)
@@ -298,23 +319,54 @@ class Raw:
 
 
 class Client:
-    """A real cvre-client process in script mode; its stdout is JSON lines."""
+    """A real cvre-client process in script mode; its stdout is JSON lines.
+    With script None its standard input stays open: the test gives it
+    commands with send() as it goes, and waits for their effects with
+    until()."""
 
     def __init__(self, bindir, port, name, script, *extra):
         self.proc = subprocess.Popen(
             [os.path.join(bindir, "cvre-client"), "--port", str(port), "--name", name, *extra],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         atexit.register(self.proc.kill)
-        self.proc.stdin.write(script)
-        self.proc.stdin.close()
-        self.proc.stdin = None  # so that communicate() does not touch it
         self.events = []
+        self.partial = b""  # stdout read by until(), short of a newline
+        if script is not None:
+            self.send(script)
+            self.proc.stdin.close()
+            self.proc.stdin = None  # so that communicate() does not touch it
+
+    def send(self, text):
+        self.proc.stdin.write(text)
+        self.proc.stdin.flush()
+
+    def take(self, data):
+        lines = (self.partial + data).split(b"\n")
+        self.partial = lines.pop()
+        self.events += [json.loads(line) for line in lines]  # every line must be JSON
+
+    def until(self, what, pred, timeout=30):
+        """The first event (of all so far) for which pred holds, reading more
+        as they come for at most timeout seconds; fails naming what."""
+        fd, end, at = self.proc.stdout.fileno(), time.time() + timeout, 0
+        while True:
+            for e in self.events[at:]:
+                if pred(e):
+                    return e
+            at = len(self.events)
+            left = end - time.time()
+            data = os.read(fd, 65536) if left > 0 and select.select([fd], [], [], left)[0] else b""
+            assert data, f"{what}: not within {timeout}s (or the client ended); last events {self.events[-3:]}"
+            self.take(data)
 
     def wait(self, timeout=30):
+        if self.proc.stdin:
+            self.proc.stdin.close()
+            self.proc.stdin = None
         out, err = self.proc.communicate(timeout=timeout)
         self.stderr = err
-        for line in out.splitlines():
-            self.events.append(json.loads(line))  # every line must be JSON
+        self.take(out.encode())
+        assert self.partial == b"", f"a last line without its newline: {self.partial!r}"
         return self.proc.returncode
 
     def of(self, kind):

@@ -139,6 +139,40 @@ def test_upload_quotas():
     assert srv.stop() == 0
 
 
+def until_taken(port, first, want, codes, timeout=20):
+    """A connection that sends `first` and gets a `want` message, tried
+    again every 0.2 s while the server refuses it with an error whose code
+    is in codes (or closes it unread: a refused connection's reset)."""
+    end = time.time() + timeout
+    while True:
+        c = Raw(port)
+        msgs = []
+        try:
+            c.send(first)
+        except (BrokenPipeError, ConnectionResetError):
+            c.closed = True
+        while not c.closed and not any(m["type"] == want for m in msgs):
+            assert time.time() < end, f"no {want} within {timeout}s; saw {msgs}"
+            msgs += c.poll(0.2, first=True)
+        if not c.closed:
+            c.queue = msgs[[m["type"] for m in msgs].index(want) + 1:]
+            return c
+        assert all(m["type"] == "welcome" or m["type"] == "error" and m["code"] in codes for m in msgs), msgs
+        assert time.time() < end, f"still refused after {timeout}s: {msgs}"
+        time.sleep(0.2)
+
+
+def admitted(port):
+    """A connection the server answers, once it no longer counts closed ones
+    from this address against --max-per-address."""
+    return until_taken(port, hello(), "welcome", (E["SERVER_FULL"],))
+
+
+def retried(port, name, password, *codes):
+    """A join that succeeds once a refusal with one of codes is over."""
+    return until_taken(port, hello() + join(name, password=password), "join_ok", codes)
+
+
 def test_required_mode_and_rate_limit():
     srv = Server(A.bin, "--auth", "required")
     w = Raw(srv.port)
@@ -153,9 +187,7 @@ def test_required_mode_and_rate_limit():
     # six past a burst of five (less what refilled since the witness's)
     assert set(codes) == {E["AUTH"], E["RATE_LIMITED"]} and codes.count(E["AUTH"]) >= 4, codes
     still_moving(w, 1)
-    time.sleep(2.2)  # a token comes back
-    ok = Raw(srv.port)
-    ok.handshake("ann", "pw-ann")
+    retried(srv.port, "ann", "pw-ann", E["RATE_LIMITED"])  # until a token comes back
     still_moving(w, 2)
     assert srv.stop() == 0
     assert "guess" not in srv.logtext()
@@ -175,21 +207,17 @@ def test_abuse_limits():
                      [m for m in c.wait_closed() if m["type"] == "error"][0]["code"])
         c.close()
     assert codes == ["join_ok"] * 3 + [E["RATE_LIMITED"]], codes
-    # connections: the witness and three more, then the fifth is refused
-    time.sleep(1.5)
-    more = [Raw(srv.port) for _ in range(3)]
-    for c in more:
-        c.send(hello())
-        c.expect("welcome")
+    # connections: the witness and three more (taken once the server has
+    # seen the joins' connections close), then the fifth is refused
+    more = [admitted(srv.port) for _ in range(3)]
     extra = Raw(srv.port)
     msgs = extra.wait_closed()
     assert msgs and msgs[0]["code"] == E["SERVER_FULL"] and "your address" in msgs[0]["message"], msgs
     for c in more:
         c.close()
-    # moves: 40 a second are taken, a flood is cut off
-    time.sleep(1.0)
-    f = Raw(srv.port)
-    f.handshake("flood")
+    # moves: 40 a second are taken, a flood is cut off (once the four are
+    # seen closed and a join token is back)
+    f = retried(srv.port, "flood", None, E["SERVER_FULL"], E["RATE_LIMITED"])
     f.send(b"".join(move(seq, (1, 0, 1)) for seq in range(1, 2001)))
     errors = [m for m in f.wait_closed() if m["type"] == "error"]
     assert errors and errors[0]["code"] == E["RATE_LIMITED"] and "flooding" in errors[0]["message"], errors

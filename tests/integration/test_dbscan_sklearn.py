@@ -31,9 +31,12 @@ except ImportError:
     raise
 
 import argparse
+import atexit
 import struct
 import subprocess
 import tempfile
+
+from harness import listening_port
 
 MAGIC = b"CVREPTS1"
 RESULTS = []
@@ -192,7 +195,8 @@ def real_log(build):
     srv = subprocess.Popen([os.path.join(build, "cvre-server"), "--port", "0", "--db", db, "--world",
                             os.path.join(here, "..", "..", "server", "worlds", "demo.world"), "--spawn-radius",
                             "25", "--log-level", "warn", "--max-per-address", "0", "--joins-per-second", "0"], stdout=subprocess.PIPE, text=True)
-    port = srv.stdout.readline().rsplit(":", 1)[1].strip()
+    atexit.register(srv.kill)  # a failed run must not leave it running
+    port = str(listening_port(srv))
     subprocess.run([os.path.join(build, "cvre-client"), "--port", port, "--bots", "100", "--rate", "20",
                     "--duration", "4"], stdout=subprocess.DEVNULL, timeout=60)
     srv.send_signal(signal.SIGTERM)

@@ -27,24 +27,30 @@ class Witness(threading.Thread):
         self.sent, self.pongs = 0, []
         self.objects = []
 
-    def run(self):
-        while not self.stopping.is_set():
-            self.sent += 1
-            self.c.send(move(self.sent, (0.01 * (self.sent % 100), 0, 0)) + ping(self.sent))
-            for m in self.c.poll(0.05):
-                if m["type"] == "pong":
-                    self.pongs.append(time.time())
-                elif m["type"] == "object":
-                    self.objects.append(m)
-
-    def finish(self):
-        self.stopping.set()
-        self.join(10)
-        for m in self.c.poll(1.0):  # the last pongs and objects in flight
+    def take(self, msgs):
+        for m in msgs:
             if m["type"] == "pong":
                 self.pongs.append(time.time())
             elif m["type"] == "object":
                 self.objects.append(m)
+
+    def run(self):
+        while not self.stopping.is_set():
+            self.sent += 1
+            self.c.send(move(self.sent, (0.01 * (self.sent % 100), 0, 0)) + ping(self.sent))
+            self.take(self.c.poll(0.05))
+
+    def finish(self, object_id):
+        """Stops; waits for the last pongs and for object_id's info (it comes
+        with a view update, in a later tick); returns the longest gap
+        between pongs."""
+        self.stopping.set()
+        self.join(10)
+        assert not self.is_alive(), "the witness is stuck"
+        if len(self.pongs) < self.sent:
+            self.take(self.c.collect("pong", 10, lambda m: m["stamp"] == self.sent))
+        if object_id not in [o["id"] for o in self.objects]:
+            self.take(self.c.collect("object", 10, lambda m: m["id"] == object_id))
         gaps = [b - a for a, b in zip(self.pongs, self.pongs[1:])]
         return max(gaps, default=0.0)
 
@@ -64,7 +70,7 @@ def test_misbehaving_parser_hurts_nobody():
         assert "File size" not in m["message"], m  # stderr (the server's log) stays writable
     good = upload(c, 6, open(ROOM, "rb").read(), "room.stl", fmt="stl", up=1)
     assert good["triangles"] == 54, good
-    gap = w.finish()
+    gap = w.finish(good["id"])
     assert w.sent > 20 and len(w.pongs) == w.sent, (w.sent, len(w.pongs))
     # a liveness check, not a speed one: a stalled loop would stop every pong
     assert gap < 3.0, f"the witness waited {gap:.2f} s for a pong"

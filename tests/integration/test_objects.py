@@ -177,7 +177,9 @@ def test_collisions_are_sent_and_logged():
     for seq in range(1, 60):  # walk east into the room's west wall at x = 4.358
         c.send(move(seq, (20, 0, 0)))
         time.sleep(0.02)
-    hits = [m for m in c.queue + c.poll(1.0) if m["type"] == "collision"]
+    # A collision goes out in the tick that applies the move, before that
+    # tick's snapshot: the one that acks the last move ends them.
+    hits = [m for m in c.collect("snapshot", 10, lambda m: m["ack"] == 59) if m["type"] == "collision"]
     assert hits, "no collision reported"
     h = hits[0]
     assert h["object"] == obj["id"] and h["box"] == 0 and h["inside"] == 0 and h["ecm_version"] == 1
@@ -205,7 +207,15 @@ def test_log_complete_after_sigterm_under_load():
     bots = subprocess.Popen([os.path.join(A.bin, "cvre-client"), "--port", str(srv.port), "--bots", "200",
                              "--rate", "20", "--pattern", "random-walk", "--duration", "30"],
                             stdout=subprocess.DEVNULL)
-    time.sleep(4)
+    # Under load: once the log holds a few hundred rows, with the bots
+    # still pushing (they walk for 30 s).
+    end, rows = time.time() + 25, 0
+    while rows < 300:
+        assert time.time() < end and bots.poll() is None, f"{rows} rows logged"
+        time.sleep(0.1)
+        db = sqlite3.connect(srv.db)
+        rows = db.execute("SELECT count(*) FROM collisions").fetchone()[0]
+        db.close()
     assert srv.stop() == 0
     bots.kill()
     bots.wait()

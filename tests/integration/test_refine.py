@@ -41,27 +41,47 @@ class Crowd:
             self.cs.append(c)
             self.ids[n] = ok["id"]
         self.pos, self.infos, self.seq = {}, [], 0
+        self.hits = {}  # object id: collisions the users were told of
+        self.sent = [0] * len(names)  # each user's last move
+        self.acked = [0] * len(names)  # and the last the server applied
+
+    def take(self, k, msgs):
+        """Notes what user k received."""
+        for m in msgs:
+            if m["type"] == "snapshot":
+                self.acked[k] = max(self.acked[k], m["ack"])
+            if m["type"] == "snapshot" and k == 0:
+                self.pos.update(m["avatars"])
+            elif m["type"] == "object" and k == 0:
+                self.infos.append(m)
+            elif m["type"] == "collision":
+                self.hits[m["object"]] = self.hits.get(m["object"], 0) + 1
 
     def pump(self, seconds=0.0):
         end = time.time() + seconds
         while True:
-            for m in self.cs[0].poll(0.02):
-                if m["type"] == "snapshot":
-                    self.pos.update(m["avatars"])
-                elif m["type"] == "object":
-                    self.infos.append(m)
+            for k, c in enumerate(self.cs):
+                self.take(k, c.poll(0.02 if k == 0 else 0.001))
             if time.time() >= end:
                 return
+
+    def settle(self):
+        """Until every user's last move is applied (its snapshot acks it):
+        the collisions it made went out before."""
+        for k, c in enumerate(self.cs):
+            if self.acked[k] < self.sent[k]:
+                self.take(k, c.collect("snapshot", 10, lambda m, k=k: m["ack"] >= self.sent[k]))
 
     def walk(self, targets, seconds):
         """Each user (or the given ones: {name: target}) heads for its target."""
         end = time.time() + seconds
         while time.time() < end:
             self.seq += 1
-            for c, (n, i) in zip(self.cs, self.ids.items()):
+            for k, (c, n) in enumerate(zip(self.cs, self.ids)):
                 t = targets.get(n) if isinstance(targets, dict) else targets
                 if t is not None:
                     c.send(move(self.seq, t))
+                    self.sent[k] = self.seq
             self.pump(0.05)
 
     def at(self, name):
@@ -76,6 +96,19 @@ class Crowd:
             self.pump(0.1)
         raise AssertionError(f"no OBJECT_INFO v{version} for object {object_id}; saw "
                              f"{[(m['id'], m['ecm_version']) for m in self.infos]}")
+
+    def wait_logged(self, db, object_id, timeout=15):
+        """Until the log holds every collision with object_id that the users
+        were told of (each is sent as it is queued for the log writer)."""
+        end, told = time.time() + timeout, self.hits.get(object_id, 0)
+        while True:
+            con = sqlite3.connect(db)
+            rows = con.execute("SELECT count(*) FROM collisions WHERE object_id = ?", (object_id,)).fetchone()[0]
+            con.close()
+            if rows >= told:
+                return rows
+            assert time.time() < end, f"{rows} of {told} collisions with object {object_id} logged"
+            time.sleep(0.05)
 
     def close(self):
         for c in self.cs:
@@ -226,7 +259,8 @@ def test_offline_apply_is_published_live():
     room = object_id(srv.db, "openfoam_room_with_doorway.stl")
     to_east_of_door(crowd)
     crowd.walk((5, 0, DOOR_Z), 1.0)
-    time.sleep(0.6)  # the collision log's writer flushes every 250 ms
+    crowd.settle()
+    assert crowd.wait_logged(srv.db, room) > 0
     rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json")
     assert rc == 0, err
     res = json.loads(out)

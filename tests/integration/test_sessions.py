@@ -6,41 +6,53 @@ import re
 import sqlite3
 import time
 
-from harness import Client, Raw, Server, args, close_to, move, run
+from harness import Client, Raw, Server, args, close_to, move, ping, run
 
 A = args()
 
 
 def test_clients_see_each_other():
+    """Three real clients, driven step by step: each step waits for the
+    events that show the last one done, not for a time."""
     srv = Server(A.bin, "--max-speed", "200", "--spawn-radius", "4")
-    scripts = {
-        "alice": "wait 1000\nmove 10 0 10\nwait 3000\nquit\n",
-        "bob": "wait 1000\nmove -10 0 5\nwait 600\nquit\n",
-        "carol": "wait 1000\nmove 0 0 -5\nwait 800\nmove 300 0 300\nwait 800\nquit\n",
-    }
-    clients = {n: Client(A.bin, srv.port, n, s) for n, s in scripts.items()}
+    names = ["alice", "bob", "carol"]
+    clients = {n: Client(A.bin, srv.port, n, None) for n in names}
+    ids = {n: c.until(f"{n} joins", lambda e: e["event"] == "join_ok")["id"] for n, c in clients.items()}
+    for n, c in clients.items():
+        for o in names:
+            if o != n:
+                c.until(f"{n} sees {o} join", lambda e, o=o: e["event"] == "joined" and e["id"] == ids[o])
+    targets = {"alice": (10, 0, 10), "bob": (-10, 0, 5), "carol": (0, 0, -5)}
+    moved = lambda who, pos: clients[who].until(f"{who}'s move to {pos} done", lambda e: e["event"] == "done" and
+                                               e["command"] == "move" and close_to(e["pos"], pos))
+    for n, c in clients.items():
+        c.send("move %g %g %g\n" % targets[n])
+    for n in names:
+        moved(n, targets[n])
+
+    def saw_at(viewer, who, pos):
+        clients[viewer].until(f"{viewer} sees {who} at {pos}", lambda e: e["event"] == "snapshot" and any(
+            a["id"] == ids[who] and close_to(a["pos"], pos) for a in e["avatars"]))
+
+    saw_at("alice", "bob", targets["bob"])
+    saw_at("bob", "alice", targets["alice"])
+    saw_at("alice", "alice", targets["alice"])  # its own authoritative position
+    # carol walks out of everyone's range, bob leaves
+    clients["carol"].send("move 300 0 300\n")
+    moved("carol", (300, 0, 300))
+    left = lambda who, reason: clients["alice"].until(
+        f"alice sees {who} leave ({reason})", lambda e: e["event"] == "left" and e["id"] == ids[who] and
+        e["reason"] == reason)
+    left("carol", "out_of_range")
+    clients["bob"].send("quit\n")
+    left("bob", "disconnected")
+    for n in ["alice", "carol"]:
+        clients[n].send("quit\n")
     for n, c in clients.items():
         assert c.wait(30) == 0, f"{n} exited with {c.proc.returncode}: {c.stderr}"
-    ids = {n: c.of("join_ok")[0]["id"] for n, c in clients.items()}
-    for n, c in clients.items():
         assert [e["event"] for e in c.events[:2]] == ["welcome", "join_ok"], c.events[:2]
         joined = {e["name"]: e["id"] for e in c.of("joined")}
         assert {k: v for k, v in ids.items() if k != n} == joined, (n, joined)
-    targets = {"alice": (10, 0, 10), "bob": (-10, 0, 5)}
-
-    def saw_at(viewer, who, pos):
-        return any(a["id"] == ids[who] and close_to(a["pos"], pos)
-                   for e in clients[viewer].of("snapshot") for a in e["avatars"])
-
-    assert saw_at("alice", "bob", targets["bob"]), "alice never saw bob arrive"
-    assert saw_at("bob", "alice", targets["alice"]), "bob never saw alice arrive"
-    assert saw_at("alice", "alice", targets["alice"]), "alice's own authoritative position missing"
-    moved = lambda who: [e["pos"] for e in clients[who].of("done") if e["command"] == "move"]
-    assert close_to(moved("alice")[0], targets["alice"])
-    assert close_to(moved("carol")[-1], (300, 0, 300))
-    left = {(e["id"], e["reason"]) for e in clients["alice"].of("left")}
-    assert (ids["bob"], "disconnected") in left, left
-    assert (ids["carol"], "out_of_range") in left, left
     assert srv.stop() == 0
 
     db = sqlite3.connect(srv.db)
@@ -70,15 +82,31 @@ def test_area_of_interest_is_exact():
     srv = Server(A.bin, "--max-speed", "1000", "--spawn-radius", "0", "--joins-per-second", "0")
     n = 25
     cs = [Raw(srv.port) for _ in range(n)]
-    ids = [c.handshake(f"p{i}")[1]["id"] for i, c in enumerate(cs)]
-    for seq in range(1, 6):  # each move may cover max speed x elapsed time
-        for i, c in enumerate(cs):
-            c.send(move(seq, (10.0 * i, 0, 0)))
-        time.sleep(0.2)
-    time.sleep(0.3)
+    oks = [c.handshake(f"p{i}")[1] for i, c in enumerate(cs)]
+    ids, pos = [ok["id"] for ok in oks], [ok["pos"] for ok in oks]
+    # Each move covers at most max speed x the time since the last one:
+    # every avatar moves again, after the snapshot that acks its last move
+    # (with its position if that changed), until it stands in its place.
+    msgs, placed, seq, end = [[] for _ in cs], set(), 0, time.time() + 60
+    while len(placed) < n:
+        assert time.time() < end, f"only {len(placed)} of {n} avatars in place"
+        seq += 1
+        todo = [i for i in range(n) if i not in placed]
+        for i in todo:
+            cs[i].send(move(seq, (10.0 * i, 0, 0)))
+        for i in todo:
+            msgs[i] += cs[i].collect("snapshot", 10, lambda m: m["ack"] == seq)
+            pos[i] = msgs[i][-1]["avatars"].get(ids[i], pos[i])
+            if close_to(pos[i], (10.0 * i, 0, 0), 1e-4):
+                placed.add(i)
+    # Every view was made after the last move (its ack was read); a ping's
+    # pong then comes after all it sent.
+    for i, c in enumerate(cs):
+        c.send(ping(i))
+        msgs[i] += c.collect("pong", 10, lambda m, i=i: m["stamp"] == i)
     for i, c in enumerate(cs):
         known = set()
-        for m in c.queue + c.poll(0.05):
+        for m in msgs[i]:
             if m["type"] == "joined":
                 known.add(m["id"])
             elif m["type"] == "left":
@@ -102,13 +130,15 @@ def test_moves_are_clamped():
     assert 0 < x <= 2.5 + 1e-4, snap
     # Requests outside the world end at its edge (the box's half-width
     # inside) and on the floor.
-    pos = snap["avatars"][me]
-    for seq in range(2, 60):
+    # Each move after the ack of the one before has at least a tick's
+    # credit: the avatar walks until the edge stops it, never past it.
+    pos, last, seq, end = snap["avatars"][me], None, 1, time.time() + 60
+    while pos != last:
+        assert time.time() < end, f"still moving at {pos}"
+        last, seq = pos, seq + 1
         r.send(move(seq, (80, -5, 0)))
-        time.sleep(0.05)
-    for m in r.queue + r.poll(0.5):
-        if m["type"] == "snapshot" and me in m["avatars"]:
-            pos = m["avatars"][me]
+        pos = r.expect("snapshot", where=lambda m: m["ack"] == seq)["avatars"].get(me, pos)
+        assert pos[0] <= 10 - 0.3 + 1e-3 and pos[1] >= 0, pos
     assert close_to(pos, (10 - 0.3, 0, 0), 1e-3), pos
     r.close()
     assert srv.stop() == 0
