@@ -915,13 +915,16 @@ static void on_stats(ev_loop *loop, void *data)
             for (uint32_t i = 0; i < st->nticks; i++)
                 fprintf(f, i ? ",%u" : "%u", st->tick_us[i]);
             /* The collision log's totals; rows up to log_committed_id were
-             * committed before this line was written (dblog.h). */
+             * committed before this line was written (dblog.h). SQLite's
+             * heap (its page caches, bounded by their cache_size) apart from
+             * the rest tells a long run's cache filling from a leak. */
             dblog_stats ls;
             dblog_stats_get(s->log, &ls);
             fprintf(f, "],\"log_written\":%llu,\"log_dropped\":%llu,\"log_lost\":%llu,\"log_queued\":%llu,"
-                       "\"log_committed_id\":%lld,\"log_last_error\":%d}\n",
+                       "\"log_committed_id\":%lld,\"log_last_error\":%d,\"sqlite_memory\":%lld}\n",
                     (unsigned long long)ls.written, (unsigned long long)ls.dropped, (unsigned long long)ls.lost,
-                    (unsigned long long)ls.queued, (long long)ls.committed_id, ls.last_error);
+                    (unsigned long long)ls.queued, (long long)ls.committed_id, ls.last_error,
+                    (long long)sqlite3_memory_used());
             fclose(f);
         }
     }
