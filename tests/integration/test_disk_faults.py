@@ -121,11 +121,10 @@ def test_full_disk():
     filler = os.path.join(fs, "filler")
     try:
         before = L.wait("committed collisions", lambda s: s["log_written"] > 0)
-        with open(filler, "wb") as f:  # the disk fills up
+        with open(filler, "wb", buffering=0) as f:  # the disk fills up
             try:
                 while True:
                     f.write(b"\0" * 65536)
-                    f.flush()
             except OSError as e:
                 assert e.errno == errno.ENOSPC, e
         full = L.wait("rows lost to the full disk", lambda s: s["log_lost"] > 0)
