@@ -1,8 +1,10 @@
 /* The collision log writer: every field round-trips exactly, stop drains the
  * queue, a full queue drops and counts, the groups, cells, user entries and
  * segments describe the table exactly (db/README.md), readers
- * run beside the writer, and database errors are counted, not fatal. Build it
- * once with -fsanitize=thread too: the producer and writer share a ring. */
+ * run beside the writer, database errors are counted, not fatal, the
+ * committed id never runs ahead of the table, and a database file deleted
+ * or renamed under the writer is noticed. Build it once with
+ * -fsanitize=thread too: the producer and writer share a ring. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
