@@ -294,7 +294,9 @@ int db_user_upsert(db *d, const char *name, double at, int64_t *user_id)
     *user_id = rc == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
     sqlite3_reset(st);
     sqlite3_clear_bindings(st);
-    return rc == SQLITE_ROW ? 0 : fail(d, "user %s vanished", name);
+    if (rc == SQLITE_ROW)
+        return 0;
+    return rc == SQLITE_DONE ? fail(d, "user %s vanished", name) : fail(d, "%s", sqlite3_errmsg(d->sql));
 }
 
 int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id)

@@ -105,9 +105,15 @@ int db_ban(db *d, const char *name, double until, double at)
     if (rc == 0)
         rc = db__admin_event(d, "ban", 0, name, at);
     /* a banned account's tokens go with the ban, in its transaction: it
-     * must not come back by resuming */
-    if (rc == 0 && db_account_find(d, name, &acc) == 0 && db_account_tokens_revoke(d, acc.id) < 0)
-        rc = -1;
+     * must not come back by resuming (a name without an account has none;
+     * a failed look-up fails the ban, which would otherwise leave them) */
+    if (rc == 0) {
+        int found = db_account_find(d, name, &acc);
+        if (found == 0)
+            rc = db_account_tokens_revoke(d, acc.id) < 0 ? -1 : 0;
+        else if (found != DB_ACCOUNT_UNKNOWN)
+            rc = -1;
+    }
     return end_write(d, rc);
 }
 
