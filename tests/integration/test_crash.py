@@ -48,9 +48,10 @@ def test_every_kill_leaves_a_sound_database():
         assert c["integrity"] == ["ok"], c
         assert c["max_id"] == c["rows"] == c["segmented"] and c["orphans"] == 0, c
         assert c["reported"] is None or c["reported"] <= c["rows"], c
-    # Most kills came while rows were being committed: the runner waited for
-    # this run's first ones before picking its moment.
-    assert sum(c["reported"] is not None and c["reported"] > 0 for c in cycles) >= CYCLES // 2, cycles
+    # Every kill after start-up came while rows were being committed: the
+    # runner waited for that run's first ones before picking its moment.
+    late = [c for c in cycles if c["restart_s"] is not None]
+    assert late and all(c["reported"] is not None and c["reported"] > 0 for c in late), cycles
 
 
 def test_sessions_of_killed_runs_are_closed():
