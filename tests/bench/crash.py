@@ -219,6 +219,9 @@ def main():
     a = ap.parse_args()
     if a.cycles < 1 or a.bots < 1:
         ap.error("--cycles and --bots must be at least 1")
+    missing = [p for p in ("cvre-server", "cvre-client") if not os.access(os.path.join(a.bin, p), os.X_OK)]
+    if missing:
+        ap.error(f"no {', '.join(missing)} in {a.bin} (build it first)")
     seed = a.seed if a.seed is not None else random.randrange(1 << 30)
     rng = random.Random(seed)
     tmp = a.out or tempfile.mkdtemp(prefix="cvre-crash-")

@@ -136,6 +136,9 @@ def main():
     a = ap.parse_args()
     if not 1 <= a.minutes * 60 / SAMPLE_S or a.bots < 1 or a.every < SAMPLE_S:
         ap.error("--minutes must allow a few samples (at least 0.5), --bots at least 1, --every at least 30")
+    missing = [p for p in ("cvre-server", "cvre-client", "cvre-admin", "cvre-cluster") if not os.access(os.path.join(a.bin, p), os.X_OK)]
+    if missing:
+        ap.error(f"no {', '.join(missing)} in {a.bin} (build it first)")
     seconds = a.minutes * 60
     warmup = a.warmup if a.warmup is not None else min(seconds / 2, 600)
     tmp = a.out or tempfile.mkdtemp(prefix="cvre-soak-")
