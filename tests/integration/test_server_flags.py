@@ -2,9 +2,11 @@
 range, or malformed, is refused with exit 2 and a message naming it; a
 server that cannot start says why and exits 1; every flag at a value in
 range is taken, and the server so configured serves a join."""
+import json
 import os
 import subprocess
 import tempfile
+import time
 
 from harness import TEMP_DIRS, Raw, Server, args, run
 
@@ -103,9 +105,25 @@ def test_every_flag_in_range_serves():
     c = Raw(srv.port)
     _, ok = c.handshake("flags")
     assert abs(ok["pos"][0]) <= 4.01 and abs(ok["pos"][2]) <= 4.01, ok  # within --spawn-radius
+    end = time.time() + 60  # --stats-interval 0.5: a line a half second
+    while not (os.path.exists(stats) and open(stats).read().endswith("\n")):
+        assert time.time() < end, "no stats line within 60 s"
+        time.sleep(0.1)
+    line = json.loads(open(stats).readline())
+    assert line["clients"] == 1 and "tick_us" in line and "log_committed_id" in line, line
     c.close()
     assert srv.stop() == 0
     assert "DEBUG" in srv.logtext()  # --log-level debug took
+    assert "stats: clients=1" in srv.logtext()
+
+    # a stats file that cannot be opened: said in the log, and the server serves on
+    srv = Server(A.bin, "--stats-file", os.path.join(tmp, "no-such-dir", "stats.jsonl"), "--stats-interval", "0.2")
+    end = time.time() + 60
+    while "stats file " not in srv.logtext():
+        assert time.time() < end, "no stats file warning within 60 s"
+        time.sleep(0.1)
+    Raw(srv.port).handshake("still")
+    assert srv.stop() == 0
 
 
 def test_importer_flags():
