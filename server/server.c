@@ -32,6 +32,12 @@
 
 /* Connections accepted per wakeup of the listening socket. */
 #define ACCEPT_BUDGET 256
+/* How long the listening socket is left alone once the process is out of
+ * file descriptors: the connection accept could not take stays waiting,
+ * so the socket stays readable, and watching it would spin the loop (and
+ * log a line a turn). Descriptors come back as clients leave; nginx waits
+ * half a second too. */
+#define ACCEPT_PAUSE_MS 500u
 /* How often timeouts and slow readers are checked. */
 #define HOUSEKEEPING_MS 100u
 /* How long a shutdown waits for clients to take their bye. */
@@ -787,6 +793,17 @@ static void refuse(int fd, const char *why)
     close(fd);
 }
 
+static void on_accept(ev_loop *loop, int fd, unsigned events, void *data);
+
+/* The end of an ACCEPT_PAUSE_MS pause: watch the listening socket again
+ * (unless a shutdown closed it meanwhile). */
+static void resume_accept(ev_loop *loop, void *data)
+{
+    server *s = data;
+    if (s->listen_fd >= 0 && ev_io_add(loop, s->listen_fd, EV_READ, on_accept, s) < 0)
+        log_error("cannot watch the listening socket again; no new connections");
+}
+
 static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
 {
     (void)events;
@@ -795,9 +812,12 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
         char peer[80], addr[80];
         int cfd = conn_accept(fd, peer, sizeof peer);
         if (cfd < 0) {
-            if (cfd == -EMFILE || cfd == -ENFILE)
-                log_warn("accept: %s; raise the file limit (ulimit -n)", strerror(-cfd));
-            else if (cfd != -EAGAIN)
+            if (cfd == -EMFILE || cfd == -ENFILE) {
+                log_warn("accept: %s; raise the file limit (ulimit -n); no new connections for %u ms",
+                         strerror(-cfd), ACCEPT_PAUSE_MS);
+                if (ev_timer_start(loop, ACCEPT_PAUSE_MS * NS_PER_MS, 0, resume_accept, s) >= 0)
+                    ev_io_del(loop, fd);
+            } else if (cfd != -EAGAIN)
                 log_warn("accept: %s", strerror(-cfd));
             return;
         }
