@@ -1,9 +1,10 @@
 /*
- * The server's two worker modules around their lives: the login checker
- * (auth.c) and the importer (importer.c) refuse to start on a database
- * they cannot open or without their thread, refuse jobs past their queue,
- * and at stop drop the jobs still waiting and the results never taken
- * (freeing what they hold: the sanitizer build's leak check is the judge).
+ * The server's worker modules around their lives: the login checker
+ * (auth.c), the importer (importer.c) and the refiner (refiner.c) refuse
+ * to start on a database they cannot open, without an eventfd or without
+ * their thread; the first two refuse jobs past their queue; and at stop
+ * they drop the jobs still waiting and the results never taken (freeing
+ * what they hold: the sanitizer build's leak check is the judge).
  */
 #define _GNU_SOURCE /* pthread_setattr_default_np */
 #include <errno.h>
@@ -17,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -24,7 +26,9 @@
 
 #include "auth.h"
 #include "db.h"
+#include "ecm.h"
 #include "importer.h"
+#include "refiner.h"
 #define TESTDB_NAME "workers"
 #include "../testdb.h"
 
@@ -157,11 +161,59 @@ static void test_importer_start_and_stop(void **state)
     unlink(helper_path);
 }
 
+static refiner_config rcfg;
+
+static void *start_refiner(void *cfg) { return refiner_start(cfg, err, sizeof err); }
+
+static void test_refiner_start_and_stop(void **state)
+{
+    static const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0}, box[1][6] = {{0, 0, 0, 1, 1, 1}};
+    db_object o = {.owner = "ann", .name = "m", .format = "stl", .scale = 1, .tri_count = 1, .tris = tri,
+                   .max = {1, 1, 0}, .box_count = 1, .boxes = box};
+    db_ecm_change ch = {.parent_version = 1, .reason = "refine", .box_count = 1, .boxes = box};
+    struct rlimit saved, none;
+    struct pollfd pf;
+    uint32_t version;
+    refiner *r;
+    db *d;
+
+    (void)state;
+    rcfg.db_path = "/nonexistent/dir/cvre.db";
+    ecm_params_default(&rcfg.ecm);
+    assert_null(refiner_start(&rcfg, err, sizeof err));
+    assert_non_null(strstr(err, "/nonexistent/dir/cvre.db"));
+    rcfg.db_path = testdb_path;
+    assert_int_equal(getrlimit(RLIMIT_NOFILE, &saved), 0);
+    none = saved;
+    none.rlim_cur = 0;
+    assert_int_equal(setrlimit(RLIMIT_NOFILE, &none), 0);
+    r = refiner_start(&rcfg, err, sizeof err);
+    assert_int_equal(setrlimit(RLIMIT_NOFILE, &saved), 0);
+    assert_null(r);
+    assert_string_equal(err, "eventfd: Too many open files");
+    assert_null(without_threads(start_refiner, &rcfg));
+    assert_non_null(strstr(err, "cannot start the refiner thread"));
+
+    /* a new collision map in the change feed, never taken: freed at stop */
+    d = testdb_open();
+    assert_int_equal(db_object_create(d, &o, 1), 0);
+    ch.object_id = o.id;
+    assert_int_equal(db_ecm_write(d, &ch, 2, &version), 0);
+    db_close(d);
+    r = refiner_start(&rcfg, err, sizeof err);
+    assert_non_null(r);
+    pf = (struct pollfd){.fd = refiner_fd(r), .events = POLLIN};
+    assert_int_equal(poll(&pf, 1, 60000), 1);
+    refiner_stop(r);
+    refiner_stop(NULL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_auth_start_and_stop, testdb_setup, testdb_teardown),
         cmocka_unit_test_setup_teardown(test_importer_start_and_stop, testdb_setup, testdb_teardown),
+        cmocka_unit_test_setup_teardown(test_refiner_start_and_stop, testdb_setup, testdb_teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
