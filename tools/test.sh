@@ -1,20 +1,46 @@
 #!/usr/bin/env bash
-# The whole test suite: installs what is missing, then builds and tests twice,
-# with gcc (warnings are errors) and with clang under AddressSanitizer and
-# UndefinedBehaviorSanitizer. Build trees go to build-test/.
+# The whole test suite: installs what is missing, then builds and tests in
+# three trees under build-test/:
+#   gcc   warnings are errors, RelWithDebInfo: every test;
+#   asan  clang, AddressSanitizer and UndefinedBehaviorSanitizer at -O1:
+#         every test;
+#   tsan  clang, ThreadSanitizer at -O1: the tests labelled `threads` (the
+#         log writer, workers and mailbox, importer, refiner, clustering
+#         and the integration tests that drive them).
+# `bash tools/test.sh asan tsan` runs only the trees named. Every test is
+# meant to take well under 120 s on two cores; ctest's timeout is the guard
+# against a hang. The city block's entries are labelled `slow`: in a tree of
+# your own, `ctest -LE slow` leaves them out.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+trees=("$@")
+[ ${#trees[@]} -gt 0 ] || trees=(gcc asan tsan)
+for t in "${trees[@]}"; do
+  case $t in gcc | asan | tsan) ;; *) echo "test.sh: no tree $t (gcc, asan, tsan)" >&2; exit 2 ;; esac
+done
 bash tools/deps.sh
 jobs=$(nproc)
-run() { # name, then cmake arguments
-  local dir=build-test/$1; shift
+run() { # name, ctest arguments up to --, then cmake arguments
+  local dir=build-test/$1 ctest_args=()
+  shift
+  while [ "$1" != -- ]; do ctest_args+=("$1"); shift; done
+  shift
   echo "== $dir: configure and build" >&2
-  cmake -S . -B "$dir" -DCVRE_WERROR=ON "$@" >/dev/null
+  cmake -S . -B "$dir" -DCVRE_WERROR=ON -DCVRE_TEST_HOOKS=ON "$@" >/dev/null
   cmake --build "$dir" -j "$jobs" >/dev/null
   echo "== $dir: test" >&2
-  (cd "$dir" && ctest --output-on-failure -j "$jobs" --timeout 300)
+  (cd "$dir" && ctest --output-on-failure -j "$jobs" --timeout 300 "${ctest_args[@]}")
 }
-run gcc -DCVRE_TEST_HOOKS=ON -DCMAKE_C_COMPILER=gcc -DCMAKE_BUILD_TYPE=RelWithDebInfo
-ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  run asan-clang -DCVRE_TEST_HOOKS=ON -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Debug \
-      "-DCMAKE_C_FLAGS_DEBUG=-g -O1" -DCVRE_SANITIZE=ON
+for t in "${trees[@]}"; do
+  case $t in
+    gcc) run gcc -- -DCMAKE_C_COMPILER=gcc -DCMAKE_BUILD_TYPE=RelWithDebInfo ;;
+    asan)
+      ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+        run asan-clang -- -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_C_FLAGS_DEBUG=-g -O1" \
+        -DCVRE_SANITIZE=ON ;;
+    tsan)
+      TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 \
+        run tsan-clang -L threads -- -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Debug \
+        "-DCMAKE_C_FLAGS_DEBUG=-g -O1" -DCVRE_TSAN=ON ;;
+  esac
+done

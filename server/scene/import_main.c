@@ -58,7 +58,13 @@ static const char usage[] =
     "  --help            this text\n"
     "  --version         the version\n";
 
-#ifdef CVRE_ASAN
+/* Sanitizer builds: AddressSanitizer's and ThreadSanitizer's shadow memory
+ * already exceeds any address-space limit. */
+#if defined(CVRE_ASAN) || defined(CVRE_TSAN)
+#define SANDBOX_LIMIT_DATA
+#endif
+
+#ifdef SANDBOX_LIMIT_DATA
 /* Bytes of private writable memory mapped now (VmData), or 0. */
 static unsigned long long data_now(void)
 {
@@ -75,14 +81,14 @@ static unsigned long long data_now(void)
 }
 #endif
 
-/* Limits that hold from here on. Under AddressSanitizer, whose shadow
- * memory already exceeds any address-space limit, the limit is on data
- * mappings instead, counted from what is mapped now (the server also
- * tells that build's allocator to return NULL rather than abort). */
+/* Limits that hold from here on. Under a sanitizer (SANDBOX_LIMIT_DATA)
+ * the limit is on data mappings instead, counted from what is mapped now
+ * (the server also tells that build's allocator to return NULL rather than
+ * abort). */
 static int set_limits(unsigned long memory_mb, unsigned long cpu_seconds)
 {
     struct rlimit cpu = {cpu_seconds, cpu_seconds + 1}, none = {0, 0}, files = {SANDBOX_FILES, SANDBOX_FILES};
-#ifndef CVRE_ASAN
+#ifndef SANDBOX_LIMIT_DATA
     struct rlimit mem = {memory_mb << 20, memory_mb << 20};
     if (setrlimit(RLIMIT_AS, &mem) != 0)
         return -1;

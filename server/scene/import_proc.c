@@ -43,24 +43,32 @@ static double now_s(void)
     return (double)t.tv_sec + (double)t.tv_nsec * 1e-9;
 }
 
-/* The helper's environment: the sanitizers' options, passed on (and,
- * under AddressSanitizer, whose allocator would abort at the helper's
- * memory limit, a NULL from malloc instead, as without it), and glibc's
- * huge-page malloc. envp holds 5 pointers, bufs 3 strings. */
-static void helper_env(char *envp[5], char bufs[3][512])
+/* The sanitizer of this build whose allocator would abort at the helper's
+ * memory limit: its options ask for a NULL from malloc instead, as
+ * without it. */
+#if defined(CVRE_ASAN)
+#define HELPER_NULL_ALLOCATOR "ASAN_OPTIONS"
+#elif defined(CVRE_TSAN)
+#define HELPER_NULL_ALLOCATOR "TSAN_OPTIONS"
+#endif
+
+/* The helper's environment: the sanitizers' options, passed on (with
+ * HELPER_NULL_ALLOCATOR's), and glibc's huge-page malloc. envp holds 6
+ * pointers, bufs 4 strings. */
+static void helper_env(char *envp[6], char bufs[4][512])
 {
-    static const char *const names[] = {"ASAN_OPTIONS", "UBSAN_OPTIONS", "LSAN_OPTIONS"};
+    static const char *const names[] = {"ASAN_OPTIONS", "UBSAN_OPTIONS", "LSAN_OPTIONS", "TSAN_OPTIONS"};
     /* glibc (2.35 on) backs malloc with transparent huge pages: every page
      * of a new process is touched for the first time, and in 2 MB pages
      * the city block's import took 0.25 s instead of 0.65 s here */
     static char tunables[] = "GLIBC_TUNABLES=glibc.malloc.hugetlb=1";
     int k = 0;
 
-    for (int i = 0; i < 3; i++) {
+    for (int i = 0; i < 4; i++) {
         const char *v = getenv(names[i]);
         char extra[96] = "";
-#ifdef CVRE_ASAN
-        if (i == 0)
+#ifdef HELPER_NULL_ALLOCATOR
+        if (strcmp(names[i], HELPER_NULL_ALLOCATOR) == 0)
             snprintf(extra, sizeof extra, "%sallocator_may_return_null=1", v && *v ? ":" : "");
 #endif
         if (!v && !extra[0])
@@ -212,7 +220,7 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
 {
     static const import_options defaults = IMPORT_OPTIONS_DEFAULT;
     uint8_t head[IMPORT_PIPE_REQUEST_HEAD];
-    char mem[16], cpu[16], envbuf[3][512], *envp[5];
+    char mem[16], cpu[16], envbuf[4][512], *envp[6];
     char *argv[] = {(char *)p->helper, "--memory", mem, "--cpu", cpu, NULL};
     int to[2] = {-1, -1}, from[2] = {-1, -1}, rc;
     exchange x = {.max_triangles = opt ? opt->max_triangles : IMPORT_MAX_TRIANGLES};

@@ -17,6 +17,7 @@
 #include <setjmp.h>
 #include <signal.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <sys/resource.h>
@@ -182,7 +183,7 @@ static void on_signal(int sig)
 typedef struct interrupted {
     pthread_t loop_thread;
     int sleeps;
-    volatile int done;
+    atomic_int done; /* set by the loop's thread, read by the signalling one */
 } interrupted;
 
 static void count_sleeps(ev_loop *l, void *data)
