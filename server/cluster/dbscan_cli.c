@@ -150,10 +150,26 @@ static int read_points(const char *path, points *p, size_t *bad_line)
     return rc;
 }
 
+static const char usage_text[] =
+    "usage: dbscan_cli [--eps E] [--min-points N] [--min-users U] [--threads T] [--summary] IN [OUT]\n"
+    "\n"
+    "Clusters the points of IN (text lines \"x y z user\", or the binary form\n"
+    "the header of dbscan_cli.c describes) with DBSCAN and writes one line per\n"
+    "point, \"label core\", to OUT (stdout by default); one line of figures goes\n"
+    "to stderr.\n"
+    "\n"
+    "  --eps E          neighbourhood radius (default 0.5)\n"
+    "  --min-points N   points within eps that make a core point (default 10)\n"
+    "  --min-users U    distinct users a cluster needs (default 1)\n"
+    "  --threads T      worker threads; 0: one per CPU (default 0)\n"
+    "  --summary        also one line per cluster on stderr\n"
+    "  --help           show this help\n"
+    "\n"
+    "Exit status: 0, 1 on an error, 2 on bad usage.\n";
+
 static int usage(void)
 {
-    fprintf(stderr, "usage: dbscan_cli [--eps E] [--min-points N] [--min-users U] [--threads T] "
-                    "[--summary] IN [OUT]\n");
+    fputs(usage_text, stderr);
     return 2;
 }
 
@@ -177,7 +193,10 @@ int main(int argc, char **argv)
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         int has_value = i + 1 < argc;
-        if (strcmp(a, "--summary") == 0) {
+        if (strcmp(a, "--help") == 0) {
+            fputs(usage_text, stdout);
+            return 0;
+        } else if (strcmp(a, "--summary") == 0) {
             summary = 1;
         } else if (strcmp(a, "--eps") == 0 && has_value) {
             char *end;
