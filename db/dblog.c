@@ -225,13 +225,15 @@ void dblog_stats_get(const dblog *log, dblog_stats *out)
     out->dropped = atomic_load_explicit(&log->dropped, memory_order_relaxed);
     out->invalid = atomic_load_explicit(&log->invalid, memory_order_relaxed);
     out->pushed = head + out->dropped + out->invalid;
+    /* The id before the count (acquire): the rows up to the id are counted
+     * in written by then, so a snapshot never has the id ahead of them. */
+    out->committed_id = atomic_load_explicit(&log->committed_id, memory_order_acquire);
     out->written = atomic_load_explicit(&log->written, memory_order_relaxed);
     out->lost = atomic_load_explicit(&log->lost, memory_order_relaxed);
     out->batches = atomic_load_explicit(&log->batches, memory_order_relaxed);
     out->failures = atomic_load_explicit(&log->failures, memory_order_relaxed);
     out->queued = head > tail ? head - tail : 0;
     out->high_water = atomic_load_explicit(&log->high_water, memory_order_relaxed);
-    out->committed_id = atomic_load_explicit(&log->committed_id, memory_order_acquire);
     out->last_error = atomic_load_explicit(&log->last_error, memory_order_relaxed);
 }
 
@@ -496,10 +498,11 @@ static int write_rows(dblog *l, uint64_t from, uint32_t n)
  * transaction. With a time cap (cap_ms > 0) the transaction takes at most
  * l->cap_rows rows, setting *n to that count, and cap_rows follows the time
  * the last capped transaction took: a sorted batch cannot be cut short part
- * way, so the cap is kept by sizing batches. On failure the transaction is
- * rolled back, so the database holds all of the batch or none of it, and the
- * message is kept in l->errmsg. Returns SQLITE_OK or the extended error
- * code. */
+ * way, so the cap is kept by sizing batches. Committed, the rows are
+ * counted in written and their last id is published in committed_id. On
+ * failure the transaction is rolled back, so the database holds all of the
+ * batch or none of it, and the message is kept in l->errmsg. Returns
+ * SQLITE_OK or the extended error code. */
 static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
 {
     uint64_t start = now_ms();
@@ -512,7 +515,9 @@ static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
         rc = sqlite3_exec(l->sql, "COMMIT", NULL, NULL, NULL);
     if (rc == SQLITE_OK) {
         l->next_id += (int64_t)*n;
-        /* Release: whoever reads this id may count on the rows up to it. */
+        /* Counted before the id is published. Release: whoever reads this
+         * id may count on the rows up to it, in the table and in written. */
+        atomic_fetch_add_explicit(&l->written, *n, memory_order_relaxed);
         atomic_store_explicit(&l->committed_id, l->next_id - 1, memory_order_release);
         uint64_t took = now_ms() - start;
         if (cap_ms && took > cap_ms) {
@@ -590,7 +595,6 @@ static void commit_rows(dblog *l, uint64_t n, int stopping)
         }
         int rc = write_batch(l, tail, &n, stopping ? 0 : l->batch_ms);
         if (rc == SQLITE_OK) {
-            atomic_fetch_add_explicit(&l->written, n, memory_order_relaxed);
             atomic_fetch_add_explicit(&l->batches, 1, memory_order_relaxed);
             if (l->failing)
                 log_info("collision log: writing again; %llu rows were lost while it failed",
