@@ -235,16 +235,19 @@ def main():
     rss_slope = slope([(s["t"], s["rss"]) for s in steady])
     sqlite_slope = slope([(s["t"], s["sqlite"]) for s in steady])
     other_slope = slope([(s["t"], s["rss"] - s["sqlite"]) for s in steady])
-    fd_slope = slope([(s["t"], s["fds"]) for s in steady if not s["busy"]])
+    idle = [(s["t"], s["fds"]) for s in steady if not s["busy"]]
+    fd_slope = slope(idle)
     first, last = samples[0], samples[-1]
     figures = dict(minutes=a.minutes, bots=a.bots, samples=len(samples), steady_samples=len(steady),
+                   idle_samples=len(idle),
                    rss_start=first["rss"], rss_end=last["rss"], rss_max=max(s["rss"] for s in samples),
                    fds_start=first["fds"], fds_end=last["fds"], rss_slope_mib_h=round(rss_slope, 1),
                    sqlite_slope_mib_h=round(sqlite_slope, 1), other_slope_mib_h=round(other_slope, 1),
                    fd_slope_h=round(fd_slope, 1), rows=last["rows"], dropped=last["dropped"], lost=last["lost"],
-                   published=last["published"], uploads=ops.count, stop_s=stop_s, sanitizer_reports=len(reports))
-    if len(steady) < 2:
-        problems.append(f"only {len(steady)} samples after the warm-up: no slope")
+                   published=last["published"], imports=last["imports"], cluster_runs=ops.count, stop_s=stop_s, sanitizer_reports=len(reports))
+    if len(steady) < 2 or len(idle) < 2:
+        problems.append(f"{len(steady)} samples after the warm-up, {len(idle)} of them between the uploads and "
+                        "cluster runs: too few for a slope (a longer run, or a longer --every)")
     if rss_slope > a.max_rss_slope:
         problems.append(f"RSS grows {rss_slope:.1f} MiB/h after the warm-up (limit {a.max_rss_slope:g})")
     if fd_slope > a.max_fd_slope:
