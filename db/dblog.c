@@ -494,6 +494,23 @@ static int write_rows(dblog *l, uint64_t from, uint32_t n)
     return rc;
 }
 
+/* The system's reason for an I/O error, 0 if unknown: an I/O error says
+ * little without it (EPERM: the file was made immutable; EROFS: its file
+ * system went read-only). SQLite's copy of errno (sqlite3_system_errno) is
+ * often overwritten by the time the error reaches us, so the WAL's and the
+ * database file's handles are asked for the last one they met. */
+static int io_errno(sqlite3 *sql)
+{
+    int e = sqlite3_system_errno(sql);
+    sqlite3_file *wal = NULL;
+    if (!e && sqlite3_file_control(sql, "main", SQLITE_FCNTL_JOURNAL_POINTER, &wal) == SQLITE_OK && wal &&
+        wal->pMethods)
+        wal->pMethods->xFileControl(wal, SQLITE_FCNTL_LAST_ERRNO, &e);
+    if (!e)
+        sqlite3_file_control(sql, "main", SQLITE_FCNTL_LAST_ERRNO, &e);
+    return e;
+}
+
 /* One attempt at committing rows [from, from + *n) of the ring in one
  * transaction. With a time cap (cap_ms > 0) the transaction takes at most
  * l->cap_rows rows, setting *n to that count, and cap_rows follows the time
@@ -530,9 +547,7 @@ static int write_batch(dblog *l, uint64_t from, uint64_t *n, uint32_t cap_ms)
     }
     forget_groups(l); /* the groups this transaction made are rolled back */
     rc = sqlite3_extended_errcode(l->sql);
-    /* An I/O error says little without the system's reason (EPERM: the
-     * file was made immutable; EROFS: the file system went read-only). */
-    int sys = (rc & 0xff) == SQLITE_IOERR || (rc & 0xff) == SQLITE_CANTOPEN ? sqlite3_system_errno(l->sql) : 0;
+    int sys = (rc & 0xff) == SQLITE_IOERR || (rc & 0xff) == SQLITE_CANTOPEN ? io_errno(l->sql) : 0;
     if (sys)
         snprintf(l->errmsg, sizeof l->errmsg, "%s (%s)", sqlite3_errmsg(l->sql), strerror(sys));
     else
@@ -572,6 +587,8 @@ static void lose_rows(dblog *l, uint64_t n, int rc)
         log_error("collision log: %llu rows lost; further failures are reported every %u s",
                   (unsigned long long)n, DBLOG_REPORT_MS / 1000u);
         l->lost_before_failing = atomic_load_explicit(&l->lost, memory_order_relaxed) - n;
+        l->reported_lost += n; /* said just now: report() starts after these */
+        l->report_due_ms = now_ms() + DBLOG_REPORT_MS;
     }
     l->failing = 1;
 }
