@@ -4,10 +4,10 @@ file descriptors.
 
 For --minutes (default: SOAK_MINUTES from the environment, else 10), --bots
 bots (200) walk about a world of desks, so that collisions are logged all
-along; the online refiner looks for clusters every 10 s; and every --every
-seconds (180) an account uploads a model (cvre-client's import, through
-the sandboxed importer) and then cvre-cluster --apply refines beside the
-running server. Every 30 s it samples the server's resident memory (VmRSS,
+along; the online refiner looks for clusters every 10 s; and --every
+seconds (180) after the last time, an account uploads a model (cvre-client's
+import, through the sandboxed importer) and then cvre-cluster --apply
+refines beside the running server. Every 30 s it samples the server's resident memory (VmRSS,
 and SQLite's share of it from the stats file) and its open descriptors, and
 from the metrics endpoint the collision rows logged and the collision map
 versions published. At the end it stops the bots and the server (SIGTERM),
@@ -22,9 +22,11 @@ cut off; or a slope over its limit after the warm-up (--warmup: half the
 run, at most 10 minutes; until then the heap grows to its working size
 while the first collision maps are refined):
 
-  --max-rss-slope MiB/h (default 64): after the warm-up nothing the server
-  holds grows with time but the few uploaded meshes; a step of a few MiB
-  when the allocator takes a new arena is not a trend over an hour. 64
+  --max-rss-slope MiB/h (default 64): after the warm-up what the server
+  holds grows only with the few uploaded meshes and, in steps, with the
+  online refiner's per-object point buffers (they keep their largest size,
+  up to 16 MiB an object, while an object's collisions pile up between two
+  versions); a step of a few MiB is not a trend over an hour. 64
   MiB/h is 5 bytes per move at 200 bots (4,000 moves/s), 60 bytes per
   collision row (300/s) or 1 KB per tick: a leak per move, row or tick
   above those is over it.
@@ -120,7 +122,8 @@ class Ops(threading.Thread):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\nUsage:")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bin", required=True, help="build directory with the four programs")
     ap.add_argument("--minutes", type=float, default=float(os.environ.get("SOAK_MINUTES", 10)),
                     help="length of the run (default: SOAK_MINUTES, else 10)")
