@@ -108,11 +108,14 @@ static void watch(http_conn *hc)
  * drains, or closes if the peer has shut its side already. */
 static void flush(http_conn *hc)
 {
+    size_t before = conn_out_pending(&hc->c);
     ssize_t left = conn_flush(&hc->c);
     if (left < 0) {
         kill_conn(hc);
         return;
     }
+    if ((size_t)left < before) /* it takes its answer, if slowly: it has the linger time again */
+        hc->deadline_ns = ev_now(hc->h->loop) + HTTP_LINGER_MS * NS_PER_MS;
     hc->writing = left > 0;
     watch(hc);
     if (left > 0)

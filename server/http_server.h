@@ -31,8 +31,8 @@
 #ifndef HTTP_REQUEST_TIMEOUT_MS
 #define HTTP_REQUEST_TIMEOUT_MS 5000u
 #endif
-/* After the response: time to take it and close. A peer that neither
- * reads nor closes is cut off then. */
+/* After the response: time to take the next of it, and at the end to
+ * close. A peer that neither reads nor closes for this long is cut off. */
 #ifndef HTTP_LINGER_MS
 #define HTTP_LINGER_MS 5000u
 #endif
