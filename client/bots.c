@@ -51,7 +51,7 @@ typedef struct walker {
 
 typedef struct bot {
     bots *swarm;
-    conn *c; /* NULL before its start and after its end */
+    session *c; /* NULL before its start and after its end */
     unsigned idx;
     walker w;
     float centre[3]; /* spawn point */
@@ -61,7 +61,7 @@ typedef struct bot {
 
 struct bots {
     ev_loop *loop;
-    conn_ctx *ctx;
+    session_ctx *ctx;
     bots_opts o;
     bot *bot;
     unsigned started;
@@ -147,22 +147,22 @@ static void serve(bots *b, bot *t, uint64_t now)
 {
     if (!t->c)
         return;
-    int st = conn_state(t->c);
-    if (st != CONN_JOINED && st != CONN_RAW)
+    int st = session_state(t->c);
+    if (st != SESSION_JOINED && st != SESSION_RAW)
         return;
     static const float raw_lo[3] = {-BOTS_RAW_HALF, 0, -BOTS_RAW_HALF};
     static const float raw_hi[3] = {BOTS_RAW_HALF, 0, BOTS_RAW_HALF};
-    const proto_welcome *wel = &conn_get_view(t->c)->welcome;
-    double speed = st == CONN_RAW ? BOTS_RAW_SPEED : wel->max_speed;
+    const proto_welcome *wel = &session_get_view(t->c)->welcome;
+    double speed = st == SESSION_RAW ? BOTS_RAW_SPEED : wel->max_speed;
     double step = BOTS_SPEED_FRACTION * speed / b->o.rate;
     walker w = t->w;
-    if (b->o.pattern == BOTS_CIRCLE && st == CONN_JOINED)
+    if (b->o.pattern == BOTS_CIRCLE && st == SESSION_JOINED)
         circle(&w, step, t->centre);
-    else if (st == CONN_RAW)
+    else if (st == SESSION_RAW)
         random_walk(b, &w, step, raw_lo, raw_hi, now);
     else
         random_walk(b, &w, step, wel->world_min, wel->world_max, now);
-    uint32_t seq = conn_send_move(t->c, w.pos);
+    uint32_t seq = session_send_move(t->c, w.pos);
     if (!seq) {
         b->k.moves_dropped++;
         return;
@@ -180,7 +180,7 @@ static void serve(bots *b, bot *t, uint64_t now)
  * position and what we had asked for at that seq (zero unless the server
  * clamped or blocked us) shifts those later moves and the current position.
  */
-static void reconcile(bot *t, const conn_view *v)
+static void reconcile(bot *t, const session_view *v)
 {
     uint32_t ack = v->ack;
     if (ack == 0)
@@ -202,11 +202,11 @@ static void reconcile(bot *t, const conn_view *v)
 
 /* ---- connections ------------------------------------------------------- */
 
-static void on_msg(conn *c, const proto_msg *m, void *data)
+static void on_msg(session *c, const proto_msg *m, void *data)
 {
     bot *t = data;
     bots *b = t->swarm;
-    const conn_view *v = conn_get_view(c);
+    const session_view *v = session_get_view(c);
     switch (m->type) {
     case PROTO_JOIN_OK:
         b->k.joined++;
@@ -237,24 +237,24 @@ static void on_msg(conn *c, const proto_msg *m, void *data)
 
 static void finish(bots *b);
 
-static void on_close(conn *c, const conn_end *end, void *data)
+static void on_close(session *c, const session_end *end, void *data)
 {
     bot *t = data;
     bots *b = t->swarm;
-    if (events_conn_end((int)t->idx, end, conn_ctx_peer(b->ctx)))
+    if (events_conn_end((int)t->idx, end, session_ctx_peer(b->ctx)))
         b->k.errors++;
-    if (end->was_open && !end->after_bye && end->kind != CONN_END_LOCAL) {
+    if (end->was_open && !end->after_bye && end->kind != SESSION_END_LOCAL) {
         b->k.disconnects++;
         events_closed((int)t->idx);
     }
-    conn_free(c);
+    session_free(c);
     t->c = NULL;
     b->open--;
     if (b->ending && b->open == 0)
         finish(b);
 }
 
-static const conn_handler handler = {.on_msg = on_msg, .on_close = on_close};
+static const session_handler handler = {.on_msg = on_msg, .on_close = on_close};
 
 static void start_bot(bots *b, bot *t)
 {
@@ -264,12 +264,12 @@ static void start_bot(bots *b, bot *t)
         t->w.pos[2] = (float)((2 * rand_unit(b) - 1) * BOTS_RAW_HALF);
         t->w.angle = 2 * PI * rand_unit(b);
         t->w.turn_at = ev_now(b->loop) + BOTS_TURN_NS;
-        t->c = conn_open(b->ctx, NULL, NULL, &handler, t);
+        t->c = session_open(b->ctx, NULL, NULL, &handler, t);
         return;
     }
     char name[PROTO_NAME_MAX + 1];
     snprintf(name, sizeof name, "%s-%u", b->o.net.name, t->idx);
-    t->c = conn_open(b->ctx, name, b->o.net.box, &handler, t);
+    t->c = session_open(b->ctx, name, b->o.net.box, &handler, t);
 }
 
 /* ---- timers ------------------------------------------------------------ */
@@ -303,9 +303,9 @@ static void on_tick(ev_loop *loop, void *data)
 
 static void fill_counts(bots *b)
 {
-    b->k.connected = conn_ctx_opened(b->ctx);
-    b->k.frames_in = conn_ctx_frames_in(b->ctx);
-    b->k.bytes_in = conn_ctx_bytes_in(b->ctx);
+    b->k.connected = session_ctx_opened(b->ctx);
+    b->k.frames_in = session_ctx_frames_in(b->ctx);
+    b->k.bytes_in = session_ctx_bytes_in(b->ctx);
 }
 
 static double elapsed_s(const bots *b) { return (double)(ev_now(b->loop) - b->t0) / (double)NS_PER_S; }
@@ -319,7 +319,7 @@ static void on_stats(ev_loop *loop, void *data)
     /* Moves keep bots alive at any usual rate; this covers very slow ones. */
     for (unsigned i = 0; i < b->started; i++)
         if (b->bot[i].c)
-            conn_keepalive(b->bot[i].c);
+            session_keepalive(b->bot[i].c);
 }
 
 static void finish(bots *b)
@@ -327,10 +327,10 @@ static void finish(bots *b)
     if (b->finished)
         return;
     b->finished = 1;
-    conn_timer_stop(b->loop, &b->tick_timer);
-    conn_timer_stop(b->loop, &b->stats_timer);
-    conn_timer_stop(b->loop, &b->end_timer);
-    conn_timer_stop(b->loop, &b->linger_timer);
+    session_timer_stop(b->loop, &b->tick_timer);
+    session_timer_stop(b->loop, &b->stats_timer);
+    session_timer_stop(b->loop, &b->end_timer);
+    session_timer_stop(b->loop, &b->linger_timer);
     fill_counts(b);
     events_summary(&b->k, elapsed_s(b));
     ev_stop(b->loop);
@@ -351,20 +351,20 @@ static void begin_end(bots *b)
     if (b->ending)
         return;
     b->ending = 1;
-    conn_timer_stop(b->loop, &b->tick_timer);
+    session_timer_stop(b->loop, &b->tick_timer);
     for (unsigned i = 0; i < b->started; i++) {
-        conn *c = b->bot[i].c;
+        session *c = b->bot[i].c;
         if (!c)
             continue;
         if (b->o.no_handshake)
-            conn_close(c);
+            session_close(c);
         else
-            conn_bye(c, PROTO_BYE_QUIT);
+            session_bye(c, PROTO_BYE_QUIT);
     }
     if (b->open == 0)
         finish(b);
     else
-        b->linger_timer = conn_timer_start(b->loop, BOTS_LINGER_NS, 0, on_linger, b);
+        b->linger_timer = session_timer_start(b->loop, BOTS_LINGER_NS, 0, on_linger, b);
 }
 
 static void on_duration(ev_loop *loop, void *data)
@@ -380,17 +380,17 @@ static void on_duration(ev_loop *loop, void *data)
 bots *bots_create(ev_loop *loop, const bots_opts *o, int *exit_code)
 {
     char err[512];
-    conn_ctx *ctx = conn_ctx_create(loop, o->net.host, o->net.port, err, sizeof err);
+    session_ctx *ctx = session_ctx_create(loop, o->net.host, o->net.port, err, sizeof err);
     if (!ctx) {
         fprintf(stderr, "cvre-client: %s\n", err);
         *exit_code = 1;
         return NULL;
     }
-    bots *b = xcalloc(1, sizeof *b);
+    bots *b = cvre_xcalloc(1, sizeof *b);
     b->loop = loop;
     b->ctx = ctx;
     b->o = *o;
-    b->bot = xcalloc(o->count, sizeof *b->bot);
+    b->bot = cvre_xcalloc(o->count, sizeof *b->bot);
     for (unsigned i = 0; i < o->count; i++) {
         b->bot[i].swarm = b;
         b->bot[i].idx = i;
@@ -398,9 +398,9 @@ bots *bots_create(ev_loop *loop, const bots_opts *o, int *exit_code)
     b->rng = ((uint64_t)time(NULL) << 20 ^ (uint64_t)getpid()) | 1u;
     b->period_ns = (uint64_t)((double)NS_PER_S / o->rate);
     b->t0 = b->cycle_at = ev_clock(loop);
-    b->tick_timer = conn_timer_start(b->loop, 0, BOTS_TICK_NS, on_tick, b);
-    b->stats_timer = conn_timer_start(b->loop, BOTS_STATS_NS, BOTS_STATS_NS, on_stats, b);
-    b->end_timer = conn_timer_start(b->loop, (uint64_t)(o->duration * (double)NS_PER_S), 0, on_duration, b);
+    b->tick_timer = session_timer_start(b->loop, 0, BOTS_TICK_NS, on_tick, b);
+    b->stats_timer = session_timer_start(b->loop, BOTS_STATS_NS, BOTS_STATS_NS, on_stats, b);
+    b->end_timer = session_timer_start(b->loop, (uint64_t)(o->duration * (double)NS_PER_S), 0, on_duration, b);
     b->linger_timer = -1;
     return b;
 }
@@ -419,13 +419,13 @@ void bots_free(bots *b)
 {
     if (!b)
         return;
-    conn_timer_stop(b->loop, &b->tick_timer);
-    conn_timer_stop(b->loop, &b->stats_timer);
-    conn_timer_stop(b->loop, &b->end_timer);
-    conn_timer_stop(b->loop, &b->linger_timer);
+    session_timer_stop(b->loop, &b->tick_timer);
+    session_timer_stop(b->loop, &b->stats_timer);
+    session_timer_stop(b->loop, &b->end_timer);
+    session_timer_stop(b->loop, &b->linger_timer);
     for (unsigned i = 0; i < b->o.count; i++)
-        conn_free(b->bot[i].c);
-    conn_ctx_free(b->ctx);
+        session_free(b->bot[i].c);
+    session_ctx_free(b->ctx);
     free(b->bot);
     free(b);
 }

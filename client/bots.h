@@ -10,13 +10,13 @@
 #ifndef CVRE_CLIENT_BOTS_H
 #define CVRE_CLIENT_BOTS_H
 
-#include "conn.h"
+#include "session.h"
 #include "ev.h"
 
 enum bots_pattern { BOTS_RANDOM_WALK, BOTS_CIRCLE };
 
 typedef struct bots_opts {
-    conn_params net;    /* net.name is the name prefix */
+    session_params net;    /* net.name is the name prefix */
     double rate;        /* moves per second per bot */
     unsigned count;     /* bots */
     int pattern;        /* enum bots_pattern */

@@ -6,6 +6,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "utf8.h"
+
 /* Each line is built with stdio's buffer and flushed whole at its end, so
  * one event never reaches the reader in two pieces. */
 static void begin(const char *event, int bot)
@@ -81,7 +83,7 @@ static void put_string(const char *key, const char *s, size_t len)
             i++;
         } else {
             uint32_t cp;
-            size_t k = proto_utf8_next(p + i, len - i, &cp);
+            size_t k = utf8_next(p + i, len - i, &cp);
             if (k == 0) {
                 fputs("\\ufffd", stdout);
                 i++;
@@ -265,20 +267,20 @@ void events_message(const proto_msg *m, uint64_t now_us)
     }
 }
 
-int events_conn_end(int bot, const conn_end *end, const char *peer)
+int events_conn_end(int bot, const session_end *end, const char *peer)
 {
     char text[PROTO_MESSAGE_MAX + 100];
     unsigned code = 0;
-    if (end->after_bye && end->kind == CONN_END_SOCKET)
+    if (end->after_bye && end->kind == SESSION_END_SOCKET)
         return 0; /* a reset after our bye is just how some servers close */
     switch (end->kind) {
-    case CONN_END_CONNECT:
+    case SESSION_END_CONNECT:
         snprintf(text, sizeof text, "client: cannot connect to %s: %s", peer, strerror(end->code));
         break;
-    case CONN_END_SOCKET:
+    case SESSION_END_SOCKET:
         snprintf(text, sizeof text, "client: connection to %s failed: %s", peer, strerror(end->code));
         break;
-    case CONN_END_PROTO:
+    case SESSION_END_PROTO:
         snprintf(text, sizeof text, "client: bad frame from server: %s", proto_strerror(end->code));
         code = (unsigned)end->code;
         break;

@@ -10,7 +10,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "conn.h"
+#include "session.h"
 #include "proto.h"
 
 /* Totals a swarm reports in its stats and summary lines. */
@@ -38,7 +38,7 @@ void events_closed(int bot);
  * A socket error after our bye counts as a clean end. Returns 1 if it
  * printed an error, 0 for a clean end.
  */
-int events_conn_end(int bot, const conn_end *end, const char *peer);
+int events_conn_end(int bot, const session_end *end, const char *peer);
 
 /* A script command finished; pos is the last authoritative own position. */
 void events_done(const char *command, const float pos[3]);

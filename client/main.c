@@ -36,7 +36,7 @@
 #define SPARE_FDS 64
 
 typedef struct options {
-    conn_params net;
+    session_params net;
     int name_given;
     double rate;
     const char *script;
@@ -328,7 +328,7 @@ static void on_signal(ev_loop *loop, int fd, unsigned events, void *data)
 
 /* A password of 1..PROTO_PASSWORD_MAX bytes into cred. 0, or 2 with a
  * message (never the password). */
-static int set_password(conn_credential *cred, const char *pw)
+static int set_password(session_credential *cred, const char *pw)
 {
     size_t n = strlen(pw);
 
@@ -343,7 +343,7 @@ static int set_password(conn_credential *cred, const char *pw)
 }
 
 /* Asks for the password of name on the terminal, without echo. */
-static int ask_password(const char *name, conn_credential *cred)
+static int ask_password(const char *name, session_credential *cred)
 {
     char line[PROTO_PASSWORD_MAX + 2];
     struct termios old, quiet;
@@ -382,7 +382,7 @@ static int ask_password(const char *name, conn_credential *cred)
 /* What the join carries: a resume token (CVRE_TOKEN), a password
  * (CVRE_PASSWORD, or asked for with --login), or nothing (a guest).
  * 0, or 2 with a message. */
-static int login_credential(const options *o, conn_credential *cred)
+static int login_credential(const options *o, session_credential *cred)
 {
     const char *token = getenv("CVRE_TOKEN"), *pw = getenv("CVRE_PASSWORD");
 

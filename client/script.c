@@ -16,6 +16,7 @@
 #include "alloc.h"
 #include "events.h"
 #include "log.h"
+#include "utf8.h"
 
 #define NS_PER_MS 1000000ull
 #define NS_PER_S 1000000000ull
@@ -197,7 +198,7 @@ static int object_name_ok(const char *name)
         return 0;
     for (size_t i = 0; i < n;) {
         uint32_t cp;
-        size_t k = proto_utf8_next((const uint8_t *)name + i, n - i, &cp);
+        size_t k = utf8_next((const uint8_t *)name + i, n - i, &cp);
         if (k == 0 || cp < 0x20u || cp == 0x7fu)
             return 0;
         i += k;
@@ -310,7 +311,7 @@ static int parse_object_cmd(char **w, int n, const char *usage, script_cmd *cmd,
         }
         if (parse_object_opts(w + 2, n - 2, usage, cmd, err, errlen) < 0)
             return -1;
-        cmd->file = xmalloc(strlen(w[1]) + 1);
+        cmd->file = cvre_xmalloc(strlen(w[1]) + 1);
         strcpy(cmd->file, w[1]);
         return 0;
     }
@@ -395,8 +396,8 @@ void script_cmd_clear(script_cmd *cmd)
 
 struct script {
     ev_loop *loop;
-    conn_ctx *ctx;
-    conn *c;
+    session_ctx *ctx;
+    session *c;
     double rate;
     uint64_t period_ns;
     const char *source; /* for messages: the file name or "stdin" */
@@ -487,7 +488,7 @@ static const char *op_name(int op)
  * its strings); it is no longer running. */
 static void cmd_release(script *s)
 {
-    conn_timer_stop(s->loop, &s->cmd_timer);
+    session_timer_stop(s->loop, &s->cmd_timer);
     if (s->imp_fd >= 0) {
         close(s->imp_fd);
         s->imp_fd = -1;
@@ -503,7 +504,7 @@ static void cmd_release(script *s)
 static void cmd_done(script *s)
 {
     if (s->cur.op == SCRIPT_MOVE || s->cur.op == SCRIPT_WALK || s->cur.op == SCRIPT_WAIT)
-        events_done(op_name(s->cur.op), conn_get_view(s->c)->pos);
+        events_done(op_name(s->cur.op), session_get_view(s->c)->pos);
     cmd_release(s);
 }
 
@@ -574,7 +575,7 @@ static void objects_put(script *s, uint32_t id, float yaw, float scale)
     if (i == s->n_objs || s->objs[i].id != id) {
         if (s->n_objs == s->cap_objs) {
             s->cap_objs = s->cap_objs ? s->cap_objs * 2 : 64;
-            s->objs = xrealloc(s->objs, s->cap_objs * sizeof *s->objs);
+            s->objs = cvre_xrealloc(s->objs, s->cap_objs * sizeof *s->objs);
         }
         memmove(s->objs + i + 1, s->objs + i, (s->n_objs - i) * sizeof *s->objs);
         s->n_objs++;
@@ -604,7 +605,7 @@ static void name_from_path(const char *path, char out[PROTO_OBJECT_NAME_MAX + 1]
     size_t n = strlen((const char *)base), o = 0;
     for (size_t i = 0; i < n;) {
         uint32_t cp;
-        size_t k = proto_utf8_next(base + i, n - i, &cp);
+        size_t k = utf8_next(base + i, n - i, &cp);
         int bad = k == 0 || cp < 0x20u || cp == 0x7fu;
         size_t w = bad ? 1 : k;
         if (o + w > PROTO_OBJECT_NAME_MAX)
@@ -666,7 +667,7 @@ static float yaw_radians(double deg) { return (float)(fmod(deg, 360.0) * (PI / 1
 static int import_abort(script *s)
 {
     proto_upload_end e = {.upload_id = s->imp_id, .at = {.scale = 1.0f}};
-    if (conn_send_upload_end(s->c, &e) < 0)
+    if (session_send_upload_end(s->c, &e) < 0)
         return -1;
     close(s->imp_fd);
     s->imp_fd = -1;
@@ -680,14 +681,14 @@ static int import_abort(script *s)
  * Sends what is next of the running import, up to IMPORT_FRAMES_PER_WAKEUP
  * frames and only while the backlog is empty, then asks for an on_writable
  * call to go on. Returns 0, or -1 after reporting a local read failure (the
- * caller ends the command). A conn that cannot send any more is left to
+ * caller ends the command). A session that cannot send any more is left to
  * on_close, which ends the run.
  */
 static int import_pump(script *s)
 {
     for (int budget = IMPORT_FRAMES_PER_WAKEUP; s->imp_phase != IMPORT_WAIT; budget--) {
-        if (budget == 0 || conn_out_pending(s->c) > 0) {
-            conn_want_writable(s->c);
+        if (budget == 0 || session_out_pending(s->c) > 0) {
+            session_want_writable(s->c);
             return 0;
         }
         int rc;
@@ -702,12 +703,12 @@ static int import_pump(script *s)
                                     .name = {name, (uint32_t)strlen(name)},
                                     .format = {format, (uint32_t)strlen(format)},
                                     .up_axis = (uint8_t)s->cur.up_axis, .unit_scale = (float)s->cur.unit_scale};
-            rc = conn_send_upload_begin(s->c, &b);
+            rc = session_send_upload_begin(s->c, &b);
             if (rc == 0) {
                 /* Chunks wait for this probe's pong: a refused BEGIN (too
                  * big, one upload at a time) is answered before it, and
                  * chunks sent meanwhile would each be refused too. */
-                conn_send_ping(s->c, probe_stamp(s, 0));
+                session_send_ping(s->c, probe_stamp(s, 0));
                 s->imp_phase = IMPORT_CHUNKS;
             }
         } else if (s->imp_phase == IMPORT_CHUNKS) {
@@ -724,14 +725,14 @@ static int import_pump(script *s)
                           k < 0 ? strerror(errno) : "the file shrank while it was being sent");
                 return import_abort(s);
             }
-            rc = conn_send_upload_chunk(s->c, s->imp_id, s->imp_off, s->chunk, (uint32_t)k);
+            rc = session_send_upload_chunk(s->c, s->imp_id, s->imp_off, s->chunk, (uint32_t)k);
             if (rc == 0) {
                 s->imp_off += (uint32_t)k;
                 if (s->imp_off == s->imp_size)
                     s->imp_phase = IMPORT_END;
                 else if (s->imp_off >= s->imp_probe_at) {
                     /* Fits: the backlog holds at most this chunk's rest. */
-                    conn_send_ping(s->c, probe_stamp(s, s->imp_off));
+                    session_send_ping(s->c, probe_stamp(s, s->imp_off));
                     s->imp_probe_at = s->imp_off + IMPORT_PROBE_BYTES;
                 }
             }
@@ -739,7 +740,7 @@ static int import_pump(script *s)
             proto_upload_end e = {.upload_id = s->imp_id,
                                   .at = {.pos = {(float)s->cur.arg[0], (float)s->cur.arg[1], (float)s->cur.arg[2]},
                                          .yaw = yaw_radians(s->cur.yaw_deg), .scale = (float)s->cur.size}};
-            rc = conn_send_upload_end(s->c, &e);
+            rc = session_send_upload_end(s->c, &e);
             if (rc == 0) {
                 s->imp_phase = IMPORT_WAIT;
                 close(s->imp_fd);
@@ -747,11 +748,11 @@ static int import_pump(script *s)
             }
         }
         if (rc == -ENOBUFS) {
-            conn_want_writable(s->c);
+            session_want_writable(s->c);
             return 0;
         }
         if (rc < 0)
-            return 0; /* the conn is ending; on_close follows */
+            return 0; /* the session is ending; on_close follows */
         s->t_progress = ev_now(s->loop);
     }
     return 0;
@@ -768,7 +769,7 @@ static void import_probed(script *s, uint64_t stamp)
     s->imp_begun = 1;
     s->imp_acked = off;
     s->t_progress = ev_now(s->loop);
-    if (conn_out_pending(s->c) == 0 && import_pump(s) < 0)
+    if (session_out_pending(s->c) == 0 && import_pump(s) < 0)
         obj_finish(s, "failed", 0);
 }
 
@@ -802,7 +803,7 @@ static int import_start(script *s)
         s->imp_probe_at = IMPORT_PROBE_BYTES;
         s->imp_phase = IMPORT_BEGIN;
         s->t_progress = ev_now(s->loop);
-        s->cmd_timer = conn_timer_start(s->loop, IMPORT_CHECK_NS, IMPORT_CHECK_NS, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, IMPORT_CHECK_NS, IMPORT_CHECK_NS, on_cmd_timer, s);
         if (import_pump(s) == 0)
             return 1;
     }
@@ -815,7 +816,7 @@ static void on_linger(ev_loop *loop, void *data)
     script *s = data;
     (void)loop;
     s->linger_timer = -1;
-    conn_close(s->c);
+    session_close(s->c);
 }
 
 /* Says bye and gives the server QUIT_LINGER_NS to close; abandons any
@@ -826,9 +827,9 @@ static void quit(script *s)
         return;
     s->quitting = 1;
     cmd_release(s);
-    if (conn_bye(s->c, PROTO_BYE_QUIT))
+    if (session_bye(s->c, PROTO_BYE_QUIT))
         events_bye_sent(PROTO_BYE_QUIT);
-    s->linger_timer = conn_timer_start(s->loop, QUIT_LINGER_NS, 0, on_linger, s);
+    s->linger_timer = session_timer_start(s->loop, QUIT_LINGER_NS, 0, on_linger, s);
 }
 
 /* One step of a move: the next point on the straight line from the last
@@ -839,19 +840,19 @@ static void quit(script *s)
  * arrives or gives up. */
 static void move_step(script *s)
 {
-    double step = conn_get_view(s->c)->welcome.max_speed / s->rate;
+    double step = session_get_view(s->c)->welcome.max_speed / s->rate;
     double d = dist3(s->target, s->base);
     float next[3];
     for (int i = 0; i < 3; i++)
         next[i] = d <= step ? s->target[i] : (float)(s->base[i] + (s->target[i] - s->base[i]) * (step / d));
-    if (conn_send_move(s->c, next))
+    if (session_send_move(s->c, next))
         memcpy(s->base, next, sizeof next);
 }
 
 /* True when the move is over: arrived, stalled or out of time. */
 static int move_over(script *s, uint64_t now)
 {
-    double d = dist3(conn_get_view(s->c)->pos, s->target);
+    double d = dist3(session_get_view(s->c)->pos, s->target);
     if (d <= MOVE_REACHED_M)
         return 1;
     if (d < s->best - MOVE_PROGRESS_M) {
@@ -868,7 +869,7 @@ static void walk_step(script *s, uint64_t now)
     double f = (double)(s->walk_k + 1) / s->walk_n;
     float next[3] = {(float)(s->from[0] + f * s->cur.arg[0]), s->from[1],
                      (float)(s->from[2] + f * s->cur.arg[1])};
-    uint32_t seq = conn_send_move(s->c, next);
+    uint32_t seq = session_send_move(s->c, next);
     if (!seq)
         return; /* backlog full: the same point again next period */
     if (++s->walk_k == s->walk_n) {
@@ -880,7 +881,7 @@ static void walk_step(script *s, uint64_t now)
 static int walk_over(const script *s, uint64_t now)
 {
     return s->walk_k == s->walk_n &&
-           (conn_get_view(s->c)->ack >= s->walk_seq || now - s->t_sent >= WALK_ACK_WAIT_NS);
+           (session_get_view(s->c)->ack >= s->walk_seq || now - s->t_sent >= WALK_ACK_WAIT_NS);
 }
 
 /* Paces move and walk at the rate; ends wait and ping when they run out. */
@@ -932,7 +933,7 @@ static void on_cmd_timer(ev_loop *loop, void *data)
  * failed ping) ends here without advancing, which advance() does. */
 static void cmd_start(script *s, const script_cmd *cmd)
 {
-    const conn_view *v = conn_get_view(s->c);
+    const session_view *v = session_get_view(s->c);
     uint64_t now = ev_now(s->loop);
     s->cur = *cmd;
     s->running = 1;
@@ -949,7 +950,7 @@ static void cmd_start(script *s, const script_cmd *cmd)
             return;
         }
         move_step(s);
-        s->cmd_timer = conn_timer_start(s->loop, s->period_ns, s->period_ns, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, s->period_ns, s->period_ns, on_cmd_timer, s);
         break;
     case SCRIPT_WALK: {
         double n = round(cmd->arg[2] * s->rate);
@@ -957,20 +958,20 @@ static void cmd_start(script *s, const script_cmd *cmd)
         s->walk_k = 0;
         s->walk_n = n < 1.0 ? 1u : (unsigned)n;
         walk_step(s, now);
-        s->cmd_timer = conn_timer_start(s->loop, s->period_ns, s->period_ns, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, s->period_ns, s->period_ns, on_cmd_timer, s);
         break;
     }
     case SCRIPT_WAIT:
-        s->cmd_timer = conn_timer_start(s->loop, (uint64_t)(cmd->arg[0] * (double)NS_PER_MS), 0, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, (uint64_t)(cmd->arg[0] * (double)NS_PER_MS), 0, on_cmd_timer, s);
         break;
     case SCRIPT_PING:
         s->ping_stamp = ev_clock(s->loop) / 1000u;
-        if (conn_send_ping(s->c, s->ping_stamp) < 0) {
+        if (session_send_ping(s->c, s->ping_stamp) < 0) {
             log_warn("ping not sent: output backlog full");
             cmd_release(s);
             return;
         }
-        s->cmd_timer = conn_timer_start(s->loop, PING_WAIT_NS, 0, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, PING_WAIT_NS, 0, on_cmd_timer, s);
         break;
     case SCRIPT_IMPORT:
         import_start(s);
@@ -981,23 +982,23 @@ static void cmd_start(script *s, const script_cmd *cmd)
                                 .at = {.pos = {(float)cmd->arg[0], (float)cmd->arg[1], (float)cmd->arg[2]},
                                        .yaw = cmd->has_yaw ? yaw_radians(cmd->yaw_deg) : k ? k->yaw : 0.0f,
                                        .scale = cmd->has_size ? (float)cmd->size : k ? k->scale : 1.0f}};
-        int rc = conn_send_object_place(s->c, &p);
+        int rc = session_send_object_place(s->c, &p);
         if (rc < 0) {
             obj_error("place %" PRIu32 ": not sent: %s", cmd->object_id, strerror(-rc));
             obj_done(s, "failed", 0);
             return;
         }
-        s->cmd_timer = conn_timer_start(s->loop, OBJECT_WAIT_NS, 0, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, OBJECT_WAIT_NS, 0, on_cmd_timer, s);
         break;
     }
     case SCRIPT_REMOVE: {
-        int rc = conn_send_object_remove(s->c, cmd->object_id);
+        int rc = session_send_object_remove(s->c, cmd->object_id);
         if (rc < 0) {
             obj_error("remove %" PRIu32 ": not sent: %s", cmd->object_id, strerror(-rc));
             obj_done(s, "failed", 0);
             return;
         }
-        s->cmd_timer = conn_timer_start(s->loop, OBJECT_WAIT_NS, 0, on_cmd_timer, s);
+        s->cmd_timer = session_timer_start(s->loop, OBJECT_WAIT_NS, 0, on_cmd_timer, s);
         break;
     }
     default:
@@ -1011,7 +1012,7 @@ static void cmd_start(script *s, const script_cmd *cmd)
  * the input is over and the queue empty. */
 static void advance(script *s)
 {
-    while (!s->running && !s->quitting && conn_state(s->c) == CONN_JOINED) {
+    while (!s->running && !s->quitting && session_state(s->c) == SESSION_JOINED) {
         if (s->q_head == s->q_len) {
             if (s->input_done)
                 quit(s);
@@ -1032,10 +1033,10 @@ static void on_start(ev_loop *loop, void *data)
     advance(s);
 }
 
-static void on_msg(conn *c, const proto_msg *m, void *data)
+static void on_msg(session *c, const proto_msg *m, void *data)
 {
     script *s = data;
-    const conn_view *v = conn_get_view(c);
+    const session_view *v = session_get_view(c);
     uint64_t now = ev_clock(s->loop);
     if (m->type == PROTO_PONG && (m->u.ping.stamp & IMPORT_PROBE_MARK)) {
         import_probed(s, m->u.ping.stamp);
@@ -1047,7 +1048,7 @@ static void on_msg(conn *c, const proto_msg *m, void *data)
         /* The world's objects follow the join; letting them in first (the
          * rest of this read, at least) gives a first place command the
          * current yaw and size to keep. */
-        s->start_timer = conn_timer_start(s->loop, 0, 0, on_start, s);
+        s->start_timer = session_timer_start(s->loop, 0, 0, on_start, s);
         break;
     case PROTO_SNAPSHOT:
         if (!s->running)
@@ -1092,7 +1093,7 @@ static void on_msg(conn *c, const proto_msg *m, void *data)
 }
 
 /* Asked for by import_pump(): the backlog has drained. */
-static void on_writable(conn *c, void *data)
+static void on_writable(session *c, void *data)
 {
     script *s = data;
     (void)c;
@@ -1101,28 +1102,28 @@ static void on_writable(conn *c, void *data)
         obj_finish(s, "failed", 0);
 }
 
-static void on_close(conn *c, const conn_end *end, void *data)
+static void on_close(session *c, const session_end *end, void *data)
 {
     script *s = data;
     (void)c;
-    if (events_conn_end(-1, end, conn_ctx_peer(s->ctx)))
+    if (events_conn_end(-1, end, session_ctx_peer(s->ctx)))
         fail(s, 1);
     events_closed(-1);
     if (!s->quitting)
         fail(s, 1);
     cmd_release(s);
-    conn_timer_stop(s->loop, &s->linger_timer);
-    conn_timer_stop(s->loop, &s->start_timer);
+    session_timer_stop(s->loop, &s->linger_timer);
+    session_timer_stop(s->loop, &s->start_timer);
     ev_stop(s->loop);
 }
 
-static const conn_handler handler = {.on_msg = on_msg, .on_close = on_close, .on_writable = on_writable};
+static const session_handler handler = {.on_msg = on_msg, .on_close = on_close, .on_writable = on_writable};
 
 static void on_keepalive(ev_loop *loop, void *data)
 {
     script *s = data;
     (void)loop;
-    conn_keepalive(s->c);
+    session_keepalive(s->c);
 }
 
 /* ---- input ------------------------------------------------------------- */
@@ -1131,7 +1132,7 @@ static void push(script *s, const script_cmd *cmd)
 {
     if (s->q_len == s->q_cap) {
         s->q_cap = s->q_cap ? s->q_cap * 2 : 16;
-        s->q = xrealloc(s->q, s->q_cap * sizeof *s->q);
+        s->q = cvre_xrealloc(s->q, s->q_cap * sizeof *s->q);
     }
     s->q[s->q_len++] = *cmd;
 }
@@ -1251,7 +1252,7 @@ static void on_input(ev_loop *loop, int fd, unsigned events, void *data)
 
 script *script_create(ev_loop *loop, const script_opts *o, int *exit_code)
 {
-    script *s = xcalloc(1, sizeof *s);
+    script *s = cvre_xcalloc(1, sizeof *s);
     s->loop = loop;
     s->rate = o->rate;
     s->period_ns = (uint64_t)((double)NS_PER_S / o->rate);
@@ -1288,16 +1289,16 @@ script *script_create(ev_loop *loop, const script_opts *o, int *exit_code)
     }
 
     char err[512];
-    s->ctx = conn_ctx_create(loop, o->net.host, o->net.port, err, sizeof err);
+    s->ctx = session_ctx_create(loop, o->net.host, o->net.port, err, sizeof err);
     if (!s->ctx) {
         fprintf(stderr, "cvre-client: %s\n", err);
         *exit_code = 1;
         script_free(s);
         return NULL;
     }
-    s->c = conn_open(s->ctx, o->net.name, o->net.box, &handler, s);
-    conn_set_credential(s->c, &o->login);
-    s->keepalive_timer = conn_timer_start(s->loop, KEEPALIVE_CHECK_NS, KEEPALIVE_CHECK_NS, on_keepalive, s);
+    s->c = session_open(s->ctx, o->net.name, o->net.box, &handler, s);
+    session_set_credential(s->c, &o->login);
+    s->keepalive_timer = session_timer_start(s->loop, KEEPALIVE_CHECK_NS, KEEPALIVE_CHECK_NS, on_keepalive, s);
     prompt(s);
     return s;
 }
@@ -1306,7 +1307,7 @@ void script_interrupt(script *s)
 {
     input_over(s);
     if (s->quitting)
-        conn_close(s->c);
+        session_close(s->c);
     else
         quit(s);
 }
@@ -1319,11 +1320,11 @@ void script_free(script *s)
         return;
     input_over(s);
     cmd_release(s);
-    conn_timer_stop(s->loop, &s->keepalive_timer);
-    conn_timer_stop(s->loop, &s->linger_timer);
-    conn_timer_stop(s->loop, &s->start_timer);
-    conn_free(s->c);
-    conn_ctx_free(s->ctx);
+    session_timer_stop(s->loop, &s->keepalive_timer);
+    session_timer_stop(s->loop, &s->linger_timer);
+    session_timer_stop(s->loop, &s->start_timer);
+    session_free(s->c);
+    session_ctx_free(s->ctx);
     for (size_t i = s->q_head; i < s->q_len; i++)
         script_cmd_clear(&s->q[i]);
     free(s->q);

@@ -10,7 +10,7 @@
 #ifndef CVRE_CLIENT_SCRIPT_H
 #define CVRE_CLIENT_SCRIPT_H
 
-#include "conn.h"
+#include "session.h"
 #include "ev.h"
 
 /* Longest command line; longer ones are an error, not silently cut. */
@@ -56,10 +56,10 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
 void script_cmd_clear(script_cmd *cmd);
 
 typedef struct script_opts {
-    conn_params net;
+    session_params net;
     double rate;      /* moves per second while walking */
     const char *file; /* NULL: standard input */
-    conn_credential login; /* what the join carries */
+    session_credential login; /* what the join carries */
 } script_opts;
 
 typedef struct script script;

@@ -10,6 +10,8 @@
  * once, and the status always names the first problem in field order.
  */
 #include "proto.h"
+#include "le.h"
+#include "utf8.h"
 
 #include <assert.h>
 #include <string.h>
@@ -28,19 +30,7 @@ _Static_assert(PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX) - 4u <= PROTO_MAX_
 #define SNAP_COUNT_AT (PROTO_HEADER_SIZE + 8u)
 #define SNAP_ENTRIES_AT (PROTO_HEADER_SIZE + PROTO_SNAPSHOT_HEAD_SIZE)
 
-/* ---- little-endian loads and stores ---------------------------------- */
-
-static inline uint16_t ld_u16(const uint8_t *p) { return (uint16_t)(p[0] | p[1] << 8); }
-
-static inline uint32_t ld_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
-static inline uint64_t ld_u64(const uint8_t *p)
-{
-    return (uint64_t)ld_u32(p) | (uint64_t)ld_u32(p + 4) << 32;
-}
+/* ---- stores that advance a cursor, over le.h ---------------------------- */
 
 static inline float bits_to_f32(uint32_t b)
 {
@@ -62,31 +52,26 @@ static inline uint8_t *st_u8(uint8_t *p, uint8_t v)
 
 static inline uint8_t *st_u16(uint8_t *p, uint16_t v)
 {
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
+    le_put_u16(p, v);
     return p + 2;
 }
 
 static inline uint8_t *st_u32(uint8_t *p, uint32_t v)
 {
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
+    le_put_u32(p, v);
     return p + 4;
 }
 
 static inline uint8_t *st_u64(uint8_t *p, uint64_t v)
 {
-    st_u32(p, (uint32_t)v);
-    return st_u32(p + 4, (uint32_t)(v >> 32));
+    le_put_u64(p, v);
+    return p + 8;
 }
 
 static inline uint8_t *st_f32(uint8_t *p, float v)
 {
-    uint32_t b;
-    memcpy(&b, &v, sizeof b);
-    return st_u32(p, b);
+    le_put_f32(p, v);
+    return p + 4;
 }
 
 static inline uint8_t *st_vec3(uint8_t *p, const float v[3])
@@ -108,42 +93,6 @@ static inline uint8_t *st_bytes(uint8_t *p, const void *src, size_t n)
 /* Rejecting overlong forms, surrogates and values past U+10FFFF (see
  * proto.h) keeps one byte form per character, so names compare equal
  * exactly when their bytes do. */
-size_t proto_utf8_next(const uint8_t *s, size_t n, uint32_t *cp)
-{
-    uint32_t c = s[0];
-    uint32_t min;
-    size_t len;
-
-    if (c < 0x80u) {
-        *cp = c;
-        return 1;
-    }
-    if ((c & 0xe0u) == 0xc0u) {
-        len = 2;
-        min = 0x80u;
-        c &= 0x1fu;
-    } else if ((c & 0xf0u) == 0xe0u) {
-        len = 3;
-        min = 0x800u;
-        c &= 0x0fu;
-    } else if ((c & 0xf8u) == 0xf0u) {
-        len = 4;
-        min = 0x10000u;
-        c &= 0x07u;
-    } else {
-        return 0;
-    }
-    for (size_t i = 1; i < len; i++) {
-        if (i >= n || (s[i] & 0xc0u) != 0x80u)
-            return 0;
-        c = c << 6 | (s[i] & 0x3fu);
-    }
-    if (c < min || c > 0x10ffffu || (c >= 0xd800u && c <= 0xdfffu))
-        return 0;
-    *cp = c;
-    return len;
-}
-
 /* Control characters would let a peer forge lines in our logs or mangle a
  * terminal; NUL would end the string early for C callers. */
 static inline int is_control(uint32_t cp) { return cp < 0x20u || cp == 0x7fu; }
@@ -156,7 +105,7 @@ static int text_ok(const uint8_t *s, size_t n)
 
     while (i < n) {
         uint32_t cp;
-        size_t k = proto_utf8_next(s + i, n - i, &cp);
+        size_t k = utf8_next(s + i, n - i, &cp);
 
         if (k == 0 || is_control(cp))
             return 0;
@@ -174,7 +123,7 @@ typedef struct reader {
 } reader;
 
 /* Records status unless an earlier failure already did: the first wins. */
-static void fail(reader *r, int status)
+static void reader_reject(reader *r, int status)
 {
     if (r->err == PROTO_OK)
         r->err = status;
@@ -208,19 +157,19 @@ static uint8_t get_u8(reader *r)
 static uint16_t get_u16(reader *r)
 {
     const uint8_t *p = take(r, 2);
-    return p ? ld_u16(p) : 0;
+    return p ? le_get_u16(p) : 0;
 }
 
 static uint32_t get_u32(reader *r)
 {
     const uint8_t *p = take(r, 4);
-    return p ? ld_u32(p) : 0;
+    return p ? le_get_u32(p) : 0;
 }
 
 static uint64_t get_u64(reader *r)
 {
     const uint8_t *p = take(r, 8);
-    return p ? ld_u64(p) : 0;
+    return p ? le_get_u64(p) : 0;
 }
 
 /* Every float on the wire must be finite: a NaN compares false with every
@@ -231,7 +180,7 @@ static float get_f32(reader *r)
     uint32_t b = get_u32(r);
 
     if (!bits_finite(b)) {
-        fail(r, PROTO_ERR_NOT_FINITE);
+        reader_reject(r, PROTO_ERR_NOT_FINITE);
         return 0.0f;
     }
     return bits_to_f32(b);
@@ -250,7 +199,7 @@ static void get_box(reader *r, float box[3])
     for (int i = 0; i < 3; i++) {
         box[i] = get_f32(r);
         if (!(box[i] >= PROTO_BOX_MIN && box[i] <= PROTO_BOX_MAX))
-            fail(r, PROTO_ERR_BAD_VALUE);
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
     }
 }
 
@@ -268,7 +217,7 @@ static proto_str get_str(reader *r, uint32_t min, uint32_t max)
     if (r->err != PROTO_OK)
         return s;
     if (n > r->left || n < min || n > max || !text_ok(r->p, n)) {
-        fail(r, PROTO_ERR_BAD_STRING);
+        reader_reject(r, PROTO_ERR_BAD_STRING);
         return s;
     }
     s.ptr = (const char *)take(r, n);
@@ -284,7 +233,7 @@ int proto_frame_parse(const uint8_t *buf, size_t avail, uint32_t max_len, proto_
 
     if (avail < 4)
         return PROTO_INCOMPLETE;
-    len = ld_u32(buf);
+    len = le_get_u32(buf);
     if (len < PROTO_LEN_MIN)
         return PROTO_ERR_FRAME_EMPTY;
     if (len > max_len)
@@ -293,7 +242,7 @@ int proto_frame_parse(const uint8_t *buf, size_t avail, uint32_t max_len, proto_
      * to a length the peer chose. */
     if (avail - 4 < len)
         return PROTO_INCOMPLETE;
-    f->type = ld_u16(buf + 4);
+    f->type = le_get_u16(buf + 4);
     f->payload = buf + PROTO_HEADER_SIZE;
     f->payload_len = len - 2;
     f->size = (size_t)len + 4;
@@ -304,7 +253,7 @@ static void decode_hello(reader *r, proto_hello *m)
 {
     m->magic = get_u32(r);
     if (m->magic != PROTO_MAGIC)
-        fail(r, PROTO_ERR_BAD_MAGIC);
+        reader_reject(r, PROTO_ERR_BAD_MAGIC);
     m->version = get_u16(r);
 }
 
@@ -321,22 +270,22 @@ static void decode_welcome(reader *r, proto_welcome *m)
         memcpy(m->token, token, PROTO_TOKEN_SIZE);
     m->tick_hz = get_u16(r);
     if (m->tick_hz == 0)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     m->aoi_radius = get_f32(r);
     if (!(m->aoi_radius > 0.0f))
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     m->max_speed = get_f32(r);
     if (!(m->max_speed >= 0.0f))
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     get_vec3(r, m->world_min);
     for (int i = 0; i < 3; i++) {
         m->world_max[i] = get_f32(r);
         if (!(m->world_max[i] >= m->world_min[i]))
-            fail(r, PROTO_ERR_BAD_VALUE);
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
     }
     m->idle_timeout_ms = get_u32(r);
     if (m->idle_timeout_ms == 0)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
 }
 
 static void decode_snapshot(reader *r, proto_snapshot *m)
@@ -362,7 +311,7 @@ static void get_transform(reader *r, proto_transform *t)
     t->yaw = get_f32(r);
     t->scale = get_f32(r);
     if (!(t->scale >= PROTO_SCALE_MIN && t->scale <= PROTO_SCALE_MAX))
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
 }
 
 /* A non-zero id: zero is kept free to mean "none" (object_info.upload_id). */
@@ -370,7 +319,7 @@ static uint32_t get_id(reader *r)
 {
     uint32_t id = get_u32(r);
     if (id == 0)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     return id;
 }
 
@@ -379,21 +328,21 @@ static void decode_upload_begin(reader *r, proto_upload_begin *m)
     m->upload_id = get_id(r);
     m->total_size = get_u32(r);
     if (m->total_size == 0)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     m->name = get_str(r, 1, PROTO_OBJECT_NAME_MAX);
     m->format = get_str(r, 0, PROTO_FORMAT_MAX);
     /* A format is a file extension: anything else is no format. */
     for (uint32_t i = 0; r->err == PROTO_OK && i < m->format.len; i++) {
         char ch = m->format.ptr[i];
         if (!((ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9')))
-            fail(r, PROTO_ERR_BAD_STRING);
+            reader_reject(r, PROTO_ERR_BAD_STRING);
     }
     m->up_axis = get_u8(r);
     if (m->up_axis > PROTO_UP_Z)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     m->unit_scale = get_f32(r);
     if (!(m->unit_scale >= PROTO_SCALE_MIN && m->unit_scale <= PROTO_SCALE_MAX))
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
 }
 
 static void decode_upload_chunk(reader *r, proto_upload_chunk *m)
@@ -402,7 +351,7 @@ static void decode_upload_chunk(reader *r, proto_upload_chunk *m)
     m->offset = get_u32(r);
     m->len = (uint32_t)r->left;
     if (r->err == PROTO_OK && (m->len == 0 || m->len > PROTO_CHUNK_MAX))
-        fail(r, m->len ? PROTO_ERR_BAD_VALUE : PROTO_ERR_SHORT);
+        reader_reject(r, m->len ? PROTO_ERR_BAD_VALUE : PROTO_ERR_SHORT);
     m->data = take(r, m->len);
 }
 
@@ -417,7 +366,7 @@ static void decode_object_info(reader *r, proto_object_info *m)
     m->tri_count = get_u32(r);
     m->box_count = get_u16(r);
     if (m->box_count > PROTO_OBJECT_BOXES_MAX)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     m->boxes = r->p;
     /* Each max is compared with its min right after it is read, as for
      * WELCOME's world bounds, so the status names the first bad field. */
@@ -428,7 +377,7 @@ static void decode_object_info(reader *r, proto_object_info *m)
         for (int k = 0; k < 3; k++) {
             float hi = get_f32(r);
             if (!(lo[k] <= hi))
-                fail(r, PROTO_ERR_BAD_VALUE);
+                reader_reject(r, PROTO_ERR_BAD_VALUE);
         }
     }
 }
@@ -440,7 +389,7 @@ static void decode_collision(reader *r, proto_collision *m)
     m->box_index = get_u16(r);
     m->inside = get_u8(r);
     if (m->inside > 1)
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     get_vec3(r, m->point);
     get_vec3(r, m->normal);
 }
@@ -463,7 +412,7 @@ static void decode_join(reader *r, proto_join *m)
         (m->credential == PROTO_CRED_PASSWORD ? m->secret_len < 1 || m->secret_len > PROTO_PASSWORD_MAX
          : m->credential == PROTO_CRED_TOKEN  ? m->secret_len != PROTO_RESUME_TOKEN_SIZE
                                               : 1))
-        fail(r, PROTO_ERR_BAD_VALUE);
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
     m->secret = take(r, m->secret_len);
 }
 
@@ -511,12 +460,12 @@ int proto_decode(const proto_frame *f, proto_msg *m)
         m->u.avatar_left.id = get_u32(r);
         m->u.avatar_left.reason = get_u8(r);
         if (m->u.avatar_left.reason > PROTO_LEFT_DISCONNECTED)
-            fail(r, PROTO_ERR_BAD_VALUE);
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
         break;
     case PROTO_ERROR:
         m->u.error.code = get_u16(r);
         if (m->u.error.code < PROTO_ERR_FRAME_EMPTY)
-            fail(r, PROTO_ERR_BAD_VALUE);
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
         m->u.error.message = get_str(r, 0, PROTO_MESSAGE_MAX);
         break;
     case PROTO_PING:
@@ -526,7 +475,7 @@ int proto_decode(const proto_frame *f, proto_msg *m)
     case PROTO_BYE:
         m->u.bye.reason = get_u8(r);
         if (m->u.bye.reason > PROTO_BYE_KICKED)
-            fail(r, PROTO_ERR_BAD_VALUE);
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
         break;
     case PROTO_OBJECT_UPLOAD_BEGIN:
         decode_upload_begin(r, &m->u.upload_begin);
@@ -553,7 +502,7 @@ int proto_decode(const proto_frame *f, proto_msg *m)
         m->u.object_rejected.request_id = get_u32(r);
         m->u.object_rejected.code = get_u16(r);
         if (m->u.object_rejected.code < PROTO_ERR_FRAME_EMPTY)
-            fail(r, PROTO_ERR_BAD_VALUE);
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
         m->u.object_rejected.message = get_str(r, 0, PROTO_MESSAGE_MAX);
         break;
     case PROTO_COLLISION:
@@ -572,9 +521,9 @@ void proto_snapshot_entry(const proto_snapshot *s, uint16_t i, proto_avatar *out
     const uint8_t *p = s->entries + (size_t)i * PROTO_SNAPSHOT_ENTRY_SIZE;
 
     assert(i < s->count);
-    out->id = ld_u32(p);
+    out->id = le_get_u32(p);
     for (int k = 0; k < 3; k++)
-        out->pos[k] = bits_to_f32(ld_u32(p + 4 + 4 * k));
+        out->pos[k] = bits_to_f32(le_get_u32(p + 4 + 4 * k));
 }
 
 void proto_object_box(const proto_object_info *o, uint16_t i, float min[3], float max[3])
@@ -583,8 +532,8 @@ void proto_object_box(const proto_object_info *o, uint16_t i, float min[3], floa
 
     assert(i < o->box_count);
     for (int k = 0; k < 3; k++) {
-        min[k] = bits_to_f32(ld_u32(p + 4 * k));
-        max[k] = bits_to_f32(ld_u32(p + 12 + 4 * k));
+        min[k] = bits_to_f32(le_get_u32(p + 4 * k));
+        max[k] = bits_to_f32(le_get_u32(p + 12 + 4 * k));
     }
 }
 
@@ -724,7 +673,7 @@ static size_t clean_message(uint8_t *dst, const char *src)
         n++;
     while (i < n && i < PROTO_MESSAGE_MAX) {
         uint32_t cp;
-        size_t k = proto_utf8_next(s + i, n - i, &cp);
+        size_t k = utf8_next(s + i, n - i, &cp);
 
         if (k == 0 || is_control(cp)) {
             dst[i++] = '?';

@@ -355,12 +355,6 @@ void proto_object_box(const proto_object_info *o, uint16_t i, float min[3], floa
 /* Short English description of a status code; never NULL. */
 const char *proto_strerror(int status);
 
-/* Decodes the UTF-8 character at s, of which n > 0 bytes are readable.
- * Returns its length in bytes and stores its code point in *cp, or returns
- * 0 when the bytes there are not one well-formed character (a stray
- * continuation byte, a cut sequence, an overlong form, a surrogate, a value
- * past U+10FFFF). */
-size_t proto_utf8_next(const uint8_t *s, size_t n, uint32_t *cp);
 
 /* Name of a message type for logs ("hello", "move"...), or "unknown". */
 const char *proto_type_name(uint16_t type);

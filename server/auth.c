@@ -97,7 +97,7 @@ static void *run_job(void *ctx, void *arg)
 {
     auth *a = ctx;
     auth_job *job = arg;
-    auth_result *r = xcalloc(1, sizeof *r);
+    auth_result *r = cvre_xcalloc(1, sizeof *r);
     int64_t id = 0;
     int rc = 0;
 
@@ -137,7 +137,7 @@ static void drop_job(void *job) { sodium_memzero(job, sizeof(auth_job)); }
 
 auth *auth_start(const char *db_path, char *err, size_t errlen)
 {
-    auth *a = xcalloc(1, sizeof *a);
+    auth *a = cvre_xcalloc(1, sizeof *a);
     worker_ops ops = {sizeof(auth_job), AUTH_QUEUE_MAX, run_job, a, drop_job, NULL};
 
     if (sodium_init() < 0) {

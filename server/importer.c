@@ -8,7 +8,7 @@
 #include "alloc.h"
 #include "db.h"
 #include "log.h"
-#include "scene/import_proc.h"
+#include "import_proc.h"
 #include "worker.h"
 
 /* Jobs waiting at once. Each holds a whole file (up to --max-upload), so the
@@ -103,7 +103,7 @@ static void *run_job(void *ctx, void *arg)
 {
     importer *im = ctx;
     import_job *job = arg;
-    import_result *r = xcalloc(1, sizeof *r);
+    import_result *r = cvre_xcalloc(1, sizeof *r);
 
     import_one(im, job, r);
     return r;
@@ -120,7 +120,7 @@ static void free_result(void *p)
 importer *importer_start(const char *db_path, const import_proc *proc, const importer_limits *limits, char *err,
                          size_t errlen)
 {
-    importer *im = xcalloc(1, sizeof *im);
+    importer *im = cvre_xcalloc(1, sizeof *im);
     worker_ops ops = {sizeof(import_job), IMPORTER_QUEUE_MAX, run_job, im, drop_job, free_result};
 
     im->proc = proc;

@@ -16,8 +16,8 @@
 #include <stdint.h>
 
 #include "proto.h"
-#include "scene/import_proc.h"
-#include "scene/scene.h"
+#include "import_proc.h"
+#include "scene.h"
 
 typedef struct importer importer;
 

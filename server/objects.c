@@ -17,7 +17,7 @@
 #include "alloc.h"
 #include "ecm.h"
 #include "log.h"
-#include "scene/import_proc.h"
+#include "import_proc.h"
 #include "serverInt.h"
 #include "srv_limits.h"
 
@@ -37,7 +37,7 @@ static int send_info(server *s, client *c, const scene_object *o, uint32_t uploa
     proto_writer w;
     if (server__out_begin(s, c, PROTO_SIZE_OBJECT_INFO(o->box_count), &w) < 0)
         return -1;
-    float(*lo)[3] = xmalloc(o->box_count * sizeof *lo), (*hi)[3] = xmalloc(o->box_count * sizeof *hi);
+    float(*lo)[3] = cvre_xmalloc(o->box_count * sizeof *lo), (*hi)[3] = cvre_xmalloc(o->box_count * sizeof *hi);
     for (uint32_t i = 0; i < o->box_count; i++) {
         memcpy(lo[i], o->world[i].min, sizeof lo[i]);
         memcpy(hi[i], o->world[i].max, sizeof hi[i]);
@@ -69,7 +69,7 @@ static void known_append(client *c, const scene_object *o)
 {
     if (c->nobjs == c->objs_cap) {
         c->objs_cap = c->objs_cap ? c->objs_cap * 2 : 64;
-        c->objs = xrealloc(c->objs, c->objs_cap * sizeof *c->objs);
+        c->objs = cvre_xrealloc(c->objs, c->objs_cap * sizeof *c->objs);
     }
     c->objs[c->nobjs++] = (known_object){o->id, o->slot, o->rev};
 }
@@ -120,16 +120,16 @@ static void view_scratch(server *s, uint32_t n)
 {
     uint32_t slots = scene_slots(s->scene);
     if (slots > s->obj_stamps) {
-        s->obj_stamp = xrealloc(s->obj_stamp, slots * sizeof *s->obj_stamp);
+        s->obj_stamp = cvre_xrealloc(s->obj_stamp, slots * sizeof *s->obj_stamp);
         memset(s->obj_stamp + s->obj_stamps, 0, (slots - s->obj_stamps) * sizeof *s->obj_stamp);
         s->obj_stamps = slots;
     }
     if (n > s->obj_found_cap) {
-        s->obj_found = xrealloc(s->obj_found, n * sizeof *s->obj_found);
+        s->obj_found = cvre_xrealloc(s->obj_found, n * sizeof *s->obj_found);
         s->obj_found_cap = n;
     }
     if (n > s->picks_cap) {
-        s->picks = xrealloc(s->picks, n * sizeof *s->picks);
+        s->picks = cvre_xrealloc(s->picks, n * sizeof *s->picks);
         s->picks_cap = n;
     }
 }
@@ -311,7 +311,7 @@ static void on_upload_chunk(server *s, client *c, const proto_upload_chunk *m)
         drop_upload(s, c);
         return;
     }
-    u->data = xrealloc(u->data, u->received + m->len);
+    u->data = cvre_xrealloc(u->data, u->received + m->len);
     memcpy(u->data + u->received, m->data, m->len);
     u->received += m->len;
 }
@@ -510,7 +510,7 @@ void objects__on_message(server *s, client *c, const proto_msg *m)
  * checked, or under a larger --world-size) is added, with a warning. */
 static int add_stored(server *s, const db_object *o)
 {
-    scene_box *boxes = xcalloc(o->box_count ? o->box_count : 1, sizeof *boxes);
+    scene_box *boxes = cvre_xcalloc(o->box_count ? o->box_count : 1, sizeof *boxes);
     for (uint32_t i = 0; i < o->box_count; i++) {
         memcpy(boxes[i].min, o->boxes[i], sizeof boxes[i].min);
         memcpy(boxes[i].max, o->boxes[i] + 3, sizeof boxes[i].max);
@@ -546,7 +546,7 @@ static int restore_one(void *ctx, const db_object *o)
                   (long long)o->id, o->name, o->owner);
         if (r->nbroken == r->cap) {
             r->cap = r->cap ? r->cap * 2 : 8;
-            r->broken = xrealloc(r->broken, r->cap * sizeof *r->broken);
+            r->broken = cvre_xrealloc(r->broken, r->cap * sizeof *r->broken);
         }
         r->broken[r->nbroken++] = o->id;
     } else if (rc < 0) {
@@ -600,7 +600,7 @@ static int name_add(world_load *wl, const char *name)
 {
     if (2 * (wl->nnames + 1) > wl->names_cap) {
         world_load grown = {.names_cap = wl->names_cap ? wl->names_cap * 2 : 64};
-        grown.names = xcalloc(grown.names_cap, sizeof *grown.names);
+        grown.names = cvre_xcalloc(grown.names_cap, sizeof *grown.names);
         for (uint32_t i = 0; i < wl->names_cap; i++)
             for (uint32_t j = wl->names[i] ? name_hash(wl->names[i]) : 0; wl->names[i]; j++)
                 if (!grown.names[j & (grown.names_cap - 1)]) {
@@ -614,7 +614,7 @@ static int name_add(world_load *wl, const char *name)
     for (uint32_t j = name_hash(name);; j++) {
         char **slot = &wl->names[j & (wl->names_cap - 1)];
         if (!*slot) {
-            *slot = xstrdup(name);
+            *slot = cvre_xstrdup(name);
             wl->nnames++;
             return 1;
         }
@@ -648,7 +648,7 @@ static uint8_t *slurp(const char *path, size_t max, size_t *len, char *err, size
     for (;;) {
         if (n == cap) {
             cap = cap ? cap * 2 : 65536;
-            buf = xrealloc(buf, cap);
+            buf = cvre_xrealloc(buf, cap);
         }
         size_t k = fread(buf + n, 1, cap - n, f);
         n += k;
@@ -686,8 +686,8 @@ static const import_mesh *world_model_mesh(server *s, world_load *wl, const char
     free(data);
     if (rc < 0)
         return NULL;
-    wl->models = xrealloc(wl->models, (wl->nmodels + 1) * sizeof *wl->models);
-    wl->models[wl->nmodels] = (world_model){xstrdup(path), opt->z_up, opt->unit_scale, mesh};
+    wl->models = cvre_xrealloc(wl->models, (wl->nmodels + 1) * sizeof *wl->models);
+    wl->models[wl->nmodels] = (world_model){cvre_xstrdup(path), opt->z_up, opt->unit_scale, mesh};
     return &wl->models[wl->nmodels++].mesh;
 }
 

@@ -112,7 +112,7 @@ static tracked *track(refiner *r, int64_t id)
     sqlite3_finalize(st);
     if (r->nobjs == r->cap) {
         r->cap = r->cap ? r->cap * 2 : 64;
-        r->objs = xrealloc(r->objs, r->cap * sizeof *r->objs);
+        r->objs = cvre_xrealloc(r->objs, r->cap * sizeof *r->objs);
     }
     memmove(r->objs + lo + 1, r->objs + lo, (r->nobjs - lo) * sizeof *r->objs);
     r->objs[lo] = t;
@@ -131,7 +131,7 @@ static int on_event(void *ctx, int64_t event_id, int64_t object_id, uint32_t ver
                   version, db_error(r->db));
         return 0;
     }
-    refiner_update *q = xmalloc(sizeof *q);
+    refiner_update *q = cvre_xmalloc(sizeof *q);
     *q = u;
     mailbox_put(r->updates, q);
     tracked *t = track(r, object_id);
@@ -157,8 +157,8 @@ static void add_point(tracked *t, const float xyz[3], uint32_t user)
     }
     if (t->n == t->cap) {
         t->cap = t->cap ? t->cap * 2 : 1024;
-        t->xyz = xrealloc(t->xyz, (size_t)t->cap * 3 * sizeof *t->xyz);
-        t->users = xrealloc(t->users, t->cap * sizeof *t->users);
+        t->xyz = cvre_xrealloc(t->xyz, (size_t)t->cap * 3 * sizeof *t->xyz);
+        t->users = cvre_xrealloc(t->users, t->cap * sizeof *t->users);
     }
     memcpy(t->xyz + 3 * (size_t)t->n, xyz, 3 * sizeof *xyz);
     t->users[t->n++] = user;
@@ -214,7 +214,7 @@ static int cmp_sig(const void *a, const void *b)
  * resolved against the version's boxes). Returns the clusters found, or -1. */
 static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nfound)
 {
-    int32_t *labels = xmalloc((t->n ? t->n : 1) * sizeof *labels);
+    int32_t *labels = cvre_xmalloc((t->n ? t->n : 1) * sizeof *labels);
     dbscan_result *res = NULL;
     float(*boxes)[6] = NULL;
     uint32_t nboxes = 0;
@@ -230,7 +230,7 @@ static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nf
         dbscan_result_free(res);
         return -1;
     }
-    *found = xrealloc(*found, (*nfound + k + 1) * sizeof **found);
+    *found = cvre_xrealloc(*found, (*nfound + k + 1) * sizeof **found);
     for (size_t i = 0; i < k; i++) {
         cluster_found *f = &(*found)[(*nfound)++];
         *f = (cluster_found){.object_id = t->id, .ecm_version = t->version, .cluster_id = (uint32_t)i,
@@ -245,7 +245,7 @@ static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nf
 /* The clusters found[0..k), in an order that does not depend on DBSCAN's. */
 static cluster_sig *signature(const cluster_found *f, size_t k)
 {
-    cluster_sig *sig = xcalloc(k ? k : 1, sizeof *sig); /* zeroed: compared bytewise */
+    cluster_sig *sig = cvre_xcalloc(k ? k : 1, sizeof *sig); /* zeroed: compared bytewise */
     for (size_t i = 0; i < k; i++) {
         sig[i].box = f[i].box;
         memcpy(sig[i].min, f[i].c.min, sizeof sig[i].min);
@@ -307,8 +307,8 @@ static void examine(refiner *r)
     cluster_found *found = NULL;
     size_t nfound = 0;
     /* Per object with clusters: where its clusters start in found. */
-    uint32_t *which = xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *which);
-    size_t *from = xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *from);
+    uint32_t *which = cvre_xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *which);
+    size_t *from = cvre_xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *from);
     uint32_t nwhich = 0;
     for (uint32_t i = 0; i < r->nobjs; i++) {
         tracked *t = &r->objs[i];
@@ -375,7 +375,7 @@ static void *run_thread(void *arg)
 
 refiner *refiner_start(const refiner_config *cfg, char *err, size_t errlen)
 {
-    refiner *r = xcalloc(1, sizeof *r);
+    refiner *r = cvre_xcalloc(1, sizeof *r);
     r->cfg = *cfg;
     r->feed_after = cfg->feed_after;
     r->updates = mailbox_create();

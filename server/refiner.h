@@ -14,7 +14,7 @@
  *     logged since the last look, keeps each object's points of its current
  *     version in memory, clusters the objects that got new points (DBSCAN),
  *     and for those with clusters records the run and writes a refined
- *     version (server/ecm/apply.h), which the feed then publishes.
+ *     version (server/pipeline/apply.h), which the feed then publishes.
  *     Collisions against a new version start that object's points afresh:
  *     they feed the next round, until no cluster remains.
  *

@@ -98,7 +98,7 @@ store_event *server__event_push(server *s, int kind, int64_t session)
 {
     if (s->nevents == s->events_cap) {
         s->events_cap = s->events_cap ? s->events_cap * 2 : 64;
-        s->events = xrealloc(s->events, s->events_cap * sizeof *s->events);
+        s->events = cvre_xrealloc(s->events, s->events_cap * sizeof *s->events);
     }
     store_event *e = &s->events[s->nevents++];
     memset(e, 0, sizeof *e);
@@ -616,7 +616,7 @@ static int known_reserve(client *c, uint32_t n)
     uint32_t cap = c->known_cap ? c->known_cap : 16;
     while (cap < n)
         cap *= 2;
-    c->known = xrealloc(c->known, cap * sizeof *c->known);
+    c->known = cvre_xrealloc(c->known, cap * sizeof *c->known);
     c->known_cap = cap;
     return 0;
 }
@@ -836,7 +836,7 @@ static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
         int one = 1, sndbuf = SRV_SOCKET_SNDBUF;
         setsockopt(cfd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
         setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
-        client *c = xcalloc(1, sizeof *c);
+        client *c = cvre_xcalloc(1, sizeof *c);
         if (conn_init(&c->c, cfd) < 0 || ev_io_add(loop, cfd, EV_READ, on_client_io, c) < 0) {
             log_error("%s refused: cannot register the connection", peer);
             if (s->cfg.max_per_address)
@@ -904,7 +904,7 @@ static void on_stats(ev_loop *loop, void *data)
                .timeouts = st->timeouts - b->timeouts, .slow_readers = st->slow_readers - b->slow_readers,
                .moves_dropped = st->moves_dropped - b->moves_dropped};
     double secs = (double)(ev_clock(loop) - st->interval_start_ns) * 1e-9;
-    uint32_t *sorted = xmalloc((st->nticks ? st->nticks : 1) * sizeof *sorted);
+    uint32_t *sorted = cvre_xmalloc((st->nticks ? st->nticks : 1) * sizeof *sorted);
     memcpy(sorted, st->tick_us, st->nticks * sizeof *sorted);
     qsort(sorted, st->nticks, sizeof *sorted, cmp_u32);
     double p50 = st->nticks ? sorted[st->nticks / 2] / 1000.0 : 0;
@@ -1061,7 +1061,7 @@ static int setup_signals(server *s, char *err, size_t errlen)
 
 server *server_create(const server_config *cfg, char *err, size_t errlen)
 {
-    server *s = xcalloc(1, sizeof *s);
+    server *s = cvre_xcalloc(1, sizeof *s);
     s->cfg = *cfg;
     s->listen_fd = s->signal_fd = -1;
     /* fds are handed out lowest first, so this bounds every client fd. */
@@ -1076,17 +1076,17 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
         snprintf(err, errlen, "cannot create the world (out of memory?)");
         goto fail;
     }
-    s->clients = xcalloc(cfg->max_clients, sizeof *s->clients);
-    s->write_list = xcalloc(cfg->max_clients, sizeof *s->write_list);
-    s->vis = xcalloc(SRV_AOI_MAX, sizeof *s->vis);
-    s->joined = xcalloc(SRV_AOI_MAX, sizeof *s->joined);
-    s->snap = xcalloc(SRV_AOI_MAX, sizeof *s->snap);
-    s->left = xcalloc(cfg->max_clients, sizeof *s->left);
-    s->by_slot = xcalloc(cfg->max_clients, sizeof *s->by_slot);
-    s->mark_id = xcalloc(cfg->max_clients, sizeof *s->mark_id);
-    s->mark_stamp = xcalloc(cfg->max_clients, sizeof *s->mark_stamp);
+    s->clients = cvre_xcalloc(cfg->max_clients, sizeof *s->clients);
+    s->write_list = cvre_xcalloc(cfg->max_clients, sizeof *s->write_list);
+    s->vis = cvre_xcalloc(SRV_AOI_MAX, sizeof *s->vis);
+    s->joined = cvre_xcalloc(SRV_AOI_MAX, sizeof *s->joined);
+    s->snap = cvre_xcalloc(SRV_AOI_MAX, sizeof *s->snap);
+    s->left = cvre_xcalloc(cfg->max_clients, sizeof *s->left);
+    s->by_slot = cvre_xcalloc(cfg->max_clients, sizeof *s->by_slot);
+    s->mark_id = cvre_xcalloc(cfg->max_clients, sizeof *s->mark_id);
+    s->mark_stamp = cvre_xcalloc(cfg->max_clients, sizeof *s->mark_stamp);
     s->st.tick_cap = (uint32_t)cfg->tick_hz * (cfg->stats_interval_ms / 1000u + 1u) * 2u;
-    s->st.tick_us = xcalloc(s->st.tick_cap, sizeof *s->st.tick_us);
+    s->st.tick_us = cvre_xcalloc(s->st.tick_cap, sizeof *s->st.tick_us);
 
     s->db = db_open(cfg->db_path, DB_READWRITE, err, errlen);
     if (!s->db)

@@ -9,7 +9,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "scene/import_proc.h"
+#include "import_proc.h"
 
 typedef struct server_config {
     const char *host;

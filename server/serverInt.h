@@ -18,7 +18,7 @@
 #include "proto.h"
 #include "ratelimit.h"
 #include "refiner.h"
-#include "scene/scene.h"
+#include "scene.h"
 #include "server.h"
 #include "world.h"
 

@@ -7,8 +7,8 @@
 #define CVRE_SRV_LIMITS_H
 
 #include "proto.h"
-#include "scene/import.h"
-#include "scene/move.h"
+#include "import.h"
+#include "move.h"
 
 /* Avatar ids are slot | generation << 16 (world.c), so slots fit in 16 bits. */
 #ifndef SRV_MAX_CLIENTS_LIMIT

@@ -13,8 +13,8 @@
 #include <stdint.h>
 
 #include "proto.h"
-#include "scene/move.h"
-#include "scene/scene.h"
+#include "move.h"
+#include "scene.h"
 
 typedef struct world world;
 

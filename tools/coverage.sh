@@ -20,7 +20,7 @@ tests=0
 echo "== $dir: coverage" >&2
 # Sources only: the tests, fuzz drivers, benchmarks and the generated
 # migrations file are not what is measured.
-gcovr -j 2 --root . --object-directory "$dir" --filter 'protocol/' --filter 'server/' \
+gcovr -j 2 --root . --object-directory "$dir" --filter 'base/' --filter 'protocol/' --filter 'algo/' --filter 'server/' \
       --filter 'db/' --filter 'client/' --exclude "$dir/" \
       --json-summary-pretty --output "$dir/coverage.json"
 check=0

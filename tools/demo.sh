@@ -5,11 +5,22 @@
 # Ctrl-C stops everything cleanly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+say() { echo "cvre demo: $*" >&2; }
+say "checking the packages it needs (tools/deps.sh; installs what is missing)"
 bash tools/deps.sh
+say "configuring build/ (cmake, Release)"
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
+if [ -x build/cvre-server ]; then
+  say "building what changed"
+else
+  say "building the five programs into build/ (about half a minute the first time)"
+fi
+started=$SECONDS
 cmake --build build -j "$(nproc)" >/dev/null
+say "built in $((SECONDS - started)) s"
 port=${CVRE_PORT:-7878}
 ready=$(mktemp)
+say "starting cvre-server on 127.0.0.1:$port and loading server/worlds/demo.world"
 ./build/cvre-server --port "$port" --db cvre-demo.db --world server/worlds/demo.world "$@" >"$ready" &
 server=$!
 # the bots start once the server says it listens (loading the world takes
@@ -23,9 +34,10 @@ until grep -q '^listening on' "$ready"; do
   sleep 0.2
 done
 rm -f "$ready"
+say "starting 8 bots that wander the world"
 ./build/cvre-client --port "$port" --bots 8 --rate 5 --pattern random-walk --duration 86400 --name wanderer >/dev/null &
 bots=$!
 trap 'kill -TERM $bots $server 2>/dev/null; wait $server' INT TERM EXIT
-echo "cvre demo: server on 127.0.0.1:$port (database cvre-demo.db), 8 bots walking." >&2
-echo "In another terminal: ./build/cvre-client --port $port --name you" >&2
+say "server on 127.0.0.1:$port (database cvre-demo.db), 8 bots walking; Ctrl-C stops it."
+say "in another terminal: ./build/cvre-client --port $port --name you"
 wait $server

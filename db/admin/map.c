@@ -87,7 +87,7 @@ static void sb_grow(sbuf *b, size_t more)
     size_t cap = b->cap ? b->cap : 65536;
     while (cap < b->len + more + 1)
         cap *= 2;
-    b->p = xrealloc(b->p, cap);
+    b->p = cvre_xrealloc(b->p, cap);
     b->cap = cap;
 }
 
@@ -391,9 +391,9 @@ static double union_volume(const float (*b)[6], uint32_t n)
 {
     if (n == 0)
         return 0;
-    double *xs = xmalloc(2 * n * sizeof *xs), *zs = xmalloc(2 * n * sizeof *zs);
-    yevent *ev = xmalloc(2 * n * sizeof *ev);
-    uint32_t *za = xmalloc(n * sizeof *za), *zb = xmalloc(n * sizeof *zb);
+    double *xs = cvre_xmalloc(2 * n * sizeof *xs), *zs = cvre_xmalloc(2 * n * sizeof *zs);
+    yevent *ev = cvre_xmalloc(2 * n * sizeof *ev);
+    uint32_t *za = cvre_xmalloc(n * sizeof *za), *zb = cvre_xmalloc(n * sizeof *zb);
     uint32_t nx = 0, nz = 0, ne = 0;
     for (uint32_t i = 0; i < n; i++) {
         if (!(b[i][3] > b[i][0] && b[i][4] > b[i][1] && b[i][5] > b[i][2]))
@@ -413,7 +413,7 @@ static double union_volume(const float (*b)[6], uint32_t n)
             zb[i] = index_of(zs, nz, b[i][5]);
         }
         size_t nodes = 4 * (size_t)nz;
-        cover c = {zs, xcalloc(nodes, sizeof *c.cnt), xcalloc(nodes, sizeof *c.len)};
+        cover c = {zs, cvre_xcalloc(nodes, sizeof *c.cnt), cvre_xcalloc(nodes, sizeof *c.len)};
         for (uint32_t s = 0; s + 1 < nx; s++) {
             double x0 = xs[s], x1 = xs[s + 1], area = 0, ylast = 0;
             int any = 0;
@@ -546,7 +546,7 @@ static void view_outline(sbuf *b, const view *v)
     typedef struct run {
         uint32_t c0, c1, r0;
     } run;
-    run *open = xmalloc((v->cols / 2 + 2) * sizeof *open), *next = xmalloc((v->cols / 2 + 2) * sizeof *next);
+    run *open = cvre_xmalloc((v->cols / 2 + 2) * sizeof *open), *next = cvre_xmalloc((v->cols / 2 + 2) * sizeof *next);
     size_t nopen = 0;
     sb_puts(b, "<g class=\"outlines\">\n");
     for (uint32_t r = 0; r <= v->rows; r++) {
@@ -614,7 +614,7 @@ static char *dup_text(sqlite3_stmt *st, int i)
 {
     const unsigned char *t = sqlite3_column_text(st, i);
     size_t n = t ? (size_t)sqlite3_column_bytes(st, i) : 0;
-    char *s = xmalloc(n + 1);
+    char *s = cvre_xmalloc(n + 1);
     if (n)
         memcpy(s, t, n);
     s[n] = 0;
@@ -678,8 +678,8 @@ static int read_object(reader *rd, mobj *o)
     while ((step = sqlite3_step(st)) == SQLITE_ROW) {
         if (o->npts == o->cap) {
             o->cap = o->cap ? o->cap * 2 : 1024;
-            o->xyz = xrealloc(o->xyz, o->cap * 3 * sizeof *o->xyz);
-            o->users = xrealloc(o->users, o->cap * sizeof *o->users);
+            o->xyz = cvre_xrealloc(o->xyz, o->cap * 3 * sizeof *o->xyz);
+            o->users = cvre_xrealloc(o->users, o->cap * sizeof *o->users);
         }
         for (int k = 0; k < 3; k++)
             o->xyz[3 * o->npts + (size_t)k] = (float)sqlite3_column_double(st, k);
@@ -695,7 +695,7 @@ static int read_object(reader *rd, mobj *o)
  * without a run. */
 static int cluster_object(mobj *o, char *err, size_t errlen)
 {
-    o->labels = xmalloc((o->npts ? o->npts : 1) * sizeof *o->labels);
+    o->labels = cvre_xmalloc((o->npts ? o->npts : 1) * sizeof *o->labels);
     o->nclusters = 0;
     if (!o->has_run || o->npts == 0) {
         for (size_t i = 0; i < o->npts; i++)
@@ -1110,7 +1110,7 @@ static void layout(world *wd, view *views)
             v->cols = 1;
         if (v->rows < 1)
             v->rows = 1;
-        v->mask = xcalloc((size_t)v->cols * v->rows, 1);
+        v->mask = cvre_xcalloc((size_t)v->cols * v->rows, 1);
     }
     views[0].ox = PAGE_MARGIN;
     /* The titles need about 430 px: the views keep that apart at least. */
@@ -1233,7 +1233,7 @@ int map_run(db *d, const map_request *r, char *err, size_t errlen)
     while ((step = sqlite3_step(objs)) == SQLITE_ROW) {
         if (wd.n == cap) {
             cap = cap ? cap * 2 : 16;
-            wd.o = xrealloc(wd.o, cap * sizeof *wd.o);
+            wd.o = cvre_xrealloc(wd.o, cap * sizeof *wd.o);
         }
         mobj *o = &wd.o[wd.n++];
         *o = (mobj){.id = sqlite3_column_int64(objs, 0), .name = dup_text(objs, 1)};

@@ -27,7 +27,7 @@ out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int verti
 {
     if (ncols < 1 || ncols > OUT_MAX_COLUMNS)
         abort(); /* a programming error: the column lists are constants */
-    out *o = xcalloc(1, sizeof *o);
+    out *o = cvre_xcalloc(1, sizeof *o);
     o->format = format;
     o->f = f;
     o->cols = cols;
@@ -90,7 +90,7 @@ static char *table_cell(sqlite3_stmt *st, int i, int kind)
 {
     char buf[OUT_CELL_MAX];
     if (sqlite3_column_type(st, i) == SQLITE_NULL)
-        return strcpy(xmalloc(2), "-");
+        return strcpy(cvre_xmalloc(2), "-");
     if (kind == OUT_TIME && sqlite3_column_type(st, i) == SQLITE_TEXT)
         kind = OUT_TEXT; /* a word instead of a time: never */
     switch (kind) {
@@ -102,14 +102,14 @@ static char *table_cell(sqlite3_stmt *st, int i, int kind)
     default: {
         const unsigned char *t = sqlite3_column_text(st, i);
         size_t n = (size_t)sqlite3_column_bytes(st, i);
-        char *s = xmalloc(n + 1);
+        char *s = cvre_xmalloc(n + 1);
         for (size_t k = 0; k < n; k++)
             s[k] = t[k] < 0x20 || t[k] == 0x7f ? '?' : (char)t[k];
         s[n] = 0;
         return s;
     }
     }
-    return strcpy(xmalloc(strlen(buf) + 1), buf);
+    return strcpy(cvre_xmalloc(strlen(buf) + 1), buf);
 }
 
 static void csv_text(FILE *f, const unsigned char *t, size_t n)
@@ -195,7 +195,7 @@ void out_row(out *o, sqlite3_stmt *st)
                 continue;
             if (o->ncells == o->cap) {
                 o->cap = o->cap ? o->cap * 2 : 256;
-                o->cells = xrealloc(o->cells, o->cap * sizeof *o->cells);
+                o->cells = cvre_xrealloc(o->cells, o->cap * sizeof *o->cells);
             }
             o->cells[o->ncells++] = table_cell(st, i, o->cols[i].kind);
         }

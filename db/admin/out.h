@@ -10,7 +10,7 @@
  *     NULL is null. Times are ISO-8601 strings in UTC to the microsecond,
  *     reals are printed with the fewest digits that read back exactly.
  * Table output is held until out_end, to size the columns; the others
- * stream. Out of memory aborts (xmalloc): this is a command-line tool.
+ * stream. Out of memory aborts (cvre_xmalloc): this is a command-line tool.
  */
 #ifndef CVRE_ADMIN_OUT_H
 #define CVRE_ADMIN_OUT_H

@@ -2,7 +2,7 @@
  * bench_broadphase: 10,000 moving avatars query 100,000 static ECM boxes once
  * per tick, in a sparse 1 km world and a dense 250 m world (the issue's
  * target: at most 1 ms and 5 ms per tick). Times, side by side in the same
- * run and on the same queries, the broadphase (server/scene/broadphase.c)
+ * run and on the same queries, the broadphase (algo/scene/broadphase.c)
  * queried one avatar at a time and in one batch, and the peer: a plain hashed
  * uniform grid (below). Checks that all three return the same set for every
  * query, without duplicates, and brute force for a sample.
@@ -24,7 +24,7 @@
 #include <time.h>
 
 #include "alloc.h"
-#include "scene/broadphase.h"
+#include "broadphase.h"
 
 #define AVATAR_W 0.6f
 #define AVATAR_H 1.8f
@@ -108,10 +108,10 @@ static int32_t hcoord(const hgrid *g, float v) { return (int32_t)floorf(v * g->i
 /* Builds the grid over n boxes (box i has id i). Aborts when out of memory. */
 static hgrid *hgrid_build(float cell, float (*box)[6], uint32_t n)
 {
-    hgrid *g = xcalloc(1, sizeof *g);
+    hgrid *g = cvre_xcalloc(1, sizeof *g);
     g->inv = 1.0f / cell;
     g->box = box;
-    g->stamp = xcalloc(n, sizeof *g->stamp);
+    g->stamp = cvre_xcalloc(n, sizeof *g->stamp);
     uint64_t refs = 0;
     for (uint32_t i = 0; i < n; i++) {
         uint64_t c = 1;
@@ -122,7 +122,7 @@ static hgrid *hgrid_build(float cell, float (*box)[6], uint32_t n)
     uint32_t slots = 1024;
     while (slots < 2 * refs)
         slots *= 2;
-    g->slots = xcalloc(slots, sizeof *g->slots);
+    g->slots = cvre_xcalloc(slots, sizeof *g->slots);
     g->mask = slots - 1;
     for (uint32_t i = 0; i < n; i++) {
         for (int32_t z = hcoord(g, box[i][2]); z <= hcoord(g, box[i][5]); z++)
@@ -131,7 +131,7 @@ static hgrid *hgrid_build(float cell, float (*box)[6], uint32_t n)
                     hcell *c = hget(g, x, y, z);
                     if (c->n == c->cap) {
                         c->cap = c->cap ? 2 * c->cap : 4;
-                        c->ids = xrealloc(c->ids, c->cap * sizeof *c->ids);
+                        c->ids = cvre_xrealloc(c->ids, c->cap * sizeof *c->ids);
                     }
                     c->ids[c->n++] = i;
                 }
@@ -318,9 +318,9 @@ typedef struct options {
 static int run_world(const options *o, const char *name, float w)
 {
     rng_state = o->seed;
-    float(*box)[6] = xmalloc(o->boxes * sizeof *box);
-    avatar *av = xmalloc(o->avatars * sizeof *av);
-    bp_box *q = xmalloc(o->avatars * sizeof *q);
+    float(*box)[6] = cvre_xmalloc(o->boxes * sizeof *box);
+    avatar *av = cvre_xmalloc(o->avatars * sizeof *av);
+    bp_box *q = cvre_xmalloc(o->avatars * sizeof *q);
     gen_boxes(box, o->boxes, w);
     gen_avatars(av, o->avatars, w);
 
@@ -349,9 +349,9 @@ static int run_world(const options *o, const char *name, float w)
     results r[NRUNS];
     double *ms[NRUNS];
     for (int k = 0; k < NRUNS; k++) {
-        r[k].h = xmalloc(OUT_CAP * sizeof(uint32_t));
-        r[k].off = xmalloc((o->avatars + 1) * sizeof(uint32_t));
-        ms[k] = xmalloc(o->ticks * sizeof(double));
+        r[k].h = cvre_xmalloc(OUT_CAP * sizeof(uint32_t));
+        r[k].off = cvre_xmalloc((o->avatars + 1) * sizeof(uint32_t));
+        ms[k] = cvre_xmalloc(o->ticks * sizeof(double));
     }
     uint64_t hits = 0;
     uint32_t bad = 0;

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Benchmark of server/cluster/dbscan.c (through dbscan_cli) side by side
+"""Benchmark of algo/cluster/dbscan.c (through dbscan_cli) side by side
 with scikit-learn's DBSCAN on the same points, in the same run.
 
 Data: collision-like points in a 100 m cube: 70% in Gaussian hotspots
@@ -77,7 +77,7 @@ def write_points(path, xyz):
 
 
 def find_cli(build_dir):
-    for rel in ("dbscan_cli", "server/cluster/dbscan_cli", "tests/dbscan_cli", "bin/dbscan_cli"):
+    for rel in ("dbscan_cli", "tests/bench/dbscan_cli", "tests/dbscan_cli", "bin/dbscan_cli"):
         p = os.path.join(build_dir, rel)
         if os.access(p, os.X_OK):
             return p

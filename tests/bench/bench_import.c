@@ -1,6 +1,6 @@
 /*
  * bench_import: what parsing every model in a separate, sandboxed process
- * (cvre-import, server/scene/import_proc.h) costs against parsing it in
+ * (cvre-import, server/import/import_proc.h) costs against parsing it in
  * the server's own process (import_model), on the same files, side by side.
  *
  * Usage: bench_import [--repeat N] [--max-ratio R] HELPER MODELS_DIR
@@ -19,8 +19,8 @@
 #include <time.h>
 
 #include "bench.h"
-#include "scene/import.h"
-#include "scene/import_proc.h"
+#include "import.h"
+#include "import_proc.h"
 
 static const struct {
     const char *path;

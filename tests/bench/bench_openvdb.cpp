@@ -1,6 +1,6 @@
 /*
  * bench_openvdb: OpenVDB's mesh-to-volume on a triangle dump written by
- * bench_voxel --dump, as the peer of server/ecm/voxel.c.
+ * bench_voxel --dump, as the peer of algo/refine/voxel.c.
  *
  *   bench_openvdb FILE.tri --depth D [--repeat 5] [--threads 0] [--band 1]
  *

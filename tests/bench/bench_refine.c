@@ -1,7 +1,7 @@
 /*
  * bench_refine: end-to-end refinement of one object, as the server's online
  * loop does it: load the object from the store, digitize, divide, write the
- * next version (server/ecm/apply.h), then publish it: read it back as the
+ * next version (server/pipeline/apply.h), then publish it: read it back as the
  * refiner does, swap it into a scene and encode the OBJECT_INFO clients get.
  *
  * Usage: bench_refine [--repeat N] [--depth D] MODELS_DIR
@@ -25,8 +25,8 @@
 #include "db.h"
 #include "ecm.h"
 #include "proto.h"
-#include "scene/import.h"
-#include "scene/scene.h"
+#include "import.h"
+#include "scene.h"
 
 static int load(const char *dir, const char *rel, int z_up, uint32_t limit, import_mesh *m)
 {

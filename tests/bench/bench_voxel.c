@@ -1,5 +1,5 @@
 /*
- * bench_voxel: voxelizes real models over their MBRs with server/ecm/voxel.c
+ * bench_voxel: voxelizes real models over their MBRs with algo/refine/voxel.c
  * and prints, per model and grid depth, the median time of --repeat runs
  * (voxel_grid_init + voxel_mark + voxel_grid_free: everything a refinement
  * pays) on one thread (voxel_mark) and on one thread per CPU
@@ -9,7 +9,7 @@
  *               [--dump DIR] [--json]
  *
  * Models default to the Stanford bunny and the city block of ../shared/models
- * (imported as the server does, through server/scene/import.h, default
+ * (imported as the server does, through server/import/import.h, default
  * options). --dump DIR writes each model's triangles to DIR/<name>.tri for
  * tests/bench/bench_openvdb.cpp: "CVRETRI1", uint32 ntris, float min[3],
  * float max[3], then 9 floats per triangle, all little-endian. --json prints
@@ -26,7 +26,7 @@
 #include <time.h>
 
 #include "bench.h"
-#include "scene/import.h"
+#include "import.h"
 #include "voxel.h"
 
 #define MAX_MODELS 8

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Benchmark of server/ecm/voxel.c (through bench_voxel) side by side with
+"""Benchmark of algo/refine/voxel.c (through bench_voxel) side by side with
 OpenVDB's mesh-to-volume (through bench_openvdb) on the same meshes and
 grids, in the same run.
 

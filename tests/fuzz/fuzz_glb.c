@@ -1,6 +1,6 @@
 /*
  * fuzz_glb.c: structure-aware fuzz target for GLB uploads: the importer's
- * GLB pre-check (server/scene/import.c check_glb, jansson) and Assimp's
+ * GLB pre-check (server/import/import.c check_glb, jansson) and Assimp's
  * glTF 2 reader.
  *
  * Inputs are GLB files. The mutator takes one apart (header, JSON chunk

@@ -1,6 +1,6 @@
 /*
  * fuzz_http.c: structure-aware fuzz target for the HTTP request head
- * (server/http.c over Debian's http_parser), which every HTTP endpoint
+ * (server/net/http.c over Debian's http_parser), which every HTTP endpoint
  * (--metrics now, the web client's next) feeds with a stranger's bytes.
  *
  * Inputs are request heads. The generator writes a request line (known,

@@ -1,6 +1,6 @@
 /*
  * fuzz_stl.c: structure-aware fuzz target for STL uploads: the importer's
- * STL recognition and ASCII pre-check (server/scene/import.c is_binary_stl,
+ * STL recognition and ASCII pre-check (server/import/import.c is_binary_stl,
  * check_stl) and Assimp's STL reader.
  *
  * Inputs are STL files, binary or ASCII. The mutator reads the triangles

@@ -9,7 +9,7 @@
 #include <string.h>
 
 #include "fz.h"
-#include "scene/import.h"
+#include "import.h"
 
 /* What the inputs reached, by hint (the target's, none), so that a
  * generator that stops reaching Assimp, or its success path, shows. */

@@ -464,12 +464,12 @@ def proto_corpus(out, fuzz_proto):
 
 # ---- HTTP request heads ------------------------------------------------------
 
-HTTP_HEAD_MAX, HTTP_URL_MAX, HTTP_HEADERS_MAX = 8192, 2048, 32  # server/http.h
+HTTP_HEAD_MAX, HTTP_URL_MAX, HTTP_HEADERS_MAX = 8192, 2048, 32  # server/net/http.h
 
 
 def http_corpus(out):
     """Requests as scrapers, curl and browsers send them, and each class
-    server/http.c refuses, at and past every limit."""
+    server/net/http.c refuses, at and past every limit."""
     def head(line, *headers, eol='\r\n'):
         return eol.join((line,) + headers) + eol + eol
 

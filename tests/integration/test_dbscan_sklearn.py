@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""server/cluster/dbscan.c against scikit-learn's DBSCAN and against an
+"""algo/cluster/dbscan.c against scikit-learn's DBSCAN and against an
 independent Python computation of the documented rules, through dbscan_cli.
 
 For each data set: core flags and noise must equal scikit-learn's exactly,
@@ -43,7 +43,7 @@ RESULTS = []
 
 
 def find_cli(build_dir):
-    for rel in ("dbscan_cli", "server/cluster/dbscan_cli", "tests/dbscan_cli", "bin/dbscan_cli"):
+    for rel in ("dbscan_cli", "tests/bench/dbscan_cli", "tests/dbscan_cli", "bin/dbscan_cli"):
         p = os.path.join(build_dir, rel)
         if os.access(p, os.X_OK):
             return p

@@ -23,8 +23,8 @@ DOOR_X, DOOR_Z = 10.218, -1.965
 NAME = r"[a-zA-Z_:][a-zA-Z0-9_:]*"
 LABELS = rf'\{{{NAME}="(?:[^"\\\n]|\\[\\"n])*"(?:,{NAME}="(?:[^"\\\n]|\\[\\"n])*")*\}}'
 SAMPLE = re.compile(rf"({NAME})({LABELS})? (\S+)$")
-HEAD_MAX, URL_MAX, HEADERS_MAX = 8192, 2048, 32  # server/http.h
-REQUEST_TIMEOUT, CONNS = 5.0, 16                # server/http_server.h
+HEAD_MAX, URL_MAX, HEADERS_MAX = 8192, 2048, 32  # server/net/http.h
+REQUEST_TIMEOUT, CONNS = 5.0, 16                # server/net/http_server.h
 
 
 class Counting(Raw):

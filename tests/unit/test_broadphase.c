@@ -12,7 +12,7 @@
 #include <string.h>
 
 #include "alloc.h"
-#include "scene/broadphase.h"
+#include "broadphase.h"
 
 #define N 3000
 #define WORLD 200.0f
@@ -345,9 +345,9 @@ static void test_out_of_memory(void **state)
     (void)state;
     const float lo[3] = {-WORLD / 2, 0, -WORLD / 2}, hi[3] = {WORLD / 2, 50, WORLD / 2};
     for (long k = 0; k < 8; k++) {
-        alloc_fail_after(k);
+        cvre_alloc_fail_after(k);
         bp *b = bp_create(lo, hi, 1);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         bp_destroy(b);
     }
     seed = 21;
@@ -356,9 +356,9 @@ static void test_out_of_memory(void **state)
         random_box(bmin[h], bmax[h]);
     int failures = 0;
     for (uint32_t h = 0; h < N; h++) {
-        alloc_fail_after(h % 3 ? -1 : 0);
+        cvre_alloc_fail_after(h % 3 ? -1 : 0);
         int rc = bp_insert(b, bmin[h], bmax[h], h);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         if (rc == -ENOMEM)
             failures++;
         else
@@ -375,18 +375,18 @@ static void test_out_of_memory(void **state)
             continue;
         float min[3], max[3];
         random_box(min, max);
-        alloc_fail_after(0);
+        cvre_alloc_fail_after(0);
         int rc = bp_update(b, min, max, h);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         if (rc == 0)
             memcpy(bmin[h], min, sizeof min), memcpy(bmax[h], max, sizeof max);
         else
             assert_int_equal(rc, -ENOMEM);
     }
     check_queries(b, 300);
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(bp_optimize(b), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     check_queries(b, 100);
     bp_destroy(b);
 }

@@ -1,5 +1,5 @@
 /*
- * server/core where it fails: the loop, its epoll backend, the mailbox and
+ * base/ where it fails: the loop, its epoll backend, the mailbox and
  * the worker when memory, file descriptors or threads run out, when a
  * callback deletes what is already reported ready, when a signal cuts the
  * wait short, and when the queue is full at stop.
@@ -36,16 +36,16 @@ static void test_loop_out_of_memory(void **state)
     (void)state;
     /* the loop, its fd table, the backend, the backend's event array */
     for (long n = 0; n < 4; n++) {
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         assert_null(ev_create(16));
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
     }
     ev_loop *l = ev_create(16);
     assert_non_null(l);
     assert_true(ev_timer_start(l, 1, 0, NULL, NULL) >= 0);
-    alloc_fail_after(0); /* the second timer needs a bigger table */
+    cvre_alloc_fail_after(0); /* the second timer needs a bigger table */
     assert_int_equal(ev_timer_start(l, 1, 0, NULL, NULL), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     ev_destroy(l);
     ev_destroy(NULL);
 }
@@ -336,7 +336,7 @@ static gate g = {PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALIZER, 0, 0, 0, 0
 static void *gated_job(void *ctx, void *job)
 {
     int n = *(int *)job;
-    int *result = xmalloc(sizeof *result);
+    int *result = cvre_xmalloc(sizeof *result);
 
     (void)ctx;
     pthread_mutex_lock(&g.lock);

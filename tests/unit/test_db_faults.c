@@ -432,9 +432,9 @@ static void test_open_refusals(void **state)
     db *d;
 
     (void)state;
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_null(db_open(testdb_path, DB_READWRITE, err, sizeof err));
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_string_equal(err, "out of memory");
 
     f = fopen(testdb_path, "w"); /* not a database at all */

@@ -33,7 +33,7 @@ static int setup(void **state)
 {
     (void)state;
     npts = 0;
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     return 0;
 }
 
@@ -334,10 +334,10 @@ static void test_allocation_failure(void **state)
         int rc = 0;
         for (int pass = 0; pass < 2; pass++) {
             before = heap_in_use();
-            alloc_fail_after(k);
+            cvre_alloc_fail_after(k);
             r = (dbscan_result *)&r;
             rc = dbscan_run(pts, users, npts, &p, labels, &r);
-            alloc_fail_after(-1);
+            cvre_alloc_fail_after(-1);
             if (rc == 0)
                 break;
             assert_int_equal(rc, -ENOMEM);

@@ -45,7 +45,7 @@ static int setup(void **state)
 static int teardown(void **state)
 {
     (void)state;
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     testdb_remove(path);
     return 0;
 }
@@ -490,9 +490,9 @@ static void test_object_load(void **state)
 
     /* Out of memory on the triangles, then on the boxes: -1, nothing kept. */
     for (long k = 0; k < 2; k++) {
-        alloc_fail_after(k);
+        cvre_alloc_fail_after(k);
         assert_int_equal(db_ecm_object_load(d, id, &o), -1);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         assert_non_null(strstr(db_error(d), "out of memory"));
         assert_null(o.tris);
         assert_null(o.boxes);
@@ -500,9 +500,9 @@ static void test_object_load(void **state)
     }
     float(*b)[6];
     uint32_t n;
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(db_ecm_boxes(d, id, 2, &b, &n), -1);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_null(b);
 
     /* Unknown, removed, corrupted. */

@@ -1,4 +1,4 @@
-/* The HTTP request head (server/http.c): what it keeps, every refusal and
+/* The HTTP request head (server/net/http.c): what it keeps, every refusal and
  * its status, every limit at and past its bound, fed whole and in pieces. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -288,9 +288,9 @@ static void test_response_head(void **state)
 static void test_out_of_memory(void **state)
 {
     (void)state;
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_null(http_request_new());
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
 }
 
 int main(void)

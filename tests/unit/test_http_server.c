@@ -1,4 +1,4 @@
-/* The HTTP endpoint (server/http_server.c) on a real event loop, in
+/* The HTTP endpoint (server/net/http_server.c) on a real event loop, in
  * process, with its deadlines shortened to 300 ms (CMake): a client thread
  * does blocking socket I/O while the test's thread runs the loop. Large
  * responses to slow and half-closed readers, a body past the cap, the
@@ -183,11 +183,11 @@ static void serve(uint32_t max_conns, long fail_after, void (*fn)(void))
     assert_int_equal(ev_io_add(loop, done[0], EV_READ, on_done, NULL), 0);
     client_run c = {fn, done[1]};
     pthread_t t;
-    alloc_fail_after(fail_after); /* before the thread: it only counts the loop's allocations */
+    cvre_alloc_fail_after(fail_after); /* before the thread: it only counts the loop's allocations */
     assert_int_equal(pthread_create(&t, NULL, client_thread, &c), 0);
     assert_int_equal(ev_run(loop), 0);
     pthread_join(t, NULL);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     http_server_stop(h);
     ev_io_del(loop, done[0]);
     close(done[0]);
@@ -314,9 +314,9 @@ static void test_out_of_memory(void **state)
     http_server_config cfg = {"test", "127.0.0.1", 0, 4};
     char err[256];
     for (long k = 0; k < 2; k++) {
-        alloc_fail_after(k);
+        cvre_alloc_fail_after(k);
         assert_null(http_server_start(loop, &cfg, handler, NULL, err, sizeof err));
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         assert_string_equal(err, "test: out of memory");
     }
     ev_destroy(loop);

@@ -26,7 +26,7 @@
 
 #include "../models.h"
 #include "alloc.h"
-#include "scene/import.h"
+#include "import.h"
 
 static const char *models_dir;
 
@@ -900,9 +900,9 @@ static void test_alloc_failure(void **state)
             import_mesh m;
             char err[256];
             int rc;
-            alloc_fail_after(n);
+            cvre_alloc_fail_after(n);
             rc = import_model(inputs[i].p, inputs[i].n, NULL, NULL, &m, err, sizeof err);
-            alloc_fail_after(-1);
+            cvre_alloc_fail_after(-1);
             if (rc == 0) {
                 import_mesh_free(&m);
                 break;

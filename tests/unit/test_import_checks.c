@@ -9,7 +9,7 @@
  * called on inputs only a broken or hostile Assimp could produce; the
  * file's public entry points are exercised through import_model as usual.
  */
-#include "scene/import.c"
+#include "import.c"
 
 #include <setjmp.h>
 #include <stdarg.h>
@@ -387,9 +387,9 @@ static void test_scene_out_of_memory(void **state)
     (void)state;
     hand_scene_init(&h);
     for (long n = 0; n < 2; n++) { /* the triangle counts, then the triangles */
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         assert_int_equal(collect_hand(&h, err, sizeof err), -ENOMEM);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         assert_non_null(strstr(err, "out of memory"));
     }
     assert_int_equal(collect_hand(&h, err, sizeof err), 0);

@@ -12,7 +12,7 @@
 #include <cmocka.h>
 
 #include "le.h"
-#include "scene/import_pipe.h"
+#include "import_pipe.h"
 
 static void test_request_round_trip(void **state)
 {

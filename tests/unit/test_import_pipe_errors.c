@@ -13,7 +13,7 @@
 
 #include "alloc.h"
 #include "le.h"
-#include "scene/import_pipe.h"
+#include "import_pipe.h"
 
 /* A good answer with one triangle, malloc'd; *n its length. */
 static uint8_t *one_triangle(size_t *n)
@@ -75,15 +75,15 @@ static void test_out_of_memory(void **state)
     uint8_t *b = one_triangle(&n), *c = (uint8_t *)"x";
 
     (void)state;
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(import_pipe_answer(b, n, 10, &m, err, sizeof err), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_string_equal(err, "out of memory reading the importer's answer");
     assert_null(m.tris);
 
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(import_pipe_answer_encode(0, NULL, &m, &c, &n), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_null(c);
     assert_int_equal(n, 0);
     free(b);

@@ -24,8 +24,8 @@
 #include <cmocka.h>
 
 #include "alloc.h"
-#include "scene/import_pipe.h"
-#include "scene/import_proc.h"
+#include "import_pipe.h"
+#include "import_proc.h"
 
 static char dir[] = "/tmp/cvre-test-proc-XXXXXX";
 static char answer_path[PATH_MAX], helper_path[PATH_MAX];
@@ -254,9 +254,9 @@ static void test_server_side_failures(void **state)
     /* no memory for the triangles the helper announces */
     answer(0, NULL, SIZE_MAX, 0);
     reader(0);
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(run(model, sizeof model, &opt, err, sizeof err), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_string_equal(err, "import failed: reading the importer's answer: Cannot allocate memory");
 
     /* no descriptors for the pipes */

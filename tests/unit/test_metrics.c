@@ -284,9 +284,9 @@ static void test_out_of_memory(void **state)
     assert_non_null(want);
     int failed = 0;
     for (long n = 0;; n++) {
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         char *text = metrics_render(&m, &len);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         if (text) {
             assert_int_equal(len, want_len);
             assert_memory_equal(text, want, len);

@@ -10,7 +10,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "scene/move.h"
+#include "move.h"
 
 #define DT 0.05f /* 20 Hz */
 #define SKIN ((float)MOVE_SKIN)

@@ -1,5 +1,5 @@
 /*
- * One refinement round (server/ecm/refine.h): the invariant (the boxes
+ * One refinement round (algo/refine/refine.h): the invariant (the boxes
  * contain every triangle) on hand-made, random and real geometry, openings
  * that open, walls that stay, the cap, determinism, bad input and running
  * out of memory.
@@ -24,8 +24,8 @@
 
 #include "../models.h"
 #include "alloc.h"
-#include "ecm/refine.h"
-#include "scene/import.h"
+#include "refine.h"
+#include "import.h"
 
 static const char *models_dir;
 
@@ -1496,9 +1496,9 @@ static void oom_case(const char *what, const ecm_params *p, const float *tris, u
     for (k = 0; k < 100000; k++) {
         memset(&r, 0xab, sizeof r);
         err[0] = 0;
-        alloc_fail_after(k);
+        cvre_alloc_fail_after(k);
         int rc = ecm_refine(p, tris, ntris, boxes, nboxes, cl, ncl, &r, err, sizeof err);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         if (rc == -ENOMEM) {
             CHECK(err[0] != 0, "allocation %ld failed: no message", k);
             assert_result_empty(&r);

@@ -9,7 +9,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "scene/scene.h"
+#include "scene.h"
 
 static const float WMIN[3] = {-500, 0, -500}, WMAX[3] = {500, 256, 500};
 

@@ -16,7 +16,7 @@
 #include <cmocka.h>
 
 #include "alloc.h"
-#include "scene/scene.h"
+#include "scene.h"
 
 static const float WMIN[3] = {-500, 0, -500}, WMAX[3] = {500, 256, 500};
 static const float tri[9] = {-1, 0, -2, 1, 0, 2, 1, 3, 2};
@@ -53,9 +53,9 @@ static void test_create_out_of_memory(void **state)
 
     (void)state;
     for (n = 0; !s; n++) {
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         s = scene_create(WMIN, WMAX);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         assert_true(n < 100);
     }
     assert_true(n > 1); /* the scene and its broadphases failed in turn */
@@ -80,9 +80,9 @@ static void test_add_out_of_memory(void **state)
         view before = look(s);
         int rc = -ENOMEM;
         for (long n = 0; rc == -ENOMEM; n++) {
-            alloc_fail_after(n);
+            cvre_alloc_fail_after(n);
             rc = scene_add(s, &d);
-            alloc_fail_after(-1);
+            cvre_alloc_fail_after(-1);
             if (rc == -ENOMEM) {
                 view after = look(s);
                 assert_memory_equal(&after, &before, sizeof after);
@@ -110,9 +110,9 @@ static void test_set_ecm_out_of_memory(void **state)
     view before = look(s);
     int rc = -ENOMEM;
     for (long n = 0; rc == -ENOMEM; n++) {
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         rc = scene_set_ecm(s, 1, 2, many, PROTO_OBJECT_BOXES_MAX);
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
         if (rc == -ENOMEM) { /* the old map stands, filed as before */
             view after = look(s);
             assert_memory_equal(&after, &before, sizeof after);

@@ -43,18 +43,18 @@ static void test_input_cap_and_memory(void **state)
     static uint8_t junk[4 * SRV_INBUF_INITIAL];
 
     (void)state;
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(conn_init(&c, dup(0)), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     conn_free(&c); /* closes the descriptor even so */
 
     pair(&c, &peer);
     assert_int_equal(conn_read(&c, 2 * SRV_INBUF_INITIAL, 1024), -EAGAIN); /* nothing there */
     assert_int_equal(write(peer, junk, sizeof junk), (ssize_t)sizeof junk);
     assert_int_equal(conn_read(&c, 2 * SRV_INBUF_INITIAL, 1024), SRV_INBUF_INITIAL);
-    alloc_fail_after(0); /* full: growing it fails */
+    cvre_alloc_fail_after(0); /* full: growing it fails */
     assert_int_equal(conn_read(&c, 2 * SRV_INBUF_INITIAL, 1024), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_int_equal(conn_read(&c, 2 * SRV_INBUF_INITIAL, 1024), SRV_INBUF_INITIAL);
     /* full at the cap: the frame parser must have refused before this */
     assert_int_equal(conn_read(&c, 2 * SRV_INBUF_INITIAL, 1024), -ENOBUFS);
@@ -88,9 +88,9 @@ static void test_output_limits(void **state)
     (void)state;
     pair(&c, &peer);
     assert_int_equal(put(&c, SRV_OUTBUF_HARD + 1), -ENOBUFS); /* never past the hard limit */
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(put(&c, 100), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_int_equal(conn_out_pending(&c), 0);
 
     /* a peer that does not read: what the socket will not take stays */
@@ -181,22 +181,22 @@ static void test_grid_and_limits_out_of_memory(void **state)
 
     (void)state;
     for (long n = 0; n < 3; n++) { /* the grid, its cells, its entries */
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         assert_null(grid_create(0, 0, 100, 100, 10, 16));
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
     }
     grid_destroy(NULL);
     g = grid_create(0, 0, 100, 100, 10, 16);
     assert_non_null(g);
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(grid_insert(g, 0, 5, 5), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_int_equal(grid_insert(g, 0, 5, 5), 0);
     /* a move into a cell that cannot grow keeps the handle, with its new
      * coordinates, in its old cell: a query reaching that cell finds it */
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(grid_move(g, 0, 15, 5), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_int_equal(grid_query(g, 15, 5, 6, found, 4), 1);
     assert_int_equal(grid_query(g, 5, 5, 1, found, 4), 0); /* it is no longer there */
     assert_int_equal(grid_move(g, 0, 95, 95), 0);
@@ -205,11 +205,11 @@ static void test_grid_and_limits_out_of_memory(void **state)
     grid_destroy(g);
 
     for (long n = 0; n < 2; n++) { /* the table, its buckets or counts */
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         assert_null(ratelimit_create(64, 1, 2));
-        alloc_fail_after(n);
+        cvre_alloc_fail_after(n);
         assert_null(addrcount_create(64));
-        alloc_fail_after(-1);
+        cvre_alloc_fail_after(-1);
     }
 }
 

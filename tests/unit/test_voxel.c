@@ -29,7 +29,7 @@
 
 #include "../models.h"
 #include "alloc.h"
-#include "scene/import.h"
+#include "import.h"
 #include "voxel.h"
 
 #ifndef CVRE_MODELS_DIR
@@ -741,18 +741,18 @@ static void test_allocation_failure(void **state)
     (void)state;
     voxel_grid g;
     float lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     assert_int_equal(voxel_grid_init(&g, 5, lo, hi), -ENOMEM);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_null(g.bits);
     assert_int_equal(g.occupied, 0);
     voxel_grid_free(&g);
     /* Marking allocates nothing, so it cannot fail for memory. */
     assert_int_equal(voxel_grid_init(&g, 5, lo, hi), 0);
-    alloc_fail_after(0);
+    cvre_alloc_fail_after(0);
     float t[9] = {0, 0, 0, 1, 0, 0, 0, 1, 1};
     assert_int_equal(voxel_mark(&g, t, 1), 0);
-    alloc_fail_after(-1);
+    cvre_alloc_fail_after(-1);
     assert_true(g.occupied > 32);
     voxel_grid_free(&g);
 }

@@ -23,6 +23,7 @@
 
 #include "alloc.h"
 #include "dbscan.h"
+#include "le.h"
 
 #define MAGIC "CVREPTS1"
 #define MAGIC_LEN 8
@@ -36,21 +37,6 @@ typedef struct points {
     uint32_t *users;
     size_t n, cap;
 } points;
-
-static uint32_t rd_u32(const unsigned char *b)
-{
-    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
-}
-
-static uint64_t rd_u64(const unsigned char *b) { return (uint64_t)rd_u32(b) | (uint64_t)rd_u32(b + 4) << 32; }
-
-static float rd_f32(const unsigned char *b)
-{
-    uint32_t u = rd_u32(b);
-    float f;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
 
 static int grow(points *p)
 {
@@ -78,7 +64,7 @@ static int read_binary(FILE *f, points *p)
     unsigned char hdr[HEADER_LEN - MAGIC_LEN], rec[RECORD_LEN];
     if (fread(hdr, 1, sizeof hdr, f) != sizeof hdr)
         return -EINVAL;
-    uint64_t n = rd_u64(hdr);
+    uint64_t n = le_get_u64(hdr);
     if (n > DBSCAN_MAX_POINTS)
         return -EINVAL;
     p->cap = (size_t)n;
@@ -90,8 +76,8 @@ static int read_binary(FILE *f, points *p)
         if (fread(rec, 1, sizeof rec, f) != sizeof rec)
             return -EINVAL;
         for (int a = 0; a < 3; a++)
-            p->xyz[3 * p->n + (size_t)a] = rd_f32(rec + 4 * a);
-        p->users[p->n] = rd_u32(rec + 12);
+            p->xyz[3 * p->n + (size_t)a] = le_get_f32(rec + 4 * a);
+        p->users[p->n] = le_get_u32(rec + 12);
     }
     if (fgetc(f) != EOF)
         return -EINVAL;

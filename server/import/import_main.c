@@ -1,6 +1,6 @@
 /*
  * import_main.c: cvre-import, the isolated importer. The server starts one
- * per upload (server/scene/import_proc.c): it reads one request on stdin
+ * per upload (server/import/import_proc.c): it reads one request on stdin
  * (import_pipe.h), parses the model with import_model, writes one answer on
  * stdout and exits. Before it reads a byte of the upload it limits itself
  * (address space, CPU seconds, no files, no core) and installs a seccomp
@@ -50,7 +50,7 @@ static const char usage[] =
     "usage: cvre-import [--memory MB] [--cpu SECONDS] [--help] [--version]\n"
     "\n"
     "Reads one model import request on stdin and writes the answer on stdout\n"
-    "(the binary form of server/scene/import_pipe.h), then exits. cvre-server\n"
+    "(the binary form of server/import/import_pipe.h), then exits. cvre-server\n"
     "starts it once per upload; it is not meant to be run by hand.\n"
     "\n"
     "  --memory MB       address space limit (default 4096)\n"

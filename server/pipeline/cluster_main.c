@@ -4,7 +4,7 @@
  * object-local coordinates, clusters them with DBSCAN (dbscan.h) and writes
  * a run record and one row per cluster, each naming the ECM box nearest its
  * centroid (where it presses). With --apply it then refines each object
- * with clusters (server/ecm/apply.h) and writes its next ECM version, which
+ * with clusters (server/pipeline/apply.h) and writes its next ECM version, which
  * a running server picks up and publishes. Safe beside a running server: it
  * reads in one snapshot (WAL) and writes in short transactions.
  */
@@ -105,8 +105,8 @@ static void push_point(points *pt, const float xyz[3], uint32_t user)
 {
     if (pt->n == pt->cap) {
         pt->cap = pt->cap ? pt->cap * 2 : 1024;
-        pt->xyz = xrealloc(pt->xyz, pt->cap * 3 * sizeof *pt->xyz);
-        pt->users = xrealloc(pt->users, pt->cap * sizeof *pt->users);
+        pt->xyz = cvre_xrealloc(pt->xyz, pt->cap * 3 * sizeof *pt->xyz);
+        pt->users = cvre_xrealloc(pt->users, pt->cap * sizeof *pt->users);
     }
     memcpy(pt->xyz + 3 * pt->n, xyz, 3 * sizeof *xyz);
     pt->users[pt->n++] = user;
@@ -242,11 +242,11 @@ int main(int argc, char **argv)
         if (!wanted)
             continue;
         if (!nobjs || objs[nobjs - 1].id != id) {
-            objs = xrealloc(objs, (nobjs + 1) * sizeof *objs);
+            objs = cvre_xrealloc(objs, (nobjs + 1) * sizeof *objs);
             objs[nobjs++] = (object_row){.id = id, .version = (uint32_t)sqlite3_column_int64(st, 1)};
         }
         object_row *r = &objs[nobjs - 1];
-        r->boxes = xrealloc(r->boxes, (r->nboxes + 1) * sizeof *r->boxes);
+        r->boxes = cvre_xrealloc(r->boxes, (r->nboxes + 1) * sizeof *r->boxes);
         for (int k = 0; k < 6; k++)
             r->boxes[r->nboxes][k] = (float)sqlite3_column_double(st, 2 + k);
         r->nboxes++;
@@ -286,7 +286,7 @@ int main(int argc, char **argv)
         if (o != SQLITE_DONE)
             goto db_fail;
         total_points += pt.n;
-        labels = xrealloc(labels, (pt.n ? pt.n : 1) * sizeof *labels);
+        labels = cvre_xrealloc(labels, (pt.n ? pt.n : 1) * sizeof *labels);
         dbscan_result *res = NULL;
         int drc = dbscan_run(pt.xyz, pt.users, pt.n, &prm, labels, &res);
         if (drc < 0) {
@@ -295,7 +295,7 @@ int main(int argc, char **argv)
             goto done;
         }
         for (size_t k = 0; k < dbscan_result_count(res); k++) {
-            found = xrealloc(found, (nfound + 1) * sizeof *found);
+            found = cvre_xrealloc(found, (nfound + 1) * sizeof *found);
             found[nfound] = (cluster_found){.object_id = objs[i].id, .ecm_version = objs[i].version,
                                             .cluster_id = (uint32_t)k, .c = *dbscan_result_cluster(res, k)};
             found[nfound].box = cluster_problem_box((const float(*)[6])objs[i].boxes, objs[i].nboxes,
@@ -324,8 +324,8 @@ int main(int argc, char **argv)
     uint64_t problem_boxes = cluster_problem_boxes(found, nfound);
 
     /* --apply: each object's clusters (consecutive in found) refine it. */
-    applied = xcalloc(nobjs ? nobjs : 1, sizeof *applied);
-    outcome = xcalloc(nobjs ? nobjs : 1, sizeof *outcome);
+    applied = cvre_xcalloc(nobjs ? nobjs : 1, sizeof *applied);
+    outcome = cvre_xcalloc(nobjs ? nobjs : 1, sizeof *outcome);
     for (size_t i = 0, k = 0; apply && i < nobjs; i++) {
         size_t first = k;
         while (k < nfound && found[k].object_id == objs[i].id)

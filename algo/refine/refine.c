@@ -18,6 +18,7 @@
 
 #include "alloc.h"
 #include "avatar.h"
+#include "err.h"
 
 _Static_assert(ECM_DEPTH_MIN >= VOXEL_DEPTH_MIN && ECM_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Cell indices, and one past the last, fit 16 bits. */
@@ -78,18 +79,6 @@ void ecm_result_free(ecm_result *r)
 {
     free(r->boxes);
     memset(r, 0, sizeof *r);
-}
-
-static int fail(char *err, size_t errlen, int rc, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
-static int fail(char *err, size_t errlen, int rc, const char *fmt, ...)
-{
-    if (errlen) {
-        va_list ap;
-        va_start(ap, fmt);
-        vsnprintf(err, errlen, fmt, ap);
-        va_end(ap);
-    }
-    return rc;
 }
 
 static double ms_since(const struct timespec *t0)
@@ -766,33 +755,33 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
 {
     memset(out, 0, sizeof *out);
     if (p->depth < ECM_DEPTH_MIN || p->depth > ECM_DEPTH_MAX)
-        return fail(err, errlen, -EINVAL, "grid depth %u is outside %u..%u", p->depth, ECM_DEPTH_MIN, ECM_DEPTH_MAX);
+        return cvre_fail(err, errlen, -EINVAL, "grid depth %u is outside %u..%u", p->depth, ECM_DEPTH_MIN, ECM_DEPTH_MAX);
     if (p->max_boxes < 1 || p->max_boxes > ECM_MAX_BOXES_LIMIT)
-        return fail(err, errlen, -EINVAL, "max boxes %u is outside 1..%u", p->max_boxes, ECM_MAX_BOXES_LIMIT);
+        return cvre_fail(err, errlen, -EINVAL, "max boxes %u is outside 1..%u", p->max_boxes, ECM_MAX_BOXES_LIMIT);
     if (!(p->max_empty >= 0 && p->max_empty <= 1))
-        return fail(err, errlen, -EINVAL, "max empty share %g is outside 0..1", p->max_empty);
+        return cvre_fail(err, errlen, -EINVAL, "max empty share %g is outside 0..1", p->max_empty);
     for (int a = 0; a < 3; a++)
         if (!(p->avatar[a] > 0) || !isfinite(p->avatar[a]))
-            return fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
+            return cvre_fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
     if (ntris == 0 || !tris)
-        return fail(err, errlen, -EINVAL, "the object has no triangles");
+        return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
     if (!finite_all(tris, (size_t)ntris * 9))
-        return fail(err, errlen, -EINVAL, "a triangle has a coordinate that is not finite");
+        return cvre_fail(err, errlen, -EINVAL, "a triangle has a coordinate that is not finite");
     if (nboxes == 0 || nboxes > ECM_MAX_BOXES_LIMIT || !boxes)
-        return fail(err, errlen, -EINVAL, "the object has %u boxes (1..%u)", nboxes, ECM_MAX_BOXES_LIMIT);
+        return cvre_fail(err, errlen, -EINVAL, "the object has %u boxes (1..%u)", nboxes, ECM_MAX_BOXES_LIMIT);
     for (uint32_t i = 0; i < nboxes; i++) {
         if (!finite_all(boxes[i], 6))
-            return fail(err, errlen, -EINVAL, "box %u has a coordinate that is not finite", i);
+            return cvre_fail(err, errlen, -EINVAL, "box %u has a coordinate that is not finite", i);
         for (int a = 0; a < 3; a++)
             if (boxes[i][a] > boxes[i][3 + a])
-                return fail(err, errlen, -EINVAL, "box %u is inside out", i);
+                return cvre_fail(err, errlen, -EINVAL, "box %u is inside out", i);
     }
     for (uint32_t i = 0; i < nclusters; i++) {
         if (clusters[i].box >= nboxes)
-            return fail(err, errlen, -EINVAL, "cluster %u names box %u of %u", i, clusters[i].box, nboxes);
+            return cvre_fail(err, errlen, -EINVAL, "cluster %u names box %u of %u", i, clusters[i].box, nboxes);
         if (!finite_all(clusters[i].min, 3) || !finite_all(clusters[i].max, 3) ||
             !finite_all(clusters[i].centroid, 3))
-            return fail(err, errlen, -EINVAL, "cluster %u has a coordinate that is not finite", i);
+            return cvre_fail(err, errlen, -EINVAL, "cluster %u has a coordinate that is not finite", i);
     }
 
     int rc = -ENOMEM;
@@ -842,9 +831,9 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     rc = 0;
 done:
     if (rc == -ENOMEM)
-        fail(err, errlen, rc, "out of memory");
+        cvre_fail(err, errlen, rc, "out of memory");
     else if (rc < 0)
-        fail(err, errlen, rc, "digitization failed: %s", strerror(-rc));
+        cvre_fail(err, errlen, rc, "digitization failed: %s", strerror(-rc));
     work_free(&w);
     if (lists)
         for (uint32_t i = 0; i < nboxes; i++)

@@ -18,7 +18,7 @@ static int should_fail(void)
     return 0;
 }
 
-void alloc_fail_after(long n) { fail_countdown = n; }
+void cvre_alloc_fail_after(long n) { fail_countdown = n; }
 
 void *cvre_malloc(size_t size) { return should_fail() ? NULL : malloc(size ? size : 1); }
 
@@ -35,14 +35,14 @@ static void *or_abort(void *p, size_t size)
     return p;
 }
 
-void *xmalloc(size_t size) { return or_abort(cvre_malloc(size), size); }
+void *cvre_xmalloc(size_t size) { return or_abort(cvre_malloc(size), size); }
 
-void *xcalloc(size_t n, size_t size) { return or_abort(cvre_calloc(n, size), n * size); }
+void *cvre_xcalloc(size_t n, size_t size) { return or_abort(cvre_calloc(n, size), n * size); }
 
-void *xrealloc(void *p, size_t size) { return or_abort(cvre_realloc(p, size), size); }
+void *cvre_xrealloc(void *p, size_t size) { return or_abort(cvre_realloc(p, size), size); }
 
-char *xstrdup(const char *s)
+char *cvre_xstrdup(const char *s)
 {
     size_t n = strlen(s) + 1;
-    return memcpy(xmalloc(n), s, n);
+    return memcpy(cvre_xmalloc(n), s, n);
 }

@@ -1,7 +1,7 @@
 /*
  * import_proc.h: import_model in a separate, limited process.
  *
- * import_isolated starts the helper cvre-import (server/scene/import_main.c)
+ * import_isolated starts the helper cvre-import (server/import/import_main.c)
  * for one upload, hands it the file on a pipe and reads the triangles back
  * in the length-checked form of import_pipe.h, checking them as it would
  * check a peer on the network. The helper runs under an address-space and

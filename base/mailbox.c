@@ -24,7 +24,7 @@ struct mailbox {
 
 mailbox *mailbox_create(void)
 {
-    mailbox *m = xcalloc(1, sizeof *m);
+    mailbox *m = cvre_xcalloc(1, sizeof *m);
     m->efd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
     if (m->efd < 0) {
         free(m);
@@ -51,7 +51,7 @@ int mailbox_fd(const mailbox *m) { return m->efd; }
 
 void mailbox_put(mailbox *m, void *p)
 {
-    item *it = xcalloc(1, sizeof *it);
+    item *it = cvre_xcalloc(1, sizeof *it);
     it->p = p;
     pthread_mutex_lock(&m->lock);
     if (m->tail)

@@ -32,8 +32,8 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
 {
     int64_t object_id = f[0].object_id;
     uint32_t version = f[0].ecm_version;
-    ecm_cluster *clusters = xmalloc(n * sizeof *clusters);
-    uint32_t *cluster_ids = xmalloc(n * sizeof *cluster_ids);
+    ecm_cluster *clusters = cvre_xmalloc(n * sizeof *clusters);
+    uint32_t *cluster_ids = cvre_xmalloc(n * sizeof *cluster_ids);
     for (uint32_t i = 0; i < n; i++) {
         clusters[i].box = f[i].box;
         memcpy(clusters[i].min, f[i].c.min, sizeof clusters[i].min);

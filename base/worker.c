@@ -23,7 +23,7 @@ struct worker {
 static void *run(void *arg)
 {
     worker *w = arg;
-    void *job = xmalloc(w->ops.job_size);
+    void *job = cvre_xmalloc(w->ops.job_size);
 
     pthread_mutex_lock(&w->lock);
     for (;;) {
@@ -48,11 +48,11 @@ static void *run(void *arg)
 
 worker *worker_start(const worker_ops *ops, char *err, size_t errlen)
 {
-    worker *w = xcalloc(1, sizeof *w);
+    worker *w = cvre_xcalloc(1, sizeof *w);
     int rc;
 
     w->ops = *ops;
-    w->jobs = xcalloc(ops->queue_max, ops->job_size);
+    w->jobs = cvre_xcalloc(ops->queue_max, ops->job_size);
     w->results = mailbox_create();
     if (!w->results) {
         snprintf(err, errlen, "eventfd: %s", strerror(errno));

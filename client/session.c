@@ -1,5 +1,5 @@
-/* conn.c: one client connection (see conn.h). */
-#include "conn.h"
+/* session.c: one client connection (see session.h). */
+#include "session.h"
 
 #include <errno.h>
 #include <netdb.h>
@@ -15,44 +15,44 @@
 #include "log.h"
 #include "le.h"
 
-/* One read buffer shared by every conn of the process: a read lands here
+/* One read buffer shared by every session of the process: a read lands here
  * and is parsed in place, and only the unfinished tail of a frame is copied
- * into the conn. 64 KiB drains a socket's worth of snapshots per call while
+ * into the session. 64 KiB drains a socket's worth of snapshots per call while
  * 5,000 bots cost no more input memory than their partial frames. */
-#ifndef CONN_SCRATCH_SIZE
-#define CONN_SCRATCH_SIZE (64u * 1024u)
+#ifndef SESSION_SCRATCH_SIZE
+#define SESSION_SCRATCH_SIZE (64u * 1024u)
 #endif
-_Static_assert(CONN_SCRATCH_SIZE >= PROTO_HEADER_SIZE, "a read holds at least a header");
+_Static_assert(SESSION_SCRATCH_SIZE >= PROTO_HEADER_SIZE, "a read holds at least a header");
 
 /* Reads per readiness callback, so one busy connection cannot starve the
  * others; the loop is level-triggered and calls back for the rest. */
-#ifndef CONN_READS_PER_WAKEUP
-#define CONN_READS_PER_WAKEUP 4
+#ifndef SESSION_READS_PER_WAKEUP
+#define SESSION_READS_PER_WAKEUP 4
 #endif
 
 /* Addresses kept from the resolver; "localhost" gives two (::1, 127.0.0.1)
  * and the first may be the one the server does not listen on. */
-#define CONN_ADDRS_MAX 4
+#define SESSION_ADDRS_MAX 4
 
 /* The largest frame a server may send us, header included. */
-#define CONN_IN_MAX (4u + PROTO_MAX_LEN)
+#define SESSION_IN_MAX (4u + PROTO_MAX_LEN)
 
-struct conn_ctx {
+struct session_ctx {
     ev_loop *loop;
-    struct sockaddr_storage addrs[CONN_ADDRS_MAX];
-    socklen_t addr_lens[CONN_ADDRS_MAX];
+    struct sockaddr_storage addrs[SESSION_ADDRS_MAX];
+    socklen_t addr_lens[SESSION_ADDRS_MAX];
     int naddrs;
     char peer[300];
-    conn *closing; /* ended, waiting for the before-sleep hook */
+    session *closing; /* ended, waiting for the before-sleep hook */
     uint64_t opened, frames_in, bytes_in;
-    uint8_t scratch[CONN_SCRATCH_SIZE];
+    uint8_t scratch[SESSION_SCRATCH_SIZE];
 };
 
-struct conn {
-    conn_ctx *ctx;
-    const conn_handler *h;
+struct session {
+    session_ctx *ctx;
+    const session_handler *h;
     void *data;
-    conn *next_closing;
+    session *next_closing;
     int in_closing; /* on ctx->closing */
     int fd;
     int state;
@@ -63,7 +63,7 @@ struct conn {
     int write_dead;  /* a send failed: output is dropped, the read side reports the end */
     int want_writable; /* the owner asked for an on_writable call */
     int ended;
-    conn_end end;
+    session_end end;
     uint32_t seq;
     uint64_t last_send;
     uint64_t keepalive_stamp; /* of our own ping whose pong is not in yet; 0 when none */
@@ -71,10 +71,10 @@ struct conn {
     size_t in_len, in_cap;
     uint8_t *out; /* unsent bytes */
     size_t out_len, out_cap;
-    conn_view view;
+    session_view view;
     float box[3];
     char name[PROTO_NAME_MAX + 1];
-    conn_credential cred;
+    session_credential cred;
 };
 
 static ev_io_fn on_io;
@@ -82,14 +82,14 @@ static ev_io_fn on_io;
 /* ---- context ----------------------------------------------------------- */
 
 /* Runs before each poll: the one safe point to tell owners about ends,
- * because no callback of any conn is on the stack. on_close may free the
- * conn and may open or end others, so the list is popped one at a time. */
+ * because no callback of any session is on the stack. on_close may free the
+ * session and may open or end others, so the list is popped one at a time. */
 static void reap(ev_loop *loop, void *data)
 {
-    conn_ctx *ctx = data;
+    session_ctx *ctx = data;
     (void)loop;
     while (ctx->closing) {
-        conn *c = ctx->closing;
+        session *c = ctx->closing;
         ctx->closing = c->next_closing;
         c->next_closing = NULL;
         c->in_closing = 0;
@@ -101,7 +101,7 @@ static void reap(ev_loop *loop, void *data)
     }
 }
 
-conn_ctx *conn_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *err, size_t errlen)
+session_ctx *session_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *err, size_t errlen)
 {
     struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
                              .ai_flags = AI_NUMERICSERV};
@@ -114,9 +114,9 @@ conn_ctx *conn_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *
                  rc == EAI_SYSTEM ? strerror(errno) : gai_strerror(rc));
         return NULL;
     }
-    conn_ctx *ctx = xcalloc(1, sizeof *ctx);
+    session_ctx *ctx = cvre_xcalloc(1, sizeof *ctx);
     ctx->loop = loop;
-    for (struct addrinfo *ai = res; ai && ctx->naddrs < CONN_ADDRS_MAX; ai = ai->ai_next) {
+    for (struct addrinfo *ai = res; ai && ctx->naddrs < SESSION_ADDRS_MAX; ai = ai->ai_next) {
         if (ai->ai_addrlen > sizeof ctx->addrs[0])
             continue;
         memcpy(&ctx->addrs[ctx->naddrs], ai->ai_addr, ai->ai_addrlen);
@@ -136,7 +136,7 @@ conn_ctx *conn_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *
     return ctx;
 }
 
-void conn_ctx_free(conn_ctx *ctx)
+void session_ctx_free(session_ctx *ctx)
 {
     if (!ctx)
         return;
@@ -144,24 +144,24 @@ void conn_ctx_free(conn_ctx *ctx)
     free(ctx);
 }
 
-uint64_t conn_ctx_opened(const conn_ctx *ctx) { return ctx->opened; }
-uint64_t conn_ctx_frames_in(const conn_ctx *ctx) { return ctx->frames_in; }
-uint64_t conn_ctx_bytes_in(const conn_ctx *ctx) { return ctx->bytes_in; }
-const char *conn_ctx_peer(const conn_ctx *ctx) { return ctx->peer; }
+uint64_t session_ctx_opened(const session_ctx *ctx) { return ctx->opened; }
+uint64_t session_ctx_frames_in(const session_ctx *ctx) { return ctx->frames_in; }
+uint64_t session_ctx_bytes_in(const session_ctx *ctx) { return ctx->bytes_in; }
+const char *session_ctx_peer(const session_ctx *ctx) { return ctx->peer; }
 
 /* ---- ending ------------------------------------------------------------ */
 
 /* Records the first end and takes the socket out of the loop at once, so no
  * further callback arrives; the fd itself stays open until the reap, which
  * keeps its number from being reused by a socket opened meanwhile. */
-static void end_conn(conn *c, int kind, int code)
+static void end_conn(session *c, int kind, int code)
 {
     if (c->ended)
         return;
     c->ended = 1;
-    c->end = (conn_end){.kind = kind, .code = code, .after_bye = c->bye_sent,
-                        .was_open = c->state != CONN_CONNECTING};
-    c->state = CONN_CLOSED;
+    c->end = (session_end){.kind = kind, .code = code, .after_bye = c->bye_sent,
+                        .was_open = c->state != SESSION_CONNECTING};
+    c->state = SESSION_CLOSED;
     if (c->armed) {
         ev_io_del(c->ctx->loop, c->fd);
         c->armed = 0;
@@ -171,11 +171,11 @@ static void end_conn(conn *c, int kind, int code)
     c->in_closing = 1;
 }
 
-void conn_close(conn *c) { end_conn(c, CONN_END_LOCAL, 0); }
+void session_close(session *c) { end_conn(c, SESSION_END_LOCAL, 0); }
 
 /* Registers or re-arms the fd. Returns 0 or -errno, which the caller turns
  * into the end that fits its stage (the loop refuses an fd past its size). */
-static int arm(conn *c, unsigned events)
+static int arm(session *c, unsigned events)
 {
     int rc = c->armed ? ev_io_mod(c->ctx->loop, c->fd, events)
                       : ev_io_add(c->ctx->loop, c->fd, events, on_io, c);
@@ -184,38 +184,38 @@ static int arm(conn *c, unsigned events)
     return rc;
 }
 
-/* Re-arms an established conn; failing to is fatal for it. */
-static void rearm(conn *c, unsigned events)
+/* Re-arms an established session; failing to is fatal for it. */
+static void rearm(session *c, unsigned events)
 {
     int rc = arm(c, events);
     if (rc < 0)
-        end_conn(c, CONN_END_SOCKET, -rc);
+        end_conn(c, SESSION_END_SOCKET, -rc);
 }
 
 /* ---- output ------------------------------------------------------------ */
 
 /* Appends to the backlog, which grows on demand so that idle bots hold no
- * output memory; the caller has checked CONN_OUT_MAX. */
-static void out_append(conn *c, const uint8_t *p, size_t n)
+ * output memory; the caller has checked SESSION_OUT_MAX. */
+static void out_append(session *c, const uint8_t *p, size_t n)
 {
     if (c->out_len + n > c->out_cap) {
         size_t cap = c->out_cap ? c->out_cap * 2 : 512;
         while (cap < c->out_len + n)
             cap *= 2;
-        if (cap > CONN_OUT_MAX)
-            cap = CONN_OUT_MAX;
-        c->out = xrealloc(c->out, cap);
+        if (cap > SESSION_OUT_MAX)
+            cap = SESSION_OUT_MAX;
+        c->out = cvre_xrealloc(c->out, cap);
         c->out_cap = cap;
     }
     memcpy(c->out + c->out_len, p, n);
     c->out_len += n;
 }
 
-/* A failed send does not end the conn: the server may have closed after an
+/* A failed send does not end the session: the server may have closed after an
  * error message that is still waiting to be read. Output stops, and the read
  * side, which the kernel now reports as readable, delivers what is left and
  * then the end. */
-static void write_failed(conn *c)
+static void write_failed(session *c)
 {
     c->write_dead = 1;
     c->out_len = 0;
@@ -225,7 +225,7 @@ static void write_failed(conn *c)
 
 /* Once the bye is out, closing our half tells the server we are done even
  * if it does not act on the bye itself. */
-static void maybe_shutdown(conn *c)
+static void maybe_shutdown(session *c)
 {
     if (c->bye_sent && c->out_len == 0 && !c->write_dead)
         shutdown(c->fd, SHUT_WR);
@@ -234,15 +234,15 @@ static void maybe_shutdown(conn *c)
 /*
  * Sends one whole frame: directly when nothing is queued, the unsent rest
  * into the backlog (EV_WRITE armed). A frame that would push the backlog
- * past CONN_OUT_MAX is dropped whole, so the stream never holds half a
- * frame. Returns 0, -ENOBUFS when dropped, -ENOTCONN when the conn cannot
+ * past SESSION_OUT_MAX is dropped whole, so the stream never holds half a
+ * frame. Returns 0, -ENOBUFS when dropped, -ENOTCONN when the session cannot
  * send any more. Only called on an established connection.
  */
-static int send_frame(conn *c, const uint8_t *p, size_t n)
+static int send_frame(session *c, const uint8_t *p, size_t n)
 {
     if (c->ended || c->write_dead || c->bye_sent)
         return -ENOTCONN;
-    if (c->out_len + n > CONN_OUT_MAX)
+    if (c->out_len + n > SESSION_OUT_MAX)
         return -ENOBUFS;
     size_t done = 0;
     if (c->out_len == 0) {
@@ -265,7 +265,7 @@ static int send_frame(conn *c, const uint8_t *p, size_t n)
 /* Writes the backlog when the socket has room again; once it is empty,
  * gives the owner the on_writable call it asked for, and stops watching for
  * writability unless the owner refilled the backlog or asked again. */
-static void flush(conn *c)
+static void flush(session *c)
 {
     while (c->out_len > 0) {
         ssize_t k = send(c->fd, c->out, c->out_len, MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -326,7 +326,7 @@ static int needs_join(uint16_t type)
            type == PROTO_COLLISION;
 }
 
-static void send_join(conn *c)
+static void send_join(session *c)
 {
     uint8_t buf[PROTO_SIZE_JOIN_MAX];
     proto_writer w;
@@ -340,9 +340,9 @@ static void send_join(conn *c)
     memset(&c->cred, 0, sizeof c->cred);
 }
 
-void conn_set_credential(conn *c, const conn_credential *cred) { c->cred = *cred; }
+void session_set_credential(session *c, const session_credential *cred) { c->cred = *cred; }
 
-static void find_own(conn *c, const proto_snapshot *s)
+static void find_own(session *c, const proto_snapshot *s)
 {
     for (uint16_t i = 0; i < s->count; i++) {
         if (le_get_u32(s->entries + (size_t)i * PROTO_SNAPSHOT_ENTRY_SIZE) != c->view.avatar_id)
@@ -358,35 +358,35 @@ static void find_own(conn *c, const proto_snapshot *s)
 /*
  * Decodes one whole frame, advances the handshake and the view, and hands
  * the message to the owner. A frame that does not decode, or is not legal
- * from a server in our state, ends the conn with the status.
+ * from a server in our state, ends the session with the status.
  */
-static void dispatch(conn *c, const proto_frame *f)
+static void dispatch(session *c, const proto_frame *f)
 {
     proto_msg m;
     c->ctx->frames_in++;
     int st = proto_decode(f, &m);
-    if (st == PROTO_OK && (!from_server(m.type) || (needs_join(m.type) && c->state != CONN_JOINED)))
+    if (st == PROTO_OK && (!from_server(m.type) || (needs_join(m.type) && c->state != SESSION_JOINED)))
         st = PROTO_ERR_UNEXPECTED;
     c->view.pos_fresh = 0;
     if (st == PROTO_OK) {
         switch (m.type) {
         case PROTO_WELCOME:
-            if (c->state != CONN_HELLO_SENT)
+            if (c->state != SESSION_HELLO_SENT)
                 st = PROTO_ERR_UNEXPECTED;
             else if (m.u.welcome.version != PROTO_VERSION)
                 st = PROTO_ERR_VERSION;
             else {
                 c->view.welcome = m.u.welcome;
-                c->state = CONN_JOIN_SENT;
+                c->state = SESSION_JOIN_SENT;
                 send_join(c);
             }
             break;
         case PROTO_JOIN_OK:
-            if (c->state != CONN_JOIN_SENT) {
+            if (c->state != SESSION_JOIN_SENT) {
                 st = PROTO_ERR_UNEXPECTED;
                 break;
             }
-            c->state = CONN_JOINED;
+            c->state = SESSION_JOINED;
             c->view.avatar_id = m.u.join_ok.avatar_id;
             memcpy(c->view.pos, m.u.join_ok.pos, sizeof c->view.pos);
             memcpy(c->view.box, m.u.join_ok.box, sizeof c->view.box);
@@ -394,7 +394,7 @@ static void dispatch(conn *c, const proto_frame *f)
             break;
         case PROTO_SNAPSHOT:
             c->view.ack = m.u.snapshot.ack_seq;
-            if (c->state == CONN_JOINED)
+            if (c->state == SESSION_JOINED)
                 find_own(c, &m.u.snapshot);
             break;
         case PROTO_PONG:
@@ -416,7 +416,7 @@ static void dispatch(conn *c, const proto_frame *f)
         }
     }
     if (st != PROTO_OK) {
-        end_conn(c, CONN_END_PROTO, st);
+        end_conn(c, SESSION_END_PROTO, st);
         return;
     }
     c->h->on_msg(c, &m, c->data);
@@ -424,29 +424,29 @@ static void dispatch(conn *c, const proto_frame *f)
 
 /* Bytes the unfinished frame in c->in needs in all: a header until one is
  * there, then what its length field says (checked by proto_frame_parse). */
-static size_t pending_need(const conn *c)
+static size_t pending_need(const session *c)
 {
     if (c->in_len < PROTO_HEADER_SIZE)
         return PROTO_HEADER_SIZE;
     return 4u + (size_t)le_get_u32(c->in);
 }
 
-static void in_reserve(conn *c, size_t need)
+static void in_reserve(session *c, size_t need)
 {
     if (need <= c->in_cap)
         return;
     size_t cap = 256;
     while (cap < need)
         cap *= 2;
-    if (cap > CONN_IN_MAX)
-        cap = CONN_IN_MAX;
-    c->in = xrealloc(c->in, cap);
+    if (cap > SESSION_IN_MAX)
+        cap = SESSION_IN_MAX;
+    c->in = cvre_xrealloc(c->in, cap);
     c->in_cap = cap;
 }
 
 /* Parses the frames of a read that landed in the shared buffer; keeps the
- * unfinished tail in the conn. */
-static void parse_scratch(conn *c, const uint8_t *buf, size_t n)
+ * unfinished tail in the session. */
+static void parse_scratch(session *c, const uint8_t *buf, size_t n)
 {
     size_t off = 0;
     while (off < n && !c->ended) {
@@ -461,13 +461,13 @@ static void parse_scratch(conn *c, const uint8_t *buf, size_t n)
             c->in_len = n - off;
             return;
         } else {
-            end_conn(c, CONN_END_PROTO, st);
+            end_conn(c, SESSION_END_PROTO, st);
         }
     }
 }
 
 /* Called after bytes were added to the unfinished frame. */
-static void parse_pending(conn *c)
+static void parse_pending(session *c)
 {
     proto_frame f;
     int st = proto_frame_parse(c->in, c->in_len, PROTO_MAX_LEN, &f);
@@ -475,23 +475,23 @@ static void parse_pending(conn *c)
         c->in_len = 0; /* reads never go past the frame, so it is all of c->in */
         dispatch(c, &f);
     } else if (st != PROTO_INCOMPLETE) {
-        end_conn(c, CONN_END_PROTO, st);
+        end_conn(c, SESSION_END_PROTO, st);
     }
 }
 
 /*
- * Reads what the socket has, up to CONN_READS_PER_WAKEUP calls. Without an
+ * Reads what the socket has, up to SESSION_READS_PER_WAKEUP calls. Without an
  * unfinished frame a read goes to the shared buffer; with one, the read asks
- * for exactly the rest of that frame, so the conn's own buffer never holds
+ * for exactly the rest of that frame, so the session's own buffer never holds
  * more than one frame and a finished frame is parsed where it lies. A short
  * read normally means the socket is drained and saves the call that would
  * say EAGAIN; with drain set (the peer hung up) reading goes on until the
  * end shows. Returns 1 when the socket said EAGAIN, 0 otherwise.
  */
-static int read_some(conn *c, int drain)
+static int read_some(session *c, int drain)
 {
-    conn_ctx *ctx = c->ctx;
-    for (int i = 0; i < CONN_READS_PER_WAKEUP && !c->ended; i++) {
+    session_ctx *ctx = c->ctx;
+    for (int i = 0; i < SESSION_READS_PER_WAKEUP && !c->ended; i++) {
         uint8_t *dst = ctx->scratch;
         size_t want = sizeof ctx->scratch;
         if (c->in_len > 0) {
@@ -506,14 +506,14 @@ static int read_some(conn *c, int drain)
                 continue;
             if (errno == EAGAIN || errno == EWOULDBLOCK)
                 return 1;
-            end_conn(c, CONN_END_SOCKET, errno);
+            end_conn(c, SESSION_END_SOCKET, errno);
             return 0;
         }
         if (n == 0) {
             if (c->in_len > 0)
-                end_conn(c, CONN_END_PROTO, PROTO_ERR_TRUNCATED);
+                end_conn(c, SESSION_END_PROTO, PROTO_ERR_TRUNCATED);
             else
-                end_conn(c, CONN_END_EOF, 0);
+                end_conn(c, SESSION_END_EOF, 0);
             return 0;
         }
         ctx->bytes_in += (uint64_t)n;
@@ -531,7 +531,7 @@ static int read_some(conn *c, int drain)
 
 /* ---- connecting -------------------------------------------------------- */
 
-static void send_hello(conn *c)
+static void send_hello(session *c)
 {
     uint8_t buf[PROTO_SIZE_HELLO];
     proto_writer w;
@@ -540,22 +540,22 @@ static void send_hello(conn *c)
     send_frame(c, buf, w.len);
 }
 
-static void connected(conn *c)
+static void connected(session *c)
 {
     c->ctx->opened++;
-    c->state = c->raw ? CONN_RAW : CONN_HELLO_SENT;
+    c->state = c->raw ? SESSION_RAW : SESSION_HELLO_SENT;
     c->last_send = ev_now(c->ctx->loop);
     rearm(c, EV_READ);
     if (!c->raw && !c->ended)
         send_hello(c);
 }
 
-/* Tries the resolved addresses from c->addr_i on; ends the conn with the
+/* Tries the resolved addresses from c->addr_i on; ends the session with the
  * last error when none is left. A refused address moves on to the next one,
  * an exhausted process (EMFILE) does not. */
-static void connect_next(conn *c)
+static void connect_next(session *c)
 {
-    conn_ctx *ctx = c->ctx;
+    session_ctx *ctx = c->ctx;
     int err = ECONNREFUSED;
     for (; c->addr_i < ctx->naddrs; c->addr_i++) {
         const struct sockaddr *sa = (const struct sockaddr *)&ctx->addrs[c->addr_i];
@@ -586,10 +586,10 @@ static void connect_next(conn *c)
         close(c->fd);
         c->fd = -1;
     }
-    end_conn(c, CONN_END_CONNECT, err);
+    end_conn(c, SESSION_END_CONNECT, err);
 }
 
-static void finish_connect(conn *c)
+static void finish_connect(session *c)
 {
     int err = 0;
     socklen_t len = sizeof err;
@@ -607,13 +607,13 @@ static void finish_connect(conn *c)
     connect_next(c);
 }
 
-/* The loop's callback for every conn socket. */
+/* The loop's callback for every session socket. */
 static void on_io(ev_loop *loop, int fd, unsigned events, void *data)
 {
-    conn *c = data;
+    session *c = data;
     (void)loop;
     (void)fd;
-    if (c->state == CONN_CONNECTING) {
+    if (c->state == SESSION_CONNECTING) {
         finish_connect(c);
         return;
     }
@@ -622,11 +622,11 @@ static void on_io(ev_loop *loop, int fd, unsigned events, void *data)
         drained = read_some(c, (events & EV_ERROR) != 0);
     if (!c->ended && (events & EV_ERROR) && drained) {
         /* An error with nothing left to read: level-triggered, it would
-         * wake us forever, so it ends the conn. */
+         * wake us forever, so it ends the session. */
         int err = 0;
         socklen_t len = sizeof err;
         getsockopt(c->fd, SOL_SOCKET, SO_ERROR, &err, &len);
-        end_conn(c, CONN_END_SOCKET, err ? err : EPIPE);
+        end_conn(c, SESSION_END_SOCKET, err ? err : EPIPE);
     }
     if (!c->ended && (events & EV_WRITE))
         flush(c);
@@ -634,15 +634,15 @@ static void on_io(ev_loop *loop, int fd, unsigned events, void *data)
 
 /* ---- public ------------------------------------------------------------ */
 
-conn *conn_open(conn_ctx *ctx, const char *name, const float box[3], const conn_handler *handler,
+session *session_open(session_ctx *ctx, const char *name, const float box[3], const session_handler *handler,
                 void *data)
 {
-    conn *c = xcalloc(1, sizeof *c);
+    session *c = cvre_xcalloc(1, sizeof *c);
     c->ctx = ctx;
     c->h = handler;
     c->data = data;
     c->fd = -1;
-    c->state = CONN_CONNECTING;
+    c->state = SESSION_CONNECTING;
     c->raw = name == NULL;
     if (name)
         snprintf(c->name, sizeof c->name, "%s", name);
@@ -652,13 +652,13 @@ conn *conn_open(conn_ctx *ctx, const char *name, const float box[3], const conn_
     return c;
 }
 
-void conn_free(conn *c)
+void session_free(session *c)
 {
     if (!c)
         return;
     if (c->in_closing) {
         /* Ended but not reaped yet: unlink it so the hook never sees it. */
-        conn **p = &c->ctx->closing;
+        session **p = &c->ctx->closing;
         while (*p && *p != c)
             p = &(*p)->next_closing;
         if (*p)
@@ -673,13 +673,13 @@ void conn_free(conn *c)
     free(c);
 }
 
-int conn_state(const conn *c) { return c->state; }
+int session_state(const session *c) { return c->state; }
 
-const conn_view *conn_get_view(const conn *c) { return &c->view; }
+const session_view *session_get_view(const session *c) { return &c->view; }
 
-uint32_t conn_send_move(conn *c, const float pos[3])
+uint32_t session_send_move(session *c, const float pos[3])
 {
-    if (c->state != CONN_JOINED && c->state != CONN_RAW)
+    if (c->state != SESSION_JOINED && c->state != SESSION_RAW)
         return 0;
     uint8_t buf[PROTO_SIZE_MOVE];
     proto_writer w;
@@ -692,9 +692,9 @@ uint32_t conn_send_move(conn *c, const float pos[3])
     return ++c->seq;
 }
 
-int conn_send_ping(conn *c, uint64_t stamp)
+int session_send_ping(session *c, uint64_t stamp)
 {
-    if (c->state != CONN_JOINED)
+    if (c->state != SESSION_JOINED)
         return -ENOTCONN;
     uint8_t buf[PROTO_SIZE_PING];
     proto_writer w;
@@ -703,9 +703,9 @@ int conn_send_ping(conn *c, uint64_t stamp)
     return send_frame(c, buf, w.len);
 }
 
-int conn_send_upload_begin(conn *c, const proto_upload_begin *m)
+int session_send_upload_begin(session *c, const proto_upload_begin *m)
 {
-    if (c->state != CONN_JOINED)
+    if (c->state != SESSION_JOINED)
         return -ENOTCONN;
     uint8_t buf[PROTO_HEADER_SIZE + 8u + 2u + PROTO_OBJECT_NAME_MAX + PROTO_FORMAT_MAX + 5u];
     proto_writer w;
@@ -714,14 +714,14 @@ int conn_send_upload_begin(conn *c, const proto_upload_begin *m)
     return w.err == PROTO_OK ? send_frame(c, buf, w.len) : -EINVAL;
 }
 
-int conn_send_upload_chunk(conn *c, uint32_t upload_id, uint32_t offset, const uint8_t *data, uint32_t len)
+int session_send_upload_chunk(session *c, uint32_t upload_id, uint32_t offset, const uint8_t *data, uint32_t len)
 {
-    if (c->state != CONN_JOINED)
+    if (c->state != SESSION_JOINED)
         return -ENOTCONN;
     /* Checked before encoding, so a full backlog costs no 16 KiB copy. */
-    if (c->out_len + PROTO_HEADER_SIZE + 8u + len > CONN_OUT_MAX)
+    if (c->out_len + PROTO_HEADER_SIZE + 8u + len > SESSION_OUT_MAX)
         return -ENOBUFS;
-    uint8_t buf[CONN_SIZE_CHUNK_MAX];
+    uint8_t buf[SESSION_SIZE_CHUNK_MAX];
     proto_writer w;
     proto_writer_init(&w, buf, sizeof buf);
     proto_put_upload_chunk(&w, &(proto_upload_chunk){.upload_id = upload_id, .offset = offset, .data = data,
@@ -729,9 +729,9 @@ int conn_send_upload_chunk(conn *c, uint32_t upload_id, uint32_t offset, const u
     return w.err == PROTO_OK ? send_frame(c, buf, w.len) : -EINVAL;
 }
 
-int conn_send_upload_end(conn *c, const proto_upload_end *m)
+int session_send_upload_end(session *c, const proto_upload_end *m)
 {
-    if (c->state != CONN_JOINED)
+    if (c->state != SESSION_JOINED)
         return -ENOTCONN;
     uint8_t buf[PROTO_HEADER_SIZE + 4u + PROTO_SIZE_TRANSFORM];
     proto_writer w;
@@ -740,9 +740,9 @@ int conn_send_upload_end(conn *c, const proto_upload_end *m)
     return send_frame(c, buf, w.len);
 }
 
-int conn_send_object_place(conn *c, const proto_object_place *m)
+int session_send_object_place(session *c, const proto_object_place *m)
 {
-    if (c->state != CONN_JOINED)
+    if (c->state != SESSION_JOINED)
         return -ENOTCONN;
     uint8_t buf[PROTO_HEADER_SIZE + 4u + PROTO_SIZE_TRANSFORM];
     proto_writer w;
@@ -751,9 +751,9 @@ int conn_send_object_place(conn *c, const proto_object_place *m)
     return send_frame(c, buf, w.len);
 }
 
-int conn_send_object_remove(conn *c, uint32_t object_id)
+int session_send_object_remove(session *c, uint32_t object_id)
 {
-    if (c->state != CONN_JOINED)
+    if (c->state != SESSION_JOINED)
         return -ENOTCONN;
     uint8_t buf[PROTO_HEADER_SIZE + 4u];
     proto_writer w;
@@ -762,11 +762,11 @@ int conn_send_object_remove(conn *c, uint32_t object_id)
     return send_frame(c, buf, w.len);
 }
 
-size_t conn_out_pending(const conn *c) { return c->out_len; }
+size_t session_out_pending(const session *c) { return c->out_len; }
 
-int conn_want_writable(conn *c)
+int session_want_writable(session *c)
 {
-    if (c->ended || c->write_dead || c->bye_sent || c->state == CONN_CONNECTING || !c->h->on_writable)
+    if (c->ended || c->write_dead || c->bye_sent || c->state == SESSION_CONNECTING || !c->h->on_writable)
         return -ENOTCONN;
     c->want_writable = 1;
     if (!(c->armed & EV_WRITE))
@@ -774,20 +774,20 @@ int conn_want_writable(conn *c)
     return c->ended ? -ENOTCONN : 0;
 }
 
-void conn_keepalive(conn *c)
+void session_keepalive(session *c)
 {
     uint64_t now = ev_now(c->ctx->loop);
-    uint64_t quiet = (uint64_t)c->view.welcome.idle_timeout_ms * 1000000u / CONN_KEEPALIVE_FRACTION;
-    if (now - c->last_send >= quiet && conn_send_ping(c, now / 1000u) == 0)
+    uint64_t quiet = (uint64_t)c->view.welcome.idle_timeout_ms * 1000000u / SESSION_KEEPALIVE_FRACTION;
+    if (now - c->last_send >= quiet && session_send_ping(c, now / 1000u) == 0)
         c->keepalive_stamp = now / 1000u;
 }
 
-int conn_bye(conn *c, uint8_t reason)
+int session_bye(session *c, uint8_t reason)
 {
     if (c->ended || c->bye_sent)
         return 0;
-    if (c->state == CONN_CONNECTING) {
-        conn_close(c);
+    if (c->state == SESSION_CONNECTING) {
+        session_close(c);
         return 0;
     }
     uint8_t buf[PROTO_SIZE_BYE];
@@ -795,7 +795,7 @@ int conn_bye(conn *c, uint8_t reason)
     proto_writer_init(&w, buf, sizeof buf);
     proto_put_bye(&w, reason);
     if (send_frame(c, buf, w.len) < 0) {
-        conn_close(c); /* cannot even say bye: nothing more to wait for */
+        session_close(c); /* cannot even say bye: nothing more to wait for */
         return 0;
     }
     c->bye_sent = 1;
@@ -803,7 +803,7 @@ int conn_bye(conn *c, uint8_t reason)
     return 1;
 }
 
-int conn_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_timer_fn *fn, void *data)
+int session_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_timer_fn *fn, void *data)
 {
     int id = ev_timer_start(loop, delay_ns, period_ns, fn, data);
     if (id < 0) {
@@ -813,7 +813,7 @@ int conn_timer_start(ev_loop *loop, uint64_t delay_ns, uint64_t period_ns, ev_ti
     return id;
 }
 
-void conn_timer_stop(ev_loop *loop, int *id)
+void session_timer_stop(ev_loop *loop, int *id)
 {
     if (*id >= 0)
         ev_timer_stop(loop, *id);

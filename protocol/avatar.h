@@ -1,6 +1,6 @@
 /*
  * avatar.h: the default avatar, one definition for movement
- * (scene/move.c), refinement (ecm/refine.c: the space users need) and the
+ * (scene/move.c), refinement (refine/refine.c: the space users need) and the
  * client: a box 0.6 m wide and deep, 1.8 m tall, that climbs steps up to
  * 0.35 m (a stair riser is about 0.18 m; a kerb or low platform fits).
  */
