@@ -21,6 +21,7 @@
 #include "moderate.h"
 #include "out.h"
 #include "query.h"
+#include "timefmt.h"
 #include "user.h"
 
 enum { EXIT_NOT_FOUND = 1, EXIT_USAGE = 2, EXIT_DB = 3, EXIT_REFUSED = 4 };
@@ -81,9 +82,10 @@ static const char usage[] =
     "Times print as ISO-8601 in UTC. NULL is \"-\" in a table, an empty CSV\n"
     "field, null in JSON.\n"
     "\n"
-    "Times given to --since and --until: Unix seconds (1795000000 or\n"
-    "1795000000.25), or ISO-8601: 2026-11-22, 2026-11-22T10:00, 2026-11-22T10:00:00.5,\n"
-    "a space instead of T, and an optional zone: Z, +01:00, -0500 (none means UTC).\n"
+    "Times given to --since and --until (cvre-cluster takes the same): Unix seconds\n"
+    "(1795000000 or 1795000000.25), or ISO-8601 as printed here: 2026-11-22,\n"
+    "2026-11-22T10:00, 2026-11-22T10:00:00.5, 2026-11-22T10:00:00.500000Z, a space\n"
+    "instead of T, and an optional zone: Z, +01:00, -0500, +01 (none means UTC).\n"
     "--since is inclusive, --until exclusive.\n"
     "\n"
     "Exit status:\n"
@@ -382,80 +384,6 @@ static int parse_real(const char *text, double *value)
     return 0;
 }
 
-/* Reads exactly `digits` decimal digits at *p into *value, advancing *p. */
-static int digits_at(const char **p, int digits, int *value)
-{
-    int v = 0;
-    for (int i = 0; i < digits; i++, (*p)++) {
-        if (**p < '0' || **p > '9')
-            return -1;
-        v = v * 10 + (**p - '0');
-    }
-    *value = v;
-    return 0;
-}
-
-/* Unix seconds, or ISO-8601 (see usage) in UTC unless a zone is given. */
-static int parse_time(const char *text, double *value)
-{
-    if (parse_real(text, value) == 0)
-        return 0;
-    struct tm tm = {0};
-    int y, mo, d, h = 0, mi = 0, s = 0, zh = 0, zm = 0, sign = 0;
-    double frac = 0;
-    const char *p = text;
-    if (digits_at(&p, 4, &y) || *p++ != '-' || digits_at(&p, 2, &mo) || *p++ != '-' || digits_at(&p, 2, &d))
-        return -1;
-    if (*p == 'T' || *p == ' ') {
-        p++;
-        if (digits_at(&p, 2, &h) || *p++ != ':' || digits_at(&p, 2, &mi))
-            return -1;
-        if (*p == ':') {
-            p++;
-            if (digits_at(&p, 2, &s))
-                return -1;
-            if (*p == '.') {
-                const char *f = p;
-                p++;
-                if (*p < '0' || *p > '9')
-                    return -1;
-                while (*p >= '0' && *p <= '9')
-                    p++;
-                char buf[32];
-                size_t n = (size_t)(p - f) < sizeof buf - 2 ? (size_t)(p - f) : sizeof buf - 2;
-                buf[0] = '0';
-                memcpy(buf + 1, f, n);
-                buf[n + 1] = 0;
-                frac = strtod(buf, NULL);
-            }
-        }
-        if (*p == 'Z') {
-            p++;
-        } else if (*p == '+' || *p == '-') {
-            sign = *p++ == '+' ? 1 : -1;
-            if (digits_at(&p, 2, &zh))
-                return -1;
-            if (*p == ':')
-                p++;
-            if (digits_at(&p, 2, &zm) || zh > 23 || zm > 59)
-                return -1;
-        }
-    }
-    if (*p || mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || s > 60)
-        return -1;
-    tm.tm_year = y - 1900;
-    tm.tm_mon = mo - 1;
-    tm.tm_mday = d;
-    tm.tm_hour = h;
-    tm.tm_min = mi;
-    tm.tm_sec = s;
-    time_t t = timegm(&tm);
-    if (tm.tm_mday != d) /* 2026-02-30 came back as March */
-        return -1;
-    *value = (double)t + frac - sign * (zh * 3600.0 + zm * 60.0);
-    return 0;
-}
-
 /* X0,Y0,Z0,X1,Y1,Z1 with X0 <= X1, Y0 <= Y1, Z0 <= Z1. */
 static int parse_region(const char *text, double box[6])
 {
@@ -563,7 +491,7 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
         case O_SINCE:
         case O_UNTIL: {
             double t;
-            if (parse_time(optarg, &t) < 0)
+            if (timefmt_parse(optarg, &t) < 0)
                 return usage_error(where, "not a time: \"%s\"", optarg);
             if (o == O_SINCE)
                 a->f.has_since = 1, a->f.since = t;

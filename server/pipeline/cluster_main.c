@@ -15,7 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "alloc.h"
@@ -23,6 +22,7 @@
 #include "db.h"
 #include "dbscan.h"
 #include "record.h"
+#include "timefmt.h"
 
 enum { EXIT_OK = 0, EXIT_USAGE = 2, EXIT_DB = 3, EXIT_INTERNAL = 4 };
 
@@ -41,8 +41,10 @@ static const char usage[] =
     "  --min-points N     collisions within eps to make a core point, >= 1 (default 10)\n"
     "  --min-users N      distinct users a cluster needs, >= 1 (default 3)\n"
     "  --object ID        only this object (repeatable)\n"
-    "  --since T, --until T  only collisions in this window (Unix seconds or\n"
-    "                     YYYY-MM-DDTHH:MM:SS, UTC)\n"
+    "  --since T, --until T  only collisions in this window: Unix seconds, or ISO 8601\n"
+    "                     as cvre-admin prints and takes it (2026-12-01T17:40:00Z,\n"
+    "                     2026-12-01T17:40:00.5, 2026-12-01 18:40+01:00; UTC\n"
+    "                     without a zone); both ends included\n"
     "  --apply            refine every object with clusters and write its next\n"
     "                     collision map version (a running server publishes it)\n"
     "  --depth D          with --apply: grid of 2^D cells per axis of a box, 2..8 (default 7)\n"
@@ -79,26 +81,6 @@ static int fail_usage(const char *fmt, ...)
     fprintf(stderr, "; try --help\n");
     va_end(ap);
     return EXIT_USAGE;
-}
-
-/* Unix seconds from "1700000000.5" or "2026-11-22T10:00:00" (UTC). */
-static int parse_time(const char *s, double *out)
-{
-    char *end;
-    double v = strtod(s, &end);
-    if (end != s && *end == 0 && isfinite(v)) {
-        *out = v;
-        return 0;
-    }
-    struct tm tm = {0};
-    char tail;
-    if (sscanf(s, "%d-%d-%dT%d:%d:%d%c", &tm.tm_year, &tm.tm_mon, &tm.tm_mday, &tm.tm_hour, &tm.tm_min,
-               &tm.tm_sec, &tail) != 6)
-        return -1;
-    tm.tm_year -= 1900;
-    tm.tm_mon -= 1;
-    *out = (double)timegm(&tm);
-    return 0;
 }
 
 static void push_point(points *pt, const float xyz[3], uint32_t user)
@@ -164,8 +146,9 @@ int main(int argc, char **argv)
         }
         case O_SINCE:
         case O_UNTIL:
-            if (parse_time(optarg, o == O_SINCE ? &since : &until) < 0)
-                return fail_usage("a time is Unix seconds or YYYY-MM-DDTHH:MM:SS, not \"%s\"", optarg);
+            if (timefmt_parse(optarg, o == O_SINCE ? &since : &until) < 0)
+                return fail_usage("a time is Unix seconds or ISO 8601 (2026-12-01T17:40:00Z, UTC without a zone), "
+                                  "not \"%s\"", optarg);
             *(o == O_SINCE ? &has_since : &has_until) = 1;
             break;
         case O_JSON: json = 1; break;

@@ -1,10 +1,11 @@
 """The clustering command lines at their edges: cvre-cluster's time windows
-in both forms, its object filter against a world with objects, the --apply
+in every form (those cvre-admin prints and takes among them), its object filter against a world with objects, the --apply
 options, its progress line on a terminal and its limits; dbscan_cli's
 flags and every malformed input, in both of its formats, refused with its
 exit code and a message."""
 import os
 import pty
+import sqlite3
 import struct
 import subprocess
 import tempfile
@@ -44,6 +45,25 @@ def test_cluster_windows_objects_and_apply():
     assert rc == 0 and '"refined":[]' in out, (out, err)  # no clusters: nothing refined
 
 
+def test_cluster_time_forms():
+    """Every form cvre-admin prints or takes, and those cvre-cluster took
+    before, give the window the run records (since, until)."""
+    db = world_db()
+    t = 1796146800.0  # 2026-12-01T17:40:00Z
+    for since, until, want in (
+            ("2026-12-01T17:40:00Z", "2026-12-01T17:40:00.250000Z", (t, t + 0.25)),  # cvre-admin's CSV/JSON
+            ("2026-12-01T17:40:00.000Z", "2026-12-01T18:40:00+01:00", (t, t)),  # its table; a zone
+            ("2026-12-01T17:40:00", "1796146800.5", (t, t + 0.5)),  # the forms cvre-cluster took before
+            ("2026-12-1T17:40:0", "2026-12-01 17:41", (t, t + 60)),
+            ("2026-12-01", "2026-12-01T12:40:00-0500", (t - 63600, t))):
+        rc, out, err = cluster(db, "--since", since, "--until", until, "--json")
+        assert rc == 0 and out.startswith('{"run":'), (since, until, out, err)
+        c = sqlite3.connect(db)
+        got = c.execute("SELECT since, until FROM cluster_runs ORDER BY id DESC LIMIT 1").fetchone()
+        c.close()
+        assert got == want, (since, until, got, want)
+
+
 def test_cluster_progress_on_a_terminal():
     db = world_db()
     master, slave = pty.openpty()
@@ -74,7 +94,8 @@ def test_cluster_refusals():
     for i in range(257):
         many += ["--object", str(i + 1)]
     for flags, words in ((many, "too many --object flags (256 at most)"),
-                         (["--since", "2026-01-01T00:00:00Z"], "a time is Unix seconds or YYYY-MM-DDTHH:MM:SS"),
+                         (["--since", "yesterday"], "a time is Unix seconds or ISO 8601 (2026-12-01T17:40:00Z"),
+                         (["--since", "2026-02-30T00:00:00Z"], "a time is Unix seconds or ISO 8601"),
                          (["--until", "inf"], "a time is Unix seconds"),
                          (["--depth", "9"], "--depth wants a whole number from 2 to 8"),
                          (["--max-boxes", "0"], "--max-boxes wants a whole number from 1 to 1024"),
@@ -145,5 +166,5 @@ def test_dbscan_cli_bad_inputs():
         assert rc == 1 and f"{name}: Invalid argument" in err, (name, err)
 
 
-run([test_cluster_windows_objects_and_apply, test_cluster_progress_on_a_terminal, test_cluster_refusals,
-     test_dbscan_cli_flags, test_dbscan_cli_bad_inputs])
+run([test_cluster_windows_objects_and_apply, test_cluster_time_forms, test_cluster_progress_on_a_terminal,
+     test_cluster_refusals, test_dbscan_cli_flags, test_dbscan_cli_bad_inputs])
