@@ -1,4 +1,5 @@
-/* events.c: JSON event lines on stdout (see events.h). */
+/* events.c: JSON event lines on stdout (see events.h), or, on a terminal,
+ * the short lines of terminal.c. */
 #include "events.h"
 
 #include <inttypes.h>
@@ -6,20 +7,31 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "utf8.h"
+#include "json.h"
+#include "sbuf.h"
+#include "terminal.h"
 
-/* Each line is built with stdio's buffer and flushed whole at its end, so
- * one event never reaches the reader in two pieces. */
+/* Set by events_to_terminal(): the script's events go to terminal.c. */
+static int to_terminal;
+
+/* The line being built; written and flushed whole at its end, so one event
+ * never reaches the reader in two pieces. */
+static sbuf line;
+
+void events_to_terminal(int on) { to_terminal = on; }
+
 static void begin(const char *event, int bot)
 {
-    printf("{\"event\":\"%s\"", event);
+    sb_clear(&line);
+    sb_printf(&line, "{\"event\":\"%s\"", event);
     if (bot >= 0)
-        printf(",\"bot\":%d", bot);
+        sb_printf(&line, ",\"bot\":%d", bot);
 }
 
 static void finish(void)
 {
-    fputs("}\n", stdout);
+    sb_puts(&line, "}\n");
+    fwrite(line.p, 1, line.len, stdout);
     fflush(stdout);
 }
 
@@ -28,103 +40,99 @@ static void finish(void)
 static void put_float(float v)
 {
     if (isfinite(v))
-        printf("%.3f", (double)v);
+        sb_printf(&line, "%.3f", (double)v);
     else
-        fputs("null", stdout);
+        sb_puts(&line, "null");
 }
 
-static void put_vec3(const char *key, const float v[3])
+static void put_floats(const char *key, const float *v, int n)
 {
-    printf(",\"%s\":[", key);
-    for (int i = 0; i < 3; i++) {
+    if (key)
+        sb_printf(&line, ",\"%s\":[", key);
+    else
+        sb_puts(&line, "[");
+    for (int i = 0; i < n; i++) {
         if (i)
-            putchar(',');
+            sb_puts(&line, ",");
         put_float(v[i]);
     }
-    putchar(']');
+    sb_puts(&line, "]");
 }
+
+static void put_vec3(const char *key, const float v[3]) { put_floats(key, v, 3); }
 
 /* Angles and scales: three decimals would lose too much of them (a scale
  * of 0.0015, a tenth of a degree), so they get the seven significant digits
  * a float holds. */
 static void put_fine(const char *key, float v)
 {
-    printf(",\"%s\":", key);
+    sb_printf(&line, ",\"%s\":", key);
     if (isfinite(v))
-        printf("%.7g", (double)v);
+        sb_printf(&line, "%.7g", (double)v);
     else
-        fputs("null", stdout);
+        sb_puts(&line, "null");
 }
 
-/* A JSON string from len bytes: quotes, backslashes and control characters
- * escaped, bytes that are not UTF-8 replaced by U+FFFD. The server's strings
- * are already clean; local messages (strerror, paths) need not be. */
+/* A string field; base/json.c escapes it (the server's strings are clean,
+ * local messages such as strerror texts and paths need not be). */
 static void put_string(const char *key, const char *s, size_t len)
 {
-    const unsigned char *p = (const unsigned char *)s;
-    printf(",\"%s\":\"", key);
-    for (size_t i = 0; i < len;) {
-        unsigned char ch = p[i];
-        if (ch == '"' || ch == '\\') {
-            putchar('\\');
-            putchar(ch);
-            i++;
-        } else if (ch == '\n') {
-            fputs("\\n", stdout);
-            i++;
-        } else if (ch == '\t') {
-            fputs("\\t", stdout);
-            i++;
-        } else if (ch == '\r') {
-            fputs("\\r", stdout);
-            i++;
-        } else if (ch < 0x20u) {
-            printf("\\u%04x", ch);
-            i++;
-        } else {
-            uint32_t cp;
-            size_t k = utf8_next(p + i, len - i, &cp);
-            if (k == 0) {
-                fputs("\\ufffd", stdout);
-                i++;
-            } else {
-                fwrite(p + i, 1, k, stdout);
-                i += k;
-            }
-        }
-    }
-    putchar('"');
+    sb_printf(&line, ",\"%s\":", key);
+    json_put_string(&line, s, len);
+}
+
+/* Hex digits of a token. */
+static void put_hex(const uint8_t *p, unsigned n)
+{
+    for (unsigned i = 0; i < n; i++)
+        sb_printf(&line, "%02x", p[i]);
 }
 
 void events_error(int bot, unsigned code, const char *text, size_t len)
 {
+    if (to_terminal && bot < 0) {
+        terminal_error(code, text, len);
+        return;
+    }
     begin("error", bot);
-    printf(",\"code\":%u", code);
+    sb_printf(&line, ",\"code\":%u", code);
     put_string("message", text, len);
     finish();
 }
 
-static const char *bye_reason(unsigned reason)
+const char *events_bye_reason(unsigned reason)
 {
     return reason == PROTO_BYE_SHUTDOWN ? "shutdown" : reason == PROTO_BYE_KICKED ? "kicked" : "quit";
 }
 
 void events_bye(int bot, unsigned reason)
 {
+    if (to_terminal && bot < 0) {
+        terminal_bye(reason, 0);
+        return;
+    }
     begin("bye", bot);
-    printf(",\"reason\":\"%s\"", bye_reason(reason));
+    sb_printf(&line, ",\"reason\":\"%s\"", events_bye_reason(reason));
     finish();
 }
 
 void events_bye_sent(unsigned reason)
 {
+    if (to_terminal) {
+        terminal_bye(reason, 1);
+        return;
+    }
     begin("bye", -1);
-    printf(",\"reason\":\"%s\",\"from\":\"client\"", bye_reason(reason));
+    sb_printf(&line, ",\"reason\":\"%s\",\"from\":\"client\"", events_bye_reason(reason));
     finish();
 }
 
 void events_closed(int bot)
 {
+    if (to_terminal && bot < 0) {
+        terminal_closed();
+        return;
+    }
     begin("closed", bot);
     finish();
 }
@@ -132,12 +140,11 @@ void events_closed(int bot)
 static void welcome(const proto_welcome *w)
 {
     begin("welcome", -1);
-    printf(",\"session\":%" PRIu64 ",\"token\":\"", w->session_id);
-    for (unsigned i = 0; i < PROTO_TOKEN_SIZE; i++)
-        printf("%02x", w->token[i]);
-    printf("\",\"tick_hz\":%u,\"aoi_radius\":", (unsigned)w->tick_hz);
+    sb_printf(&line, ",\"session\":%" PRIu64 ",\"token\":\"", w->session_id);
+    put_hex(w->token, PROTO_TOKEN_SIZE);
+    sb_printf(&line, "\",\"tick_hz\":%u,\"aoi_radius\":", (unsigned)w->tick_hz);
     put_float(w->aoi_radius);
-    fputs(",\"max_speed\":", stdout);
+    sb_puts(&line, ",\"max_speed\":");
     put_float(w->max_speed);
     put_vec3("world_min", w->world_min);
     put_vec3("world_max", w->world_max);
@@ -147,48 +154,45 @@ static void welcome(const proto_welcome *w)
 static void snapshot(const proto_snapshot *s)
 {
     begin("snapshot", -1);
-    printf(",\"tick\":%" PRIu32 ",\"ack\":%" PRIu32 ",\"avatars\":[", s->tick, s->ack_seq);
+    sb_printf(&line, ",\"tick\":%" PRIu32 ",\"ack\":%" PRIu32 ",\"avatars\":[", s->tick, s->ack_seq);
     for (uint16_t i = 0; i < s->count; i++) {
         proto_avatar a;
         proto_snapshot_entry(s, i, &a);
-        printf("%s{\"id\":%" PRIu32, i ? "," : "", a.id);
+        sb_printf(&line, "%s{\"id\":%" PRIu32, i ? "," : "", a.id);
         put_vec3("pos", a.pos);
-        putchar('}');
+        sb_puts(&line, "}");
     }
-    putchar(']');
+    sb_puts(&line, "]");
     finish();
 }
 
 static void object_info(const proto_object_info *o)
 {
     begin("object", -1);
-    printf(",\"id\":%" PRIu32 ",\"upload\":%" PRIu32, o->object_id, o->upload_id);
+    sb_printf(&line, ",\"id\":%" PRIu32 ",\"upload\":%" PRIu32, o->object_id, o->upload_id);
     put_string("owner", o->owner.ptr, o->owner.len);
     put_string("name", o->name.ptr, o->name.len);
     put_vec3("pos", o->at.pos);
     put_fine("yaw", o->at.yaw);
     put_fine("scale", o->at.scale);
-    printf(",\"ecm_version\":%" PRIu32 ",\"triangles\":%" PRIu32 ",\"boxes\":[", o->ecm_version, o->tri_count);
+    sb_printf(&line, ",\"ecm_version\":%" PRIu32 ",\"triangles\":%" PRIu32 ",\"boxes\":[", o->ecm_version,
+              o->tri_count);
     for (uint16_t i = 0; i < o->box_count; i++) {
-        float lo[3], hi[3];
-        proto_object_box(o, i, lo, hi);
-        fputs(i ? ",[" : "[", stdout);
-        for (int k = 0; k < 6; k++) {
-            if (k)
-                putchar(',');
-            put_float(k < 3 ? lo[k] : hi[k - 3]);
-        }
-        putchar(']');
+        float box[6];
+        proto_object_box(o, i, box, box + 3);
+        if (i)
+            sb_puts(&line, ",");
+        put_floats(NULL, box, 6);
     }
-    putchar(']');
+    sb_puts(&line, "]");
     finish();
 }
 
 static void collision(const proto_collision *c)
 {
     begin("collision", -1);
-    printf(",\"object\":%" PRIu32 ",\"ecm_version\":%" PRIu32 ",\"box\":%u,\"inside\":%s", c->object_id,
-           c->ecm_version, (unsigned)c->box_index, c->inside ? "true" : "false");
+    sb_printf(&line, ",\"object\":%" PRIu32 ",\"ecm_version\":%" PRIu32 ",\"box\":%u,\"inside\":%s", c->object_id,
+              c->ecm_version, (unsigned)c->box_index, c->inside ? "true" : "false");
     put_vec3("point", c->point);
     put_vec3("normal", c->normal);
     finish();
@@ -196,26 +200,29 @@ static void collision(const proto_collision *c)
 
 void events_message(const proto_msg *m, uint64_t now_us)
 {
+    if (to_terminal) {
+        terminal_message(m, now_us);
+        return;
+    }
     switch (m->type) {
     case PROTO_WELCOME:
         welcome(&m->u.welcome);
         break;
     case PROTO_JOIN_OK:
         begin("join_ok", -1);
-        printf(",\"id\":%" PRIu32, m->u.join_ok.avatar_id);
+        sb_printf(&line, ",\"id\":%" PRIu32, m->u.join_ok.avatar_id);
         put_vec3("pos", m->u.join_ok.pos);
         put_vec3("box", m->u.join_ok.box);
         if (m->u.join_ok.has_token) { /* for CVRE_TOKEN on the next join */
-            fputs(",\"resume_token\":\"", stdout);
-            for (unsigned i = 0; i < PROTO_RESUME_TOKEN_SIZE; i++)
-                printf("%02x", m->u.join_ok.token[i]);
-            putchar('"');
+            sb_puts(&line, ",\"resume_token\":\"");
+            put_hex(m->u.join_ok.token, PROTO_RESUME_TOKEN_SIZE);
+            sb_puts(&line, "\"");
         }
         finish();
         break;
     case PROTO_AVATAR_JOINED:
         begin("joined", -1);
-        printf(",\"id\":%" PRIu32, m->u.avatar_joined.id);
+        sb_printf(&line, ",\"id\":%" PRIu32, m->u.avatar_joined.id);
         put_string("name", m->u.avatar_joined.name.ptr, m->u.avatar_joined.name.len);
         put_vec3("pos", m->u.avatar_joined.pos);
         put_vec3("box", m->u.avatar_joined.box);
@@ -223,8 +230,8 @@ void events_message(const proto_msg *m, uint64_t now_us)
         break;
     case PROTO_AVATAR_LEFT:
         begin("left", -1);
-        printf(",\"id\":%" PRIu32 ",\"reason\":\"%s\"", m->u.avatar_left.id,
-               m->u.avatar_left.reason == PROTO_LEFT_OUT_OF_RANGE ? "out_of_range" : "disconnected");
+        sb_printf(&line, ",\"id\":%" PRIu32 ",\"reason\":\"%s\"", m->u.avatar_left.id,
+                  m->u.avatar_left.reason == PROTO_LEFT_OUT_OF_RANGE ? "out_of_range" : "disconnected");
         finish();
         break;
     case PROTO_SNAPSHOT:
@@ -236,8 +243,8 @@ void events_message(const proto_msg *m, uint64_t now_us)
     case PROTO_PONG: {
         uint64_t stamp = m->u.ping.stamp;
         begin("pong", -1);
-        printf(",\"stamp\":%" PRIu64 ",\"rtt_ms\":%.3f", stamp,
-               now_us >= stamp ? (double)(now_us - stamp) / 1000.0 : 0.0);
+        sb_printf(&line, ",\"stamp\":%" PRIu64 ",\"rtt_ms\":%.3f", stamp,
+                  now_us >= stamp ? (double)(now_us - stamp) / 1000.0 : 0.0);
         finish();
         break;
     }
@@ -249,13 +256,13 @@ void events_message(const proto_msg *m, uint64_t now_us)
         break;
     case PROTO_OBJECT_REMOVED:
         begin("object_removed", -1);
-        printf(",\"id\":%" PRIu32, m->u.object_id);
+        sb_printf(&line, ",\"id\":%" PRIu32, m->u.object_id);
         finish();
         break;
     case PROTO_OBJECT_REJECTED:
         begin("rejected", -1);
-        printf(",\"request\":%" PRIu32 ",\"code\":%u", m->u.object_rejected.request_id,
-               (unsigned)m->u.object_rejected.code);
+        sb_printf(&line, ",\"request\":%" PRIu32 ",\"code\":%u", m->u.object_rejected.request_id,
+                  (unsigned)m->u.object_rejected.code);
         put_string("message", m->u.object_rejected.message.ptr, m->u.object_rejected.message.len);
         finish();
         break;
@@ -293,35 +300,48 @@ int events_conn_end(int bot, const session_end *end, const char *peer)
 
 void events_done(const char *command, const float pos[3])
 {
+    if (to_terminal) {
+        terminal_done(command, pos);
+        return;
+    }
     begin("done", -1);
-    printf(",\"command\":\"%s\"", command);
+    sb_printf(&line, ",\"command\":\"%s\"", command);
     put_vec3("pos", pos);
     finish();
 }
 
 void events_done_object(const char *command, const char *result, uint32_t object_id, uint32_t upload_id,
-                        double seconds)
+                        double seconds, const float box[6])
 {
+    if (to_terminal) {
+        terminal_done_object(command, result, object_id, seconds, box);
+        return;
+    }
     begin("done", -1);
-    printf(",\"command\":\"%s\",\"result\":\"%s\",\"object\":", command, result);
+    sb_printf(&line, ",\"command\":\"%s\",\"result\":\"%s\",\"object\":", command, result);
     if (object_id)
-        printf("%" PRIu32, object_id);
+        sb_printf(&line, "%" PRIu32, object_id);
     else
-        fputs("null", stdout);
+        sb_puts(&line, "null");
     if (upload_id)
-        printf(",\"upload\":%" PRIu32, upload_id);
-    printf(",\"seconds\":%.3f", seconds);
+        sb_printf(&line, ",\"upload\":%" PRIu32, upload_id);
+    sb_printf(&line, ",\"seconds\":%.3f", seconds);
+    if (box) {
+        put_vec3("box_min", box);
+        put_vec3("box_max", box + 3);
+    }
     finish();
 }
 
 static void counts(const char *event, const events_counts *k, const char *time_key, double t)
 {
     begin(event, -1);
-    printf(",\"%s\":%.3f,\"connected\":%" PRIu64 ",\"joined\":%" PRIu64 ",\"moves_sent\":%" PRIu64
-           ",\"moves_dropped\":%" PRIu64 ",\"frames_in\":%" PRIu64 ",\"bytes_in\":%" PRIu64
-           ",\"errors\":%" PRIu64 ",\"disconnects\":%" PRIu64 ",\"collisions\":%" PRIu64,
-           time_key, t, k->connected, k->joined, k->moves_sent, k->moves_dropped, k->frames_in,
-           k->bytes_in, k->errors, k->disconnects, k->collisions);
+    sb_printf(&line,
+              ",\"%s\":%.3f,\"connected\":%" PRIu64 ",\"joined\":%" PRIu64 ",\"moves_sent\":%" PRIu64
+              ",\"moves_dropped\":%" PRIu64 ",\"frames_in\":%" PRIu64 ",\"bytes_in\":%" PRIu64
+              ",\"errors\":%" PRIu64 ",\"disconnects\":%" PRIu64 ",\"collisions\":%" PRIu64,
+              time_key, t, k->connected, k->joined, k->moves_sent, k->moves_dropped, k->frames_in, k->bytes_in,
+              k->errors, k->disconnects, k->collisions);
     finish();
 }
 

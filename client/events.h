@@ -2,7 +2,8 @@
  * events.h: what the client prints on stdout, one JSON object per line,
  * flushed at once, so that a program reading the pipe sees each event as it
  * happens. Swarm events carry a "bot" field; bot < 0 leaves it out.
- * Diagnostics go to stderr (log.h), never here.
+ * Diagnostics go to stderr (log.h), never here. A person at a terminal gets
+ * short lines instead (events_to_terminal(), terminal.h).
  */
 #ifndef CVRE_CLIENT_EVENTS_H
 #define CVRE_CLIENT_EVENTS_H
@@ -19,6 +20,10 @@ typedef struct events_counts {
     uint64_t collisions; /* COLLISION messages received */
 } events_counts;
 
+/* With on set, the one user's events (bot < 0) are shown as terminal.c's
+ * lines instead of JSON; the swarm's always stay JSON. */
+void events_to_terminal(int on);
+
 /* A message received from the server: welcome, join_ok, joined, left,
  * snapshot, error, pong, bye, object, object_removed, rejected or
  * collision. Pings are answered, not printed. now_us is the monotonic clock
@@ -27,6 +32,8 @@ void events_message(const proto_msg *m, uint64_t now_us);
 
 void events_error(int bot, unsigned code, const char *text, size_t len);
 void events_bye(int bot, unsigned reason);
+/* "quit", "shutdown" or "kicked" for a bye's reason (enum proto_bye_reason). */
+const char *events_bye_reason(unsigned reason);
 /* Our own bye, so a reader sees why the session ends: marked "from":"client". */
 void events_bye_sent(unsigned reason);
 void events_closed(int bot);
@@ -46,10 +53,11 @@ void events_done(const char *command, const float pos[3]);
  * An object command (import, place, remove) finished. result is "ok",
  * "rejected", "timeout" or "failed"; object_id 0 prints null (an import
  * that made no object); upload_id 0 leaves the field out (place, remove);
- * seconds is how long the command took.
+ * seconds is how long the command took; box (min x y z, max x y z), when
+ * not NULL, is where the object's box ended up, in world coordinates.
  */
 void events_done_object(const char *command, const char *result, uint32_t object_id, uint32_t upload_id,
-                        double seconds);
+                        double seconds, const float box[6]);
 
 void events_stats(const events_counts *k, double t);
 void events_summary(const events_counts *k, double duration);

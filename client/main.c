@@ -46,19 +46,23 @@ typedef struct options {
     double ramp;
     int no_handshake;
     int login; /* ask for the password on the terminal if CVRE_PASSWORD is unset */
+    int json;  /* JSON lines even on a terminal */
 } options;
 
 static void usage(FILE *f)
 {
     fputs("usage: cvre-client [--host H] [--port P] [--name NAME] [--login] [--box X,Y,Z] [--rate HZ]\n"
-          "                   [--script FILE]\n"
+          "                   [--script FILE] [--json]\n"
           "       cvre-client --bots N [--pattern random-walk|circle] [--duration S] [--ramp N]\n"
           "                   [--no-handshake] [--host H] [--port P] [--name PREFIX] [--rate HZ]\n"
           "       cvre-client --help | --version\n"
           "\n"
           "The thin client of a cvre-server: one user driven by hand or by a script, or a\n"
           "swarm of bots for load tests, on one event loop. Every event it receives is\n"
-          "printed on stdout as one JSON object per line; messages go to stderr.\n"
+          "printed on stdout as one JSON object per line; messages go to stderr. Typing\n"
+          "at a terminal (standard input and output both one), a person gets short lines\n"
+          "instead: joins, leaves, objects, errors, command results, a collision once per\n"
+          "contact, no snapshots.\n"
           "\n"
           "Options:\n"
           "  --host H           server address (default 127.0.0.1; IPv4, IPv6 or a name)\n"
@@ -69,6 +73,7 @@ static void usage(FILE *f)
           "  --box X,Y,Z        avatar box size in metres (default 0.6,1.8,0.6)\n"
           "  --rate HZ          moves per second while walking (default 20)\n"
           "  --script FILE      run the commands in FILE instead of standard input\n"
+          "  --json             JSON lines, every event, even at a terminal\n"
           "  --bots N           run N bots (guests) instead of one user\n"
           "  --pattern P        bots: random-walk (default) or circle\n"
           "  --duration S       bots: seconds to run (default 10)\n"
@@ -79,8 +84,12 @@ static void usage(FILE *f)
           "\n"
           "Commands (standard input, interactively on a terminal, or --script FILE):\n"
           "  move X Y Z, walk DX DZ SECONDS, wait MS, ping, quit;\n"
-          "  import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z [--yaw DEGREES]\n"
-          "  [--size S], place ID X Y Z [--yaw DEGREES] [--size S], remove ID (accounts only).\n"
+          "  import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z\n"
+          "  [--anchor origin|base] [--drop] [--yaw DEGREES] [--size S],\n"
+          "  place ID X Y Z [--yaw DEGREES] [--size S], remove ID (accounts only).\n"
+          "  import's at X Y Z places the model's origin; --anchor base places the bottom\n"
+          "  centre of its box there instead, and --drop then lowers or raises the box\n"
+          "  onto the highest surface under it the client knows of (else the floor).\n"
           "\n"
           "Environment:\n"
           "  CVRE_TOKEN         join with this resume token (the hex resume_token of an\n"
@@ -99,18 +108,20 @@ static void usage(FILE *f)
           f);
 }
 
+/* Reports a bad flag value; returns -EINVAL for parse_args to pass on. */
 static int bad(const char *flag, const char *value, const char *want)
 {
     fprintf(stderr, "cvre-client: %s: bad value '%s': %s (see --help)\n", flag, value, want);
-    return 2;
+    return -EINVAL;
 }
 
+/* The flag value parsers: 0, or -EINVAL when s is not a value in range. */
 static int parse_double(const char *s, double lo, double hi, int lo_open, double *out)
 {
     char *end;
     double v = strtod(s, &end);
     if (end == s || *end != '\0' || !isfinite(v) || v > hi || v < lo || (lo_open && v == lo))
-        return -1;
+        return -EINVAL;
     *out = v;
     return 0;
 }
@@ -119,11 +130,11 @@ static int parse_unsigned(const char *s, unsigned long lo, unsigned long hi, uns
 {
     char *end;
     if (*s < '0' || *s > '9')
-        return -1;
+        return -EINVAL;
     errno = 0;
     unsigned long v = strtoul(s, &end, 10);
     if (*end != '\0' || errno || v < lo || v > hi)
-        return -1;
+        return -EINVAL;
     *out = v;
     return 0;
 }
@@ -135,9 +146,9 @@ static int parse_box(const char *s, float box[3])
         char *end;
         double v = strtod(p, &end);
         if (end == p || !isfinite(v) || v < PROTO_BOX_MIN || v > PROTO_BOX_MAX)
-            return -1;
+            return -EINVAL;
         if (*end != (i < 2 ? ',' : '\0'))
-            return -1;
+            return -EINVAL;
         box[i] = (float)v;
         p = end + 1;
     }
@@ -168,8 +179,8 @@ static unsigned digits(unsigned v)
     return d;
 }
 
-/* Fills *o from argv. Returns -1 to go on, or the exit code: 0 after --help
- * or --version, 2 after a usage error (already reported). */
+/* Fills *o from argv. Returns 0 to go on, -ECANCELED after --help or
+ * --version (printed), -EINVAL after a usage error (reported). */
 static int parse_args(int argc, char **argv, options *o)
 {
     *o = (options){.net = {.host = "127.0.0.1", .port = 7878, .name = "user", .box = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH}},
@@ -178,15 +189,15 @@ static int parse_args(int argc, char **argv, options *o)
         const char *arg = argv[i];
         if (strncmp(arg, "--", 2) != 0) {
             fprintf(stderr, "cvre-client: unexpected argument '%s' (see --help)\n", arg);
-            return 2;
+            return -EINVAL;
         }
         if (strcmp(arg, "--help") == 0) {
             usage(stdout);
-            return 0;
+            return -ECANCELED;
         }
         if (strcmp(arg, "--version") == 0) {
             printf("cvre-client %s\n", CVRE_VERSION);
-            return 0;
+            return -ECANCELED;
         }
         if (strcmp(arg, "--no-handshake") == 0) {
             o->no_handshake = 1;
@@ -196,13 +207,17 @@ static int parse_args(int argc, char **argv, options *o)
             o->login = 1;
             continue;
         }
+        if (strcmp(arg, "--json") == 0) {
+            o->json = 1;
+            continue;
+        }
         /* Every other flag takes a value: --flag VALUE or --flag=VALUE. */
         char flag[32];
         const char *eq = strchr(arg, '='), *val;
         size_t flen = eq ? (size_t)(eq - arg) : strlen(arg);
         if (flen >= sizeof flag) {
             fprintf(stderr, "cvre-client: unknown flag '%s' (see --help)\n", arg);
-            return 2;
+            return -EINVAL;
         }
         memcpy(flag, arg, flen);
         flag[flen] = '\0';
@@ -213,7 +228,7 @@ static int parse_args(int argc, char **argv, options *o)
             k++;
         if (k == sizeof known / sizeof known[0]) {
             fprintf(stderr, "cvre-client: unknown flag '%s' (see --help)\n", flag);
-            return 2;
+            return -EINVAL;
         }
         if (eq) {
             val = eq + 1;
@@ -221,7 +236,7 @@ static int parse_args(int argc, char **argv, options *o)
             val = argv[++i];
         } else {
             fprintf(stderr, "cvre-client: %s needs a value (see --help)\n", flag);
-            return 2;
+            return -EINVAL;
         }
 
         unsigned long u;
@@ -267,11 +282,11 @@ static int parse_args(int argc, char **argv, options *o)
     }
     if (o->login && o->bots) {
         fprintf(stderr, "cvre-client: --login is for one user, not --bots (bots are guests)\n");
-        return 2;
+        return -EINVAL;
     }
     if (o->no_handshake && o->bots == 0) {
         fprintf(stderr, "cvre-client: --no-handshake needs --bots\n");
-        return 2;
+        return -EINVAL;
     }
     if (o->bots > 0) {
         if (!o->name_given)
@@ -279,10 +294,10 @@ static int parse_args(int argc, char **argv, options *o)
         if (strlen(o->net.name) + 1 + digits(o->bots - 1) > PROTO_NAME_MAX) {
             fprintf(stderr, "cvre-client: --name: '%s-%u' would be longer than %u bytes\n",
                     o->net.name, o->bots - 1, PROTO_NAME_MAX);
-            return 2;
+            return -EINVAL;
         }
     }
-    return -1;
+    return 0;
 }
 
 /* Lifts the descriptor limit to the hard limit, since every bot is a
@@ -326,7 +341,7 @@ static void on_signal(ev_loop *loop, int fd, unsigned events, void *data)
     }
 }
 
-/* A password of 1..PROTO_PASSWORD_MAX bytes into cred. 0, or 2 with a
+/* A password of 1..PROTO_PASSWORD_MAX bytes into cred. 0, or -EINVAL with a
  * message (never the password). */
 static int set_password(session_credential *cred, const char *pw)
 {
@@ -334,7 +349,7 @@ static int set_password(session_credential *cred, const char *pw)
 
     if (n < 1 || n > PROTO_PASSWORD_MAX) {
         fprintf(stderr, "cvre-client: a password is 1 to %u bytes\n", PROTO_PASSWORD_MAX);
-        return 2;
+        return -EINVAL;
     }
     cred->kind = PROTO_CRED_PASSWORD;
     cred->len = (uint32_t)n;
@@ -342,7 +357,8 @@ static int set_password(session_credential *cred, const char *pw)
     return 0;
 }
 
-/* Asks for the password of name on the terminal, without echo. */
+/* Asks for the password of name on the terminal, without echo. 0, or
+ * -EINVAL with a message. */
 static int ask_password(const char *name, session_credential *cred)
 {
     char line[PROTO_PASSWORD_MAX + 2];
@@ -353,7 +369,7 @@ static int ask_password(const char *name, session_credential *cred)
 
     if (!tty) {
         fprintf(stderr, "cvre-client: --login: no terminal to ask for the password; set CVRE_PASSWORD\n");
-        return 2;
+        return -EINVAL;
     }
     fd = fileno(tty);
     fprintf(tty, "password for %s: ", name);
@@ -371,7 +387,7 @@ static int ask_password(const char *name, session_credential *cred)
     fclose(tty);
     if (!got) {
         fprintf(stderr, "cvre-client: --login: no password given\n");
-        return 2;
+        return -EINVAL;
     }
     line[strcspn(line, "\r\n")] = 0;
     rc = set_password(cred, line);
@@ -381,7 +397,7 @@ static int ask_password(const char *name, session_credential *cred)
 
 /* What the join carries: a resume token (CVRE_TOKEN), a password
  * (CVRE_PASSWORD, or asked for with --login), or nothing (a guest).
- * 0, or 2 with a message. */
+ * 0, or -EINVAL with a message. */
 static int login_credential(const options *o, session_credential *cred)
 {
     const char *token = getenv("CVRE_TOKEN"), *pw = getenv("CVRE_PASSWORD");
@@ -398,7 +414,7 @@ static int login_credential(const options *o, session_credential *cred)
         if (!ok) {
             fprintf(stderr, "cvre-client: CVRE_TOKEN must be the %u hex digits of a resume_token\n",
                     2 * PROTO_RESUME_TOKEN_SIZE);
-            return 2;
+            return -EINVAL;
         }
         cred->kind = PROTO_CRED_TOKEN;
         cred->len = PROTO_RESUME_TOKEN_SIZE;
@@ -413,8 +429,8 @@ int main(int argc, char **argv)
 {
     options o;
     int code = parse_args(argc, argv, &o);
-    if (code >= 0)
-        return code;
+    if (code < 0)
+        return code == -ECANCELED ? 0 : 2; /* --help or --version; a usage error */
 
     signal(SIGPIPE, SIG_IGN);
     int max_fd = o.bots ? raise_nofile(o.bots) : SPARE_FDS;
@@ -438,9 +454,10 @@ int main(int argc, char **argv)
                         .duration = o.duration, .ramp = o.ramp, .no_handshake = o.no_handshake};
         m.bots = bots_create(loop, &bo, &code);
     } else {
-        script_opts so = {.net = o.net, .rate = o.rate, .file = o.script};
-        code = login_credential(&o, &so.login);
-        if (code == 0)
+        script_opts so = {.net = o.net, .rate = o.rate, .file = o.script, .json = o.json};
+        if (login_credential(&o, &so.login) < 0)
+            code = 2;
+        else
             m.script = script_create(loop, &so, &code);
         memset(&so.login, 0, sizeof so.login);
     }

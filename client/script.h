@@ -2,6 +2,8 @@
  * script.h: the scripted and interactive client: one connection that runs
  * commands (move, walk, wait, ping, import, place, remove, quit) in order
  * once joined, while every received event is printed (events.h).
+ * script_parse.c holds the command language, script_upload.c the imports'
+ * uploads and placing, script.c the runner and its input.
  *
  * Commands come from a file, read and checked whole before connecting; from
  * standard input when it is a pipe or a terminal, line by line as they are
@@ -27,6 +29,12 @@ enum script_op {
     SCRIPT_QUIT
 };
 
+/* Which point of an imported model "at X Y Z" names. */
+enum script_anchor {
+    SCRIPT_ANCHOR_ORIGIN, /* the model file's origin (the wire's transform) */
+    SCRIPT_ANCHOR_BASE,   /* the bottom centre of the box around its collision boxes */
+};
+
 typedef struct script_cmd {
     int op;        /* enum script_op */
     double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms; import, place: x y z */
@@ -39,11 +47,13 @@ typedef struct script_cmd {
     char name[PROTO_OBJECT_NAME_MAX + 1]; /* --name, or "": the file's base name */
     int up_axis;        /* enum proto_up_axis */
     double unit_scale;  /* file units to metres */
+    int anchor;         /* enum script_anchor */
+    int drop;           /* --drop: lower (or raise) the box onto the surface under it */
 } script_cmd;
 
 /*
  * Parses one line (without its newline). Returns 1 and fills *cmd for a
- * command, 0 for a blank or comment line, -1 with a message in err (which
+ * command, 0 for a blank or comment line, -EINVAL with a message in err (which
  * does not name the line; the caller knows it) for anything else, including
  * numbers that are not finite or do not fit their range. Words are split at
  * blanks; a word in double quotes ("my model.obj") may hold blanks and '#'.
@@ -54,12 +64,15 @@ typedef struct script_cmd {
 int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errlen);
 /* Frees what *cmd owns; it may be cleared again. */
 void script_cmd_clear(script_cmd *cmd);
+/* The command's word ("move", "import", ...) for an enum script_op. */
+const char *script_op_name(int op);
 
 typedef struct script_opts {
     session_params net;
     double rate;      /* moves per second while walking */
     const char *file; /* NULL: standard input */
     session_credential login; /* what the join carries */
+    int json;         /* JSON lines even when a person types at a terminal */
 } script_opts;
 
 typedef struct script script;
