@@ -7,7 +7,7 @@
 #include <string.h>
 
 #include "alloc.h"
-#include "importInt.h"
+#include "err.h"
 #include "le.h"
 
 _Static_assert(IMPORT_PIPE_HINT_MAX <= 255u, "the hint's length is a u8");
@@ -121,16 +121,16 @@ long import_pipe_answer_head(const uint8_t *p, size_t n, uint32_t max_triangles,
 
     if (n < 14)
         return n >= 4 && memcmp(p, answer_magic, 4) != 0
-                   ? import__fail(err, errlen, -EPROTO, "the importer's answer has no valid header")
+                   ? cvre_fail(err, errlen, -EPROTO, "the importer's answer has no valid header")
                    : 0;
     if (memcmp(p, answer_magic, 4) != 0 || le_get_u32(p + 4) != IMPORT_PIPE_VERSION)
-        return import__fail(err, errlen, -EPROTO, "the importer's answer has no valid header");
+        return cvre_fail(err, errlen, -EPROTO, "the importer's answer has no valid header");
     h->status = (int32_t)le_get_u32(p + 8);
     ml = le_get_u16(p + 12);
     if (ml > IMPORT_PIPE_MESSAGE_MAX)
-        return import__fail(err, errlen, -EPROTO, "the importer's message is too long");
+        return cvre_fail(err, errlen, -EPROTO, "the importer's message is too long");
     if (h->status != 0 && h->status != -EINVAL && h->status != -EFBIG && h->status != -ENOMEM)
-        return import__fail(err, errlen, -EPROTO, "the importer answered status %d", (int)h->status);
+        return cvre_fail(err, errlen, -EPROTO, "the importer answered status %d", (int)h->status);
     if (n < 14 + ml + (h->status == 0 ? 28u : 0u))
         return 0;
     copy_message(p + 14, ml, h->message, sizeof h->message);
@@ -139,7 +139,7 @@ long import_pipe_answer_head(const uint8_t *p, size_t n, uint32_t max_triangles,
         return (long)(14 + ml);
     h->ntris = le_get_u32(p + 14 + ml);
     if (h->ntris == 0)
-        return import__fail(err, errlen, -EPROTO, "the importer answered no triangles");
+        return cvre_fail(err, errlen, -EPROTO, "the importer answered no triangles");
     if (h->ntris > max_triangles) {
         if (errlen)
             snprintf(err, errlen, "the importer answered %u triangles, over the limit of %u", h->ntris,
@@ -160,7 +160,7 @@ int import_pipe_answer_tris(float *tris, const import_pipe_head *h, char *err, s
         float v = le_get_f32((const uint8_t *)&tris[i]);
         int axis = (int)(i % 3);
         if (!isfinite(v) || fabsf(v) > IMPORT_MAX_COORD)
-            return import__fail(err, errlen, -EPROTO, "the importer answered a coordinate that is not finite or beyond %.0f km",
+            return cvre_fail(err, errlen, -EPROTO, "the importer answered a coordinate that is not finite or beyond %.0f km",
                        IMPORT_MAX_COORD / 1000.0);
         tris[i] = v;
         got[axis] = fminf(got[axis], v);
@@ -168,7 +168,7 @@ int import_pipe_answer_tris(float *tris, const import_pipe_head *h, char *err, s
     }
     for (int i = 0; i < 6; i++)
         ok &= got[i] == h->box[i]; /* by value: -0 is 0 */
-    return ok ? 0 : import__fail(err, errlen, -EPROTO, "the importer's box is not its triangles' box");
+    return ok ? 0 : cvre_fail(err, errlen, -EPROTO, "the importer's box is not its triangles' box");
 }
 
 int import_pipe_answer(const uint8_t *p, size_t n, uint32_t max_triangles, import_mesh *out,
@@ -183,9 +183,9 @@ int import_pipe_answer(const uint8_t *p, size_t n, uint32_t max_triangles, impor
     if (k < 0)
         return (int)k;
     if (k == 0)
-        return import__fail(err, errlen, -EPROTO, "the importer's answer ends in its header (%zu bytes)", n);
+        return cvre_fail(err, errlen, -EPROTO, "the importer's answer ends in its header (%zu bytes)", n);
     if ((uint64_t)(n - (size_t)k) != (uint64_t)h.ntris * 36u)
-        return import__fail(err, errlen, -EPROTO, "the importer's answer holds %zu bytes after its header for %u triangles",
+        return cvre_fail(err, errlen, -EPROTO, "the importer's answer holds %zu bytes after its header for %u triangles",
                    n - (size_t)k, h.ntris);
     if (h.status != 0) {
         if (errlen)

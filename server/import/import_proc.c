@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "alloc.h"
+#include "err.h"
 #include "import_pipe.h"
 #include "importInt.h"
 #include "le.h"
@@ -233,16 +234,16 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     if (!opt)
         opt = &defaults;
     if (!data || len == 0)
-        return import__fail(err, errlen, -EINVAL, "empty file");
+        return cvre_fail(err, errlen, -EINVAL, "empty file");
     if (len > IMPORT_MAX_BYTES)
-        return import__fail(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
+        return cvre_fail(err, errlen, -EFBIG, "file of %zu bytes is over the %u-byte limit", len,
                    (unsigned)IMPORT_MAX_BYTES);
     head_len = import_pipe_request_head(head, hint, opt, (uint32_t)len);
     snprintf(mem, sizeof mem, "%u", (unsigned)p->memory_mb);
     snprintf(cpu, sizeof cpu, "%u", (unsigned)p->cpu_seconds);
     helper_env(envp, envbuf);
     if (pipe2(to, O_CLOEXEC) != 0 || pipe2(from, O_CLOEXEC) != 0) {
-        rc = import__fail(err, errlen, -errno, "cannot start the importer: pipe: %s", strerror(errno));
+        rc = cvre_fail(err, errlen, -errno, "cannot start the importer: pipe: %s", strerror(errno));
         goto cleanup;
     }
     posix_spawn_file_actions_init(&fa);
@@ -251,7 +252,8 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     rc = posix_spawn(&pid, p->helper, &fa, NULL, argv, envp);
     posix_spawn_file_actions_destroy(&fa);
     if (rc != 0) {
-        rc = import__fail(err, errlen, -rc, "cannot start the importer %s: %s", p->helper, strerror(rc));
+        rc = cvre_fail(err, errlen, -rc, "cannot start the importer %s: %s", p->helper, strerror(rc));
+        import__printable(err, errlen); /* the path may be any bytes */
         goto cleanup;
     }
     close(to[0]), to[0] = -1;
@@ -259,32 +261,32 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     rc = talk(pid, &to[1], from[0], head, head_len, data, len, deadline, &x);
     reap(pid, deadline, &x);
     if (rc < 0) {
-        import__fail(err, errlen, rc, "import failed: reading the importer's answer: %s", strerror(-rc));
+        cvre_fail(err, errlen, rc, "import failed: reading the importer's answer: %s", strerror(-rc));
     } else if (x.timed_out ||
                (WIFSIGNALED(x.status) && WTERMSIG(x.status) == SIGXCPU)) {
-        rc = import__fail(err, errlen, -ETIMEDOUT, "import failed: timed out (over %u s of CPU)",
+        rc = cvre_fail(err, errlen, -ETIMEDOUT, "import failed: timed out (over %u s of CPU)",
                  (unsigned)p->cpu_seconds);
     } else if (x.bad == EFBIG) {
-        rc = import__fail(err, errlen, -EFBIG, "import failed: too large (%s)", x.why);
+        rc = cvre_fail(err, errlen, -EFBIG, "import failed: too large (%s)", x.why);
     } else if (x.bad) {
-        rc = import__fail(err, errlen, -EPROTO, "import failed: bad answer from the importer: %s", x.why);
+        rc = cvre_fail(err, errlen, -EPROTO, "import failed: bad answer from the importer: %s", x.why);
     } else if (WIFSIGNALED(x.status)) {
-        rc = import__fail(err, errlen, -ECHILD, "import failed: parser crashed (%s)",
+        rc = cvre_fail(err, errlen, -ECHILD, "import failed: parser crashed (%s)",
                  WTERMSIG(x.status) == SIGSYS ? "a forbidden system call"
                                               : strsignal(WTERMSIG(x.status)));
     } else if (!WIFEXITED(x.status) || WEXITSTATUS(x.status) != 0) {
-        rc = import__fail(err, errlen, -ECHILD, "import failed: the importer exited with status %d",
+        rc = cvre_fail(err, errlen, -ECHILD, "import failed: the importer exited with status %d",
                  WIFEXITED(x.status) ? WEXITSTATUS(x.status) : -1);
     } else if (x.head_len <= 0 || x.tris_have != x.tris_need) {
-        rc = import__fail(err, errlen, -EPROTO, "import failed: bad answer from the importer: it ended %s",
+        rc = cvre_fail(err, errlen, -EPROTO, "import failed: bad answer from the importer: it ended %s",
                  x.head_len <= 0 ? "in its header" : "before its last triangle");
     } else if (x.h.status == -ENOMEM) {
-        rc = import__fail(err, errlen, -EFBIG, "import failed: too large (over the importer's %u MB)",
+        rc = cvre_fail(err, errlen, -EFBIG, "import failed: too large (over the importer's %u MB)",
                  (unsigned)p->memory_mb);
     } else if (x.h.status != 0) {
-        rc = import__fail(err, errlen, x.h.status, "%s", x.h.message);
+        rc = cvre_fail(err, errlen, x.h.status, "%s", x.h.message);
     } else if ((rc = import_pipe_answer_tris(x.tris, &x.h, x.why, sizeof x.why)) != 0) {
-        import__fail(err, errlen, rc, "import failed: bad answer from the importer: %s", x.why);
+        cvre_fail(err, errlen, rc, "import failed: bad answer from the importer: %s", x.why);
     } else {
         out->tris = x.tris;
         out->ntris = x.h.ntris;

@@ -7,7 +7,8 @@
  *
  * import.c is included, not linked, so that its static functions can be
  * called on inputs only a broken or hostile Assimp could produce; the
- * file's public entry points are exercised through import_model as usual.
+ * file's public entry points are exercised through import_model as usual,
+ * and the formats' pre-checks (cvre_import_formats) through importInt.h.
  */
 #include "import.c"
 
@@ -16,6 +17,8 @@
 #include <stddef.h>
 
 #include <cmocka.h>
+
+#include "le.h"
 
 /* ---- the upload as Assimp's only file ---------------------------------- */
 
@@ -211,7 +214,7 @@ static void test_glb_node_expansion(void **state)
     /* as many copies as fit pass the pre-check (Assimp is not asked here:
      * it would build them all) */
     p = glb_tree(children, fit, &n);
-    assert_int_equal(check_glb(p, n, err, sizeof err), 0);
+    assert_int_equal(import__glb.check(p, n, err, sizeof err), 0);
     free(p);
 }
 
