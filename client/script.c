@@ -414,6 +414,8 @@ static void on_close(session *c, const session_end *end, void *data)
 {
     script *s = data;
     (void)c;
+    if (s->terminal)
+        terminal_prompt(NULL); /* nothing more will be read */
     if (events_conn_end(-1, end, session_ctx_peer(s->ctx)))
         raise_exit_code(s, 1);
     events_closed(-1);
