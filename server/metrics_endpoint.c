@@ -12,7 +12,7 @@
 #include "http_server.h"
 #include "log.h"
 #include "metrics.h"
-#include "serverInt.h"
+#include "metrics_endpoint.h"
 
 #define METRICS_PATH "/metrics"
 

@@ -2,8 +2,13 @@
  * objects.c: the server's side of objects: uploads in chunks, imports on the
  * importer thread, placement and removal by their owners, the scene restored
  * from the database and preloaded from a world file, new collision maps from
- * the refiner thread, and OBJECT_INFO for every client.
+ * the refiner thread, and OBJECT_INFO for every client (objects.h). It
+ * tells clients through clients.h and records changes through
+ * session_log.h, and calls nothing else of the server's: the handlers and
+ * the tick call it, never the other way.
  */
+#include "objects.h"
+
 #include <errno.h>
 #include <float.h>
 #include <libgen.h>
@@ -18,7 +23,8 @@
 #include "ecm.h"
 #include "log.h"
 #include "import_proc.h"
-#include "serverInt.h"
+#include "clients.h"
+#include "session_log.h"
 #include "srv_limits.h"
 
 /* Where objects may stand in this server's world (srv_limits.h). */
@@ -35,7 +41,7 @@ static scene_limits world_limits(const server *s)
 static int send_info(server *s, client *c, const scene_object *o, uint32_t upload_id)
 {
     proto_writer w;
-    if (server__out_begin(s, c, PROTO_SIZE_OBJECT_INFO(o->box_count), &w) < 0)
+    if (clients__out_begin(s, c, PROTO_SIZE_OBJECT_INFO(o->box_count), &w) < 0)
         return -1;
     float(*lo)[3] = cvre_xmalloc(o->box_count * sizeof *lo), (*hi)[3] = cvre_xmalloc(o->box_count * sizeof *hi);
     for (uint32_t i = 0; i < o->box_count; i++) {
@@ -50,7 +56,7 @@ static int send_info(server *s, client *c, const scene_object *o, uint32_t uploa
     proto_put_object_info(&w, &m, (const float(*)[3])lo, (const float(*)[3])hi);
     free(lo);
     free(hi);
-    server__out_end(s, c, &w);
+    clients__out_end(s, c, &w);
     return 0;
 }
 
@@ -58,10 +64,10 @@ static int send_info(server *s, client *c, const scene_object *o, uint32_t uploa
 static void send_removed(server *s, client *c, uint32_t id)
 {
     proto_writer w;
-    if (server__out_begin(s, c, PROTO_SIZE_OBJECT_REMOVED, &w) < 0)
+    if (clients__out_begin(s, c, PROTO_SIZE_OBJECT_REMOVED, &w) < 0)
         return;
     proto_put_object_removed(&w, id);
-    server__out_end(s, c, &w);
+    clients__out_end(s, c, &w);
 }
 
 /* Records that c was told of o, which it did not know. */
@@ -241,10 +247,10 @@ static void reject(server *s, client *c, uint32_t request_id, int code, const ch
     if ((unsigned)code < METRICS_CODES)
         s->st.rejected[code]++;
     proto_writer w;
-    if (server__out_begin(s, c, PROTO_SIZE_OBJECT_REJECTED_MAX, &w) < 0)
+    if (clients__out_begin(s, c, PROTO_SIZE_OBJECT_REJECTED_MAX, &w) < 0)
         return;
     proto_put_object_rejected(&w, request_id, (uint16_t)code, msg);
-    server__out_end(s, c, &w);
+    clients__out_end(s, c, &w);
 }
 
 /* ---- uploads ---------------------------------------------------------- */
@@ -337,7 +343,7 @@ static void on_upload_end(server *s, client *c, const proto_upload_end *m)
     u->data = NULL; /* the job owns it now */
     uint32_t id = u->id;
     drop_upload(s, c);
-    server__events_flush(s);
+    session_log__flush(s);
     if (importer_submit(s->importer, &job) < 0)
         reject(s, c, id, PROTO_ERR_UPLOAD, "the importer is busy; try again later");
 }
@@ -352,7 +358,7 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
     server *s = data;
     import_result r;
     while (importer_take(s->importer, &r) == 0) {
-        client *c = server__client_by_session(s, r.session);
+        client *c = clients__by_session(s, r.session);
         if (r.status != 0) {
             s->st.imports_failed++;
             if (c)
@@ -444,7 +450,7 @@ static void on_place(server *s, client *c, const proto_object_place *m)
         return;
     }
     (void)scene_place(s->scene, m->object_id, &m->at); /* it fits: checked above */
-    server__event_push(s, EVT_PLACE, m->object_id)->at_place = m->at;
+    session_log__push(s, EVT_PLACE, m->object_id)->at_place = m->at;
     s->scene_gen++; /* the others see it in their next view; the sender now */
     if (send_info(s, c, o, 0) == 0)
         known_set(c, o);
@@ -454,7 +460,7 @@ static void on_remove(server *s, client *c, uint32_t id)
 {
     if (!owned(s, c, id))
         return;
-    server__event_push(s, EVT_REMOVE, id);
+    session_log__push(s, EVT_REMOVE, id);
     scene_remove(s->scene, id);
     s->scene_gen++;
     send_removed(s, c, id);

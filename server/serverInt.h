@@ -1,6 +1,23 @@
 /*
- * serverInt.h: what server.c (connections, protocol, tick) and objects.c
- * (uploads, object requests, import results) share. Nothing else includes it.
+ * serverInt.h: the state cvre-server's files share: the server, its clients
+ * and its figures. Only the server's own .c files include it; each of them
+ * declares its functions in its own header:
+ *
+ *   server.c       lifecycle: create, run, shutdown, housekeeping, reaping
+ *   listener.c     the protocol's listening socket: accept and admission
+ *   handlers.c     a client's frames in, and what each message does
+ *   tick.c         the fixed-rate step and its collisions
+ *   avatar_view.c  what each client is told of the avatars near it
+ *   objects.c      objects: uploads, placement, what each client is told
+ *   stats.c        the periodic report of the figures
+ *   session_log.c  sessions and object changes queued for the store
+ *   clients.c      one client's connection: output, close, linger
+ *
+ * Calls go down this list, never up: server.c drives everything; listener.c
+ * hands a new connection to handlers.c; handlers.c and tick.c call objects.c
+ * and avatar_view.c; those call clients.c and session_log.c. objects.c knows
+ * nothing of the files above it: it is called, and answers through
+ * clients.h (output) and session_log.h (the store).
  */
 #ifndef CVRE_SERVER_INT_H
 #define CVRE_SERVER_INT_H
@@ -95,7 +112,7 @@ typedef struct client {
 enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE, EVT_PLACE, EVT_REMOVE };
 
 /* A change waiting to be written (a session's, or an object's place); the
- * tick batches them into one transaction so that a burst of joins costs one
+ * tick batches them into one transaction (session_log.h) so that a burst of joins costs one
  * commit, and the tick never waits for the database: when the collision
  * log's writer holds the lock, the batch simply waits for the next tick. */
 typedef struct store_event {
@@ -110,7 +127,7 @@ typedef struct store_event {
 
 /* The server's figures. The counters are totals since start, never reset:
  * the metrics endpoint serves them as they are, and each stats interval
- * (on_stats) reports their growth since its start (server.st_base). */
+ * (stats__report) reports their growth since its start (server.st_base). */
 typedef struct stats {
     uint64_t frames_in, moves_in, bytes_in, bytes_out;
     uint64_t accepted, closed, protocol_errors, timeouts, slow_readers, collisions, moves_dropped;
@@ -136,7 +153,7 @@ struct server {
     /* Per-tick scratch, sized for the largest area of interest. */
     const world_avatar **vis, **joined, **snap;
     uint32_t *left;
-    /* Per avatar slot: which id was stamped, and when (update_view). */
+    /* Per avatar slot: which id was stamped, and when (avatar_view.c). */
     uint32_t *mark_id, *mark_stamp, stamp;
     store_event *events;
     uint32_t nevents, events_cap;
@@ -169,37 +186,7 @@ struct server {
     uint32_t picks_cap;
 };
 
-uint64_t server__now(const server *s);
-/* Queues a change for the next flush (see store_event). */
-store_event *server__event_push(server *s, int kind, int64_t session);
-/* Writes the queued changes now (each tick does; an import first, so that
- * the quota it checks counts the removals before it). */
-void server__events_flush(server *s);
-/* Reserves need bytes of c's output (disconnecting it at the hard limit:
- * -1) and appends what w holds; see server.c. */
-int server__out_begin(server *s, client *c, size_t need, proto_writer *w);
-void server__out_end(server *s, client *c, const proto_writer *w);
-void server__protocol_error(server *s, client *c, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
-/* The connected client of this session, or NULL (it may have left). */
-client *server__client_by_session(server *s, int64_t session);
-
-/* metrics_endpoint.c: the --metrics endpoint, if configured. */
-int metrics__start(server *s, char *err, size_t errlen);
-void metrics__stop(server *s);
-
-/* objects.c */
-int objects__start(server *s, char *err, size_t errlen);
-void objects__stop(server *s);
-/* Handles an object request from a joined client. */
-void objects__on_message(server *s, client *c, const proto_msg *m);
-/* Brings what c knows of the objects up to date with where its avatar
- * is (see SRV_OBJECT_VIEW_STEP): each tick, and at its join with force set.
- * Cheap when nothing changed and the avatar did not move far. */
-void objects__view(server *s, client *c, int force);
-/* The objects of a deleted account pass to the world (the store did the
- * same); every client hears of the new owner. */
-void objects__owner_gone(server *s, const char *owner);
-/* Frees what c's unfinished upload and its view hold. */
-void objects__client_gone(server *s, client *c);
+/* The loop's time of this wake-up, in ns. */
+static inline uint64_t server__now(const server *s) { return ev_now(s->loop); }
 
 #endif
