@@ -1,12 +1,13 @@
 #include "account.h"
 
+#include <errno.h>
 #include <math.h>
 #include <pthread.h>
 #include <sodium.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "dbInt.h"
+#include "err.h"
 
 /* crypto_pwhash_str hashes with the library's default algorithm; the store
  * promises Argon2id, so a libsodium that changed its default must not build
@@ -54,7 +55,7 @@ static void crypto_init(void)
 static int crypto_ready(db *d)
 {
     pthread_once(&crypto_once, crypto_init);
-    return crypto_state == 0 ? 0 : db__fail(d, "account: libsodium could not be initialized");
+    return crypto_state == 0 ? 0 : db__fail(d, -EIO, "account: libsodium could not be initialized");
 }
 
 /* ---- names and passwords ---- */
@@ -113,33 +114,24 @@ static const char *bad_code_point(uint32_t c)
 int db_account_name_check(const char *name, char *why, size_t whylen)
 {
     size_t n = name ? strnlen(name, DB_ACCOUNT_NAME_MAX + 1) : 0;
-    if (n == 0) {
-        snprintf(why, whylen, "a name must not be empty");
-        return -1;
-    }
-    if (n > DB_ACCOUNT_NAME_MAX) {
-        snprintf(why, whylen, "a name must be at most %u bytes", DB_ACCOUNT_NAME_MAX);
-        return -1;
-    }
+    if (n == 0)
+        return cvre_fail(why, whylen, -EINVAL, "a name must not be empty");
+    if (n > DB_ACCOUNT_NAME_MAX)
+        return cvre_fail(why, whylen, -EINVAL, "a name must be at most %u bytes", DB_ACCOUNT_NAME_MAX);
     const unsigned char *s = (const unsigned char *)name;
     for (size_t at = 0; at < n;) {
         uint32_t c;
         size_t k = utf8_decode(s + at, n - at, &c);
-        if (k == 0) {
-            snprintf(why, whylen, "a name must be UTF-8: byte %zu is not", at);
-            return -1;
-        }
+        if (k == 0)
+            return cvre_fail(why, whylen, -EINVAL, "a name must be UTF-8: byte %zu is not", at);
         const char *bad = bad_code_point(c);
-        if (bad) {
-            snprintf(why, whylen, "a name must not hold %s: U+%04X at byte %zu", bad, (unsigned)c, at);
-            return -1;
-        }
+        if (bad)
+            return cvre_fail(why, whylen, -EINVAL, "a name must not hold %s: U+%04X at byte %zu", bad, (unsigned)c,
+                             at);
         at += k;
     }
-    if (is_world(name)) {
-        snprintf(why, whylen, "the name \"%s\" is reserved", DB_ACCOUNT_WORLD_NAME);
-        return -1;
-    }
+    if (is_world(name))
+        return cvre_fail(why, whylen, -EINVAL, "the name \"%s\" is reserved", DB_ACCOUNT_WORLD_NAME);
     return 0;
 }
 
@@ -151,31 +143,31 @@ static int password_ok(const char *password, size_t len)
 /* Hashes a password (one Argon2id run) into out. */
 static int hash_password(db *d, const char *password, size_t len, char out[crypto_pwhash_STRBYTES])
 {
-    if (crypto_ready(d) < 0)
-        return -1;
+    int rc = crypto_ready(d);
+    if (rc < 0)
+        return rc;
     if (crypto_pwhash_str(out, password, len, PWHASH_OPS, PWHASH_MEM) != 0)
-        return db__fail(d, "account: the password could not be hashed (out of memory)");
+        return db__fail(d, -ENOMEM, "account: the password could not be hashed (out of memory)");
     return 0;
 }
 
 /* ---- statements ---- */
 
-static int sql_fail(db *d) { return db__fail(d, "account: %s", sqlite3_errmsg(db_sqlite(d))); }
-
 static int prepare(db *d, const char *sql, sqlite3_stmt **st)
 {
     if (sqlite3_prepare_v2(db_sqlite(d), sql, -1, st, NULL) != SQLITE_OK) {
         *st = NULL;
-        return sql_fail(d);
+        return db__sql_fail(d, "account");
     }
     return 0;
 }
 
-/* Steps st once: 1 with a row, 0 when done, -1 on error (with the message). */
+/* Steps st once: 1 with a row, 0 when done, a negative errno on error
+ * (with the message). */
 static int step(db *d, sqlite3_stmt *st)
 {
     int rc = sqlite3_step(st);
-    return rc == SQLITE_ROW ? 1 : rc == SQLITE_DONE ? 0 : sql_fail(d);
+    return rc == SQLITE_ROW ? 1 : rc == SQLITE_DONE ? 0 : db__sql_fail(d, "account");
 }
 
 /* Values a one-statement write binds by name: each parameter the SQL
@@ -188,12 +180,13 @@ typedef struct params {
 } params;
 
 /* Prepares sql, binds p, runs it to the end and finalizes it; returns the
- * rows it changed, or -1. */
+ * rows it changed, or a negative errno. */
 static int exec_sql(db *d, const char *sql, const params *p)
 {
     sqlite3_stmt *st;
-    if (prepare(d, sql, &st) < 0)
-        return -1;
+    int rc = prepare(d, sql, &st);
+    if (rc < 0)
+        return rc;
     int i;
     if ((i = sqlite3_bind_parameter_index(st, ":id")))
         sqlite3_bind_int64(st, i, p->id);
@@ -203,25 +196,25 @@ static int exec_sql(db *d, const char *sql, const params *p)
         sqlite3_bind_blob(st, i, p->hash, DB_ACCOUNT_TOKEN_BYTES, SQLITE_STATIC);
     if ((i = sqlite3_bind_parameter_index(st, ":n")))
         sqlite3_bind_int64(st, i, p->n);
-    int rc = step(d, st);
+    rc = step(d, st);
     sqlite3_finalize(st);
-    return rc < 0 ? -1 : sqlite3_changes(db_sqlite(d));
+    return rc < 0 ? rc : sqlite3_changes(db_sqlite(d));
 }
 
 /* The write functions run in a BEGIN IMMEDIATE transaction of their own. */
 static int begin_write(db *d)
 {
     if (!sqlite3_get_autocommit(db_sqlite(d)))
-        return db__fail(d, "account: called inside a transaction (it needs one of its own)");
+        return db__fail(d, -EINVAL, "account: called inside a transaction (it needs one of its own)");
     return db_begin(d);
 }
 
-/* Commits when rc is 0, rolls back otherwise; returns rc, or -1 if the
- * commit failed. */
+/* Commits when rc is 0, rolls back otherwise; returns rc, or the commit's
+ * error. */
 static int end_write(db *d, int rc)
 {
-    if (rc == 0 && db_commit(d) < 0)
-        rc = -1;
+    if (rc == 0)
+        rc = db_commit(d);
     if (rc != 0)
         db_rollback(d);
     return rc;
@@ -246,31 +239,28 @@ static void read_account(sqlite3_stmt *st, db_account *a)
     }
 }
 
-/* One account by id (name NULL) or name into *out: 0, DB_ACCOUNT_UNKNOWN or
- * -1. */
+/* One account by id (name NULL) or name into *out: 0, -ENOENT or another
+ * negative errno. */
 static int lookup(db *d, int64_t id, const char *name, db_account *out)
 {
     sqlite3_stmt *st;
-    if (prepare(d, name ? "SELECT " ACCOUNT_COLUMNS " FROM accounts WHERE name = ?1"
-                        : "SELECT " ACCOUNT_COLUMNS " FROM accounts WHERE id = ?1",
-                &st) < 0)
-        return -1;
+    int r = prepare(d, name ? "SELECT " ACCOUNT_COLUMNS " FROM accounts WHERE name = ?1"
+                            : "SELECT " ACCOUNT_COLUMNS " FROM accounts WHERE id = ?1",
+                    &st);
+    if (r < 0)
+        return r;
     if (name)
         sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
     else
         sqlite3_bind_int64(st, 1, id);
-    int r = step(d, st);
+    r = step(d, st);
     if (r == 1)
         read_account(st, out);
     sqlite3_finalize(st);
-    if (r == 0) {
-        if (name)
-            db__fail(d, "account: no account named \"%s\"", name);
-        else
-            db__fail(d, "account: no account with id %lld", (long long)id);
-        return DB_ACCOUNT_UNKNOWN;
-    }
-    return r < 0 ? -1 : 0;
+    if (r == 0)
+        return name ? db__fail(d, -ENOENT, "account: no account named \"%s\"", name)
+                    : db__fail(d, -ENOENT, "account: no account with id %lld", (long long)id);
+    return r < 0 ? r : 0;
 }
 
 int db_account_get(db *d, int64_t id, db_account *out) { return lookup(d, id, NULL, out); }
@@ -278,16 +268,16 @@ int db_account_get(db *d, int64_t id, db_account *out) { return lookup(d, id, NU
 int db_account_find(db *d, const char *name, db_account *out)
 {
     if (!name)
-        return db__fail(d, "account: no name given");
+        return db__fail(d, -EINVAL, "account: no name given");
     return lookup(d, 0, name, out);
 }
 
 int db_account_list(db *d, db_account_fn *fn, void *ctx)
 {
     sqlite3_stmt *st;
-    if (prepare(d, "SELECT " ACCOUNT_COLUMNS " FROM accounts ORDER BY id", &st) < 0)
-        return -1;
-    int r, rc = 0;
+    int r, rc = prepare(d, "SELECT " ACCOUNT_COLUMNS " FROM accounts ORDER BY id", &st);
+    if (rc < 0)
+        return rc;
     while ((r = step(d, st)) == 1) {
         db_account a;
         read_account(st, &a);
@@ -296,7 +286,7 @@ int db_account_list(db *d, db_account_fn *fn, void *ctx)
             break;
     }
     sqlite3_finalize(st);
-    return r < 0 ? -1 : rc;
+    return r < 0 ? r : rc;
 }
 
 /* ---- adding, deleting, passwords ---- */
@@ -305,27 +295,26 @@ int db_account_add(db *d, const char *name, const char *password, size_t passwor
                    int64_t *id)
 {
     char why[128];
-    if (db_account_name_check(name, why, sizeof why) < 0)
-        return db__fail(d, "account: %s", why);
+    int rc = db_account_name_check(name, why, sizeof why);
+    if (rc < 0)
+        return db__fail(d, rc, "account: %s", why);
     if (password && !password_ok(password, password_len))
-        return db__fail(d, "account: a password must be 1 to %u bytes", DB_ACCOUNT_PASSWORD_MAX);
+        return db__fail(d, -EINVAL, "account: a password must be 1 to %u bytes", DB_ACCOUNT_PASSWORD_MAX);
     if (!isfinite(at))
-        return db__fail(d, "account: the time is not finite");
+        return db__fail(d, -EINVAL, "account: the time is not finite");
     db_account old;
-    int r = lookup(d, 0, name, &old); /* refuse a taken name before paying for a hash */
-    if (r == 0) {
-        db__fail(d, "account: the name \"%s\" is taken", old.name);
-        return DB_ACCOUNT_EXISTS;
-    }
-    if (r != DB_ACCOUNT_UNKNOWN)
-        return -1;
+    rc = lookup(d, 0, name, &old); /* refuse a taken name before paying for a hash */
+    if (rc == 0)
+        return db__fail(d, -EEXIST, "account: the name \"%s\" is taken", old.name);
+    if (rc != -ENOENT)
+        return rc;
     char hash[crypto_pwhash_STRBYTES];
-    if (password && hash_password(d, password, password_len, hash) < 0)
-        return -1;
+    if (password && (rc = hash_password(d, password, password_len, hash)) < 0)
+        return rc;
     sqlite3_stmt *st;
-    if (begin_write(d) < 0)
-        return -1;
-    int rc = prepare(d, "INSERT INTO accounts(name, password_hash, is_admin, created_at, password_at) "
+    if ((rc = begin_write(d)) < 0)
+        return rc;
+    rc = prepare(d, "INSERT INTO accounts(name, password_hash, is_admin, created_at, password_at) "
                         "VALUES (?1, ?2, ?3, ?4, ?5)", &st);
     if (rc == 0) {
         sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
@@ -335,13 +324,9 @@ int db_account_add(db *d, const char *name, const char *password, size_t passwor
         }
         sqlite3_bind_int(st, 3, is_admin != 0);
         sqlite3_bind_double(st, 4, at);
-        rc = sqlite3_step(st) == SQLITE_DONE ? 0 : -1;
-        if (rc < 0 && (sqlite3_extended_errcode(db_sqlite(d)) == SQLITE_CONSTRAINT_UNIQUE)) {
-            db__fail(d, "account: the name \"%s\" is taken", name); /* by another writer, since the check */
-            rc = DB_ACCOUNT_EXISTS;
-        } else if (rc < 0) {
-            sql_fail(d);
-        }
+        rc = step(d, st);
+        if (rc == -EEXIST) /* the unique name: taken by another writer since the check */
+            db__fail(d, rc, "account: the name \"%s\" is taken", name);
         sqlite3_finalize(st);
     }
     if (rc == 0 && id)
@@ -350,17 +335,15 @@ int db_account_add(db *d, const char *name, const char *password, size_t passwor
 }
 
 /* The account named name, unless it is the world account: 0 and *a,
- * DB_ACCOUNT_UNKNOWN, DB_ACCOUNT_REFUSED or -1. what names the change for
- * the message. */
+ * -ENOENT, -EPERM or another negative errno. what names the change for the
+ * message. */
 static int changeable(db *d, const char *name, db_account *a, const char *what)
 {
     int r = lookup(d, 0, name, a);
     if (r != 0)
         return r;
-    if (a->id == DB_ACCOUNT_WORLD) {
-        db__fail(d, "account: the reserved account \"%s\" cannot %s", a->name, what);
-        return DB_ACCOUNT_REFUSED;
-    }
+    if (a->id == DB_ACCOUNT_WORLD)
+        return db__fail(d, -EPERM, "account: the reserved account \"%s\" cannot %s", a->name, what);
     return 0;
 }
 
@@ -375,35 +358,36 @@ static int delete_locked(db *d, const char *name, int64_t *objects)
      * belong to the users row "world", which a server without a world file
      * may never have made. */
     sqlite3_stmt *st;
-    if (exec_sql(d, "INSERT INTO users(name, created_at, last_seen_at) VALUES ('" DB_ACCOUNT_WORLD_NAME "', :at, :at) "
-                    "ON CONFLICT(name) DO NOTHING", &(params){.at = db_now()}) < 0 ||
-        prepare(d, "UPDATE objects SET owner_id = (SELECT id FROM users WHERE name = '" DB_ACCOUNT_WORLD_NAME "') "
-                   "WHERE removed_at IS NULL AND owner_id = (SELECT id FROM users WHERE name = ?1)", &st) < 0)
-        return -1;
+    if ((r = exec_sql(d, "INSERT INTO users(name, created_at, last_seen_at) VALUES ('" DB_ACCOUNT_WORLD_NAME
+                         "', :at, :at) ON CONFLICT(name) DO NOTHING", &(params){.at = db_now()})) < 0 ||
+        (r = prepare(d, "UPDATE objects SET owner_id = (SELECT id FROM users WHERE name = '" DB_ACCOUNT_WORLD_NAME
+                        "') WHERE removed_at IS NULL AND owner_id = (SELECT id FROM users WHERE name = ?1)", &st)) < 0)
+        return r;
     sqlite3_bind_text(st, 1, a.name, -1, SQLITE_STATIC); /* the stored spelling: owners match exactly */
     r = step(d, st);
     sqlite3_finalize(st);
     if (r < 0)
-        return -1;
+        return r;
     if (objects)
         *objects = sqlite3_changes(db_sqlite(d));
     /* Tokens explicitly: the cascade needs foreign_keys on, which only this
      * store's own connections promise. */
-    if (exec_sql(d, "DELETE FROM account_tokens WHERE account_id = :id", &(params){.id = a.id}) < 0 ||
-        exec_sql(d, "DELETE FROM accounts WHERE id = :id", &(params){.id = a.id}) < 0)
-        return -1;
+    if ((r = exec_sql(d, "DELETE FROM account_tokens WHERE account_id = :id", &(params){.id = a.id})) < 0 ||
+        (r = exec_sql(d, "DELETE FROM accounts WHERE id = :id", &(params){.id = a.id})) < 0)
+        return r;
     return 0;
 }
 
 int db_account_delete(db *d, const char *name, int64_t *objects)
 {
     if (!name)
-        return db__fail(d, "account: no name given");
+        return db__fail(d, -EINVAL, "account: no name given");
     if (objects)
         *objects = 0;
-    if (begin_write(d) < 0)
-        return -1;
-    int rc = delete_locked(d, name, objects);
+    int rc = begin_write(d);
+    if (rc < 0)
+        return rc;
+    rc = delete_locked(d, name, objects);
     /* running servers end its sessions and hand its objects to the world */
     if (rc == 0)
         rc = db__admin_event(d, "deleted", 0, name, db_now());
@@ -413,20 +397,18 @@ int db_account_delete(db *d, const char *name, int64_t *objects)
 int db_account_set_password(db *d, const char *name, const char *password, size_t password_len, double at)
 {
     if (!name)
-        return db__fail(d, "account: no name given");
+        return db__fail(d, -EINVAL, "account: no name given");
     if (!password_ok(password, password_len))
-        return db__fail(d, "account: a password must be 1 to %u bytes", DB_ACCOUNT_PASSWORD_MAX);
+        return db__fail(d, -EINVAL, "account: a password must be 1 to %u bytes", DB_ACCOUNT_PASSWORD_MAX);
     if (!isfinite(at))
-        return db__fail(d, "account: the time is not finite");
+        return db__fail(d, -EINVAL, "account: the time is not finite");
     db_account a;
     int rc = changeable(d, name, &a, "have a password"); /* before paying for a hash */
     if (rc != 0)
         return rc;
     char hash[crypto_pwhash_STRBYTES];
-    if (hash_password(d, password, password_len, hash) < 0)
-        return -1;
-    if (begin_write(d) < 0)
-        return -1;
+    if ((rc = hash_password(d, password, password_len, hash)) < 0 || (rc = begin_write(d)) < 0)
+        return rc;
     rc = changeable(d, name, &a, "have a password"); /* again, under the lock */
     sqlite3_stmt *st = NULL;
     if (rc == 0)
@@ -438,8 +420,8 @@ int db_account_set_password(db *d, const char *name, const char *password, size_
         rc = step(d, st);
         sqlite3_finalize(st);
     }
-    if (rc == 0 && db_account_tokens_revoke(d, a.id) < 0)
-        rc = -1;
+    if (rc == 0 && (rc = db_account_tokens_revoke(d, a.id)) > 0)
+        rc = 0; /* how many went */
     if (rc == 0) /* a new password logs every device out, running servers too */
         rc = db__admin_event(d, "logout", 0, a.name, at);
     return end_write(d, rc);
@@ -450,14 +432,14 @@ int db_account_set_password(db *d, const char *name, const char *password, size_
 int db_account_verify(db *d, const char *name, const char *password, size_t password_len, int64_t *id)
 {
     if (!name || !id)
-        return db__fail(d, "account: no name or id given");
-    if (crypto_ready(d) < 0)
-        return -1;
+        return db__fail(d, -EINVAL, "account: no name or id given");
     sqlite3_stmt *st;
-    if (prepare(d, "SELECT id, password_hash FROM accounts WHERE name = ?1 AND password_hash IS NOT NULL", &st) < 0)
-        return -1;
+    int r = crypto_ready(d);
+    if (r < 0 || (r = prepare(d, "SELECT id, password_hash FROM accounts WHERE name = ?1 AND password_hash IS NOT NULL",
+                              &st)) < 0)
+        return r;
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
-    int r = step(d, st);
+    r = step(d, st);
     int64_t found = 0;
     char hash[crypto_pwhash_STRBYTES] = "";
     if (r == 1) {
@@ -471,7 +453,7 @@ int db_account_verify(db *d, const char *name, const char *password, size_t pass
     }
     sqlite3_finalize(st);
     if (r < 0)
-        return -1;
+        return r;
     /* Every path below runs one verification at the same costs: a known
      * name against its hash, anything else against the dummy. */
     int ok = password_ok(password, password_len);
@@ -482,8 +464,7 @@ int db_account_verify(db *d, const char *name, const char *password, size_t pass
         *id = found;
         return 0;
     }
-    db__fail(d, "wrong name or password");
-    return DB_ACCOUNT_DENIED;
+    return db__fail(d, -EACCES, "wrong name or password");
 }
 
 /* ---- resume tokens ---- */
@@ -492,17 +473,16 @@ int db_account_token_issue(db *d, int64_t account_id, double at, double expires_
                            uint8_t token[DB_ACCOUNT_TOKEN_BYTES])
 {
     if (!token)
-        return db__fail(d, "account: no token buffer given");
+        return db__fail(d, -EINVAL, "account: no token buffer given");
     if (!isfinite(at) || !isfinite(expires_at) || expires_at <= at)
-        return db__fail(d, "account: a token must expire after it is issued");
-    if (crypto_ready(d) < 0 || begin_write(d) < 0)
-        return -1;
+        return db__fail(d, -EINVAL, "account: a token must expire after it is issued");
+    int rc;
+    if ((rc = crypto_ready(d)) < 0 || (rc = begin_write(d)) < 0)
+        return rc;
     db_account a;
-    int rc = lookup(d, account_id, NULL, &a);
-    if (rc == 0 && (a.id == DB_ACCOUNT_WORLD || !a.can_log_in)) {
-        db__fail(d, "account: \"%s\" cannot log in, so it gets no token", a.name);
-        rc = DB_ACCOUNT_REFUSED;
-    }
+    rc = lookup(d, account_id, NULL, &a);
+    if (rc == 0 && (a.id == DB_ACCOUNT_WORLD || !a.can_log_in))
+        rc = db__fail(d, -EPERM, "account: \"%s\" cannot log in, so it gets no token", a.name);
     uint8_t hash[crypto_generichash_BYTES];
     sqlite3_stmt *st = NULL;
     if (rc == 0)
@@ -519,12 +499,12 @@ int db_account_token_issue(db *d, int64_t account_id, double at, double expires_
         sqlite3_finalize(st);
     }
     /* Keep this one and the newest DB_ACCOUNT_TOKENS_MAX - 1 others. */
-    if (rc == 0 && exec_sql(d,
-                            "DELETE FROM account_tokens WHERE account_id = :id AND hash != :hash AND hash NOT IN "
-                            "(SELECT hash FROM account_tokens WHERE account_id = :id AND hash != :hash "
-                            "ORDER BY created_at DESC, hash LIMIT :n)",
-                            &(params){.id = account_id, .hash = hash, .n = DB_ACCOUNT_TOKENS_MAX - 1}) < 0)
-        rc = -1;
+    if (rc == 0 && (rc = exec_sql(d,
+                                  "DELETE FROM account_tokens WHERE account_id = :id AND hash != :hash AND hash NOT IN "
+                                  "(SELECT hash FROM account_tokens WHERE account_id = :id AND hash != :hash "
+                                  "ORDER BY created_at DESC, hash LIMIT :n)",
+                                  &(params){.id = account_id, .hash = hash, .n = DB_ACCOUNT_TOKENS_MAX - 1})) > 0)
+        rc = 0; /* how many went */
     rc = end_write(d, rc);
     if (rc != 0)
         sodium_memzero(token, DB_ACCOUNT_TOKEN_BYTES); /* a token that was not stored is no token */
@@ -535,11 +515,12 @@ int db_account_token_issue(db *d, int64_t account_id, double at, double expires_
 static int redeem_locked(db *d, const uint8_t hash[DB_ACCOUNT_TOKEN_BYTES], double now, int64_t *account_id)
 {
     sqlite3_stmt *st;
-    if (prepare(d, "SELECT t.hash, t.account_id, t.expires_at, a.password_hash IS NOT NULL FROM account_tokens t "
-                   "JOIN accounts a ON a.id = t.account_id WHERE t.hash = ?1", &st) < 0)
-        return -1;
+    int r = prepare(d, "SELECT t.hash, t.account_id, t.expires_at, a.password_hash IS NOT NULL FROM account_tokens t "
+                       "JOIN accounts a ON a.id = t.account_id WHERE t.hash = ?1", &st);
+    if (r < 0)
+        return r;
     sqlite3_bind_blob(st, 1, hash, DB_ACCOUNT_TOKEN_BYTES, SQLITE_STATIC);
-    int r = step(d, st);
+    r = step(d, st);
     int match = 0, live = 0;
     int64_t id = 0;
     if (r == 1) {
@@ -551,13 +532,11 @@ static int redeem_locked(db *d, const uint8_t hash[DB_ACCOUNT_TOKEN_BYTES], doub
     }
     sqlite3_finalize(st);
     if (r < 0)
-        return -1;
-    if (match && exec_sql(d, "DELETE FROM account_tokens WHERE hash = :hash", &(params){.hash = hash}) < 0)
-        return -1;
-    if (!match || !live) {
-        db__fail(d, "unknown or expired token");
-        return DB_ACCOUNT_DENIED;
-    }
+        return r;
+    if (match && (r = exec_sql(d, "DELETE FROM account_tokens WHERE hash = :hash", &(params){.hash = hash})) < 0)
+        return r;
+    if (!match || !live)
+        return db__fail(d, -EACCES, "unknown or expired token");
     *account_id = id;
     return 0;
 }
@@ -565,24 +544,26 @@ static int redeem_locked(db *d, const uint8_t hash[DB_ACCOUNT_TOKEN_BYTES], doub
 int db_account_token_redeem(db *d, const uint8_t token[DB_ACCOUNT_TOKEN_BYTES], double now, int64_t *account_id)
 {
     if (!token || !account_id)
-        return db__fail(d, "account: no token given");
+        return db__fail(d, -EINVAL, "account: no token given");
     if (!isfinite(now))
-        return db__fail(d, "account: the time is not finite");
-    if (crypto_ready(d) < 0)
-        return -1;
+        return db__fail(d, -EINVAL, "account: the time is not finite");
+    int rc = crypto_ready(d);
+    if (rc < 0)
+        return rc;
     uint8_t hash[crypto_generichash_BYTES];
     crypto_generichash(hash, sizeof hash, token, DB_ACCOUNT_TOKEN_BYTES, NULL, 0);
-    if (begin_write(d) < 0)
-        return -1;
-    int rc = redeem_locked(d, hash, now, account_id);
+    if ((rc = begin_write(d)) < 0)
+        return rc;
+    rc = redeem_locked(d, hash, now, account_id);
     /* A denial still commits: the expired token it found is gone. */
-    return end_write(d, rc == DB_ACCOUNT_DENIED ? 0 : rc) == 0 ? rc : -1;
+    int end = end_write(d, rc == -EACCES ? 0 : rc);
+    return end == 0 ? rc : end;
 }
 
 int db_account_tokens_expire(db *d, double now)
 {
     if (!isfinite(now))
-        return db__fail(d, "account: the time is not finite");
+        return db__fail(d, -EINVAL, "account: the time is not finite");
     return exec_sql(d, "DELETE FROM account_tokens WHERE expires_at <= :at", &(params){.at = now});
 }
 

@@ -22,10 +22,19 @@
  * thread's own, and bound how many run at once. They hash before taking the
  * write lock, so other writers wait only for the insert or update.
  *
- * Functions return 0 or -1 with the message in db_error(), except where a
- * DB_ACCOUNT_* answer is said. None leaves a transaction of its own open.
+ * Functions return 0, or a negative errno with the message in db_error()
+ * (db.h). Besides the database's errors they answer: -EINVAL for an invalid
+ * argument (name, password, time, a NULL); -ENOENT: no account of that name
+ * or id, nothing written; -EEXIST (db_account_add): the name, ignoring ASCII
+ * case, is taken, nothing written; -EPERM: the reserved world account
+ * (delete, set a password, issue a token), or an account without a
+ * password (issue a token), nothing written; -EACCES (db_account_verify,
+ * db_account_token_redeem): wrong name or password, or an unknown, used or
+ * expired token, one answer for every reason, so that the caller cannot
+ * tell a client more than "no" (the message says as little and may be
+ * shown to the client). None leaves a transaction of its own open.
  * add, delete, set_password, token_issue and token_redeem take a BEGIN
- * IMMEDIATE transaction of their own and refuse to run inside one (-1);
+ * IMMEDIATE transaction of their own and refuse to run inside one (-EINVAL);
  * tokens_expire and tokens_revoke are one statement each and may run inside
  * the caller's. Statements are prepared per call (nothing here is on a hot
  * path).
@@ -67,22 +76,6 @@ _Static_assert(DB_ACCOUNT_TOKENS_MAX >= 1, "an account that can log in can hold 
 #define DB_ACCOUNT_WORLD 1
 #define DB_ACCOUNT_WORLD_NAME "world"
 
-/* Answers besides 0 and -1. */
-enum {
-    /* db_account_verify: wrong name or password; db_account_token_redeem: an
-     * unknown, used or expired token. One answer for every reason, so that
-     * the caller cannot tell a client more than "no" (the message says as
-     * little and may be shown to the client). */
-    DB_ACCOUNT_DENIED = -2,
-    /* db_account_add: the name (ignoring ASCII case) is taken. Nothing written. */
-    DB_ACCOUNT_EXISTS = -3,
-    /* No account of that name or id. Nothing written. */
-    DB_ACCOUNT_UNKNOWN = -4,
-    /* The reserved world account (delete, set a password, issue a token), or
-     * an account without a password (issue a token). Nothing written. */
-    DB_ACCOUNT_REFUSED = -5
-};
-
 typedef struct db_account {
     int64_t id;
     char name[DB_ACCOUNT_NAME_MAX + 1]; /* as stored */
@@ -97,16 +90,16 @@ typedef struct db_account {
  * no surrogates, at most U+10FFFF) with no control character (C0, DEL, C1),
  * no space of any kind (Unicode White_Space), no invisible formatting
  * character (soft hyphen, zero-width and bidirectional controls, BOM) and no
- * noncharacter, and not "world" in any case. Returns 0, or -1 with the
+ * noncharacter, and not "world" in any case. Returns 0, or -EINVAL with the
  * reason in why (whylen bytes; it may quote the name's length, never its
  * bytes). Needs no db: the server may check a name before anything else. */
 int db_account_name_check(const char *name, char *why, size_t whylen);
 
 /* Adds an account. password: 1..DB_ACCOUNT_PASSWORD_MAX bytes, or NULL for
- * an account that cannot log in. Sets *id (may be NULL). -1 with nothing
- * written on an invalid name or password (checked first) or a database or
- * hashing failure; DB_ACCOUNT_EXISTS if the name is taken (checked before
- * hashing, and again by the insert). */
+ * an account that cannot log in. Sets *id (may be NULL). -EINVAL with
+ * nothing written on an invalid name or password (checked first); -EEXIST
+ * if the name is taken (checked before hashing, and again by the insert);
+ * -ENOMEM if hashing failed. */
 int db_account_add(db *d, const char *name, const char *password, size_t password_len, int is_admin, double at,
                    int64_t *id);
 
@@ -116,13 +109,13 @@ int db_account_add(db *d, const char *name, const char *password, size_t passwor
  * later account of the same name does not inherit them; removed objects keep
  * their owner as history. Sessions, collisions and the users row stay
  * (history). *objects (may be NULL) gets the number of objects handed over.
- * DB_ACCOUNT_UNKNOWN, DB_ACCOUNT_REFUSED (world). A running server learns of
+ * -ENOENT, -EPERM (world). A running server learns of
  * none of this by itself: it must drop the account's connections and read
  * the objects' owners again. */
 int db_account_delete(db *d, const char *name, int64_t *objects);
 
 /* The account with this id, or this name (ignoring ASCII case), into *out.
- * DB_ACCOUNT_UNKNOWN if there is none. */
+ * -ENOENT if there is none. */
 int db_account_get(db *d, int64_t id, db_account *out);
 int db_account_find(db *d, const char *name, db_account *out);
 
@@ -134,23 +127,24 @@ int db_account_list(db *d, db_account_fn *fn, void *ctx);
 
 /* Sets the password of the account named name (1..DB_ACCOUNT_PASSWORD_MAX
  * bytes) and deletes its tokens: a new password logs every device out.
- * DB_ACCOUNT_UNKNOWN, DB_ACCOUNT_REFUSED (world); -1 on an invalid password
- * or a failure, nothing written. */
+ * -ENOENT, -EPERM (world), -EINVAL (an invalid password); nothing written
+ * on any failure. */
 int db_account_set_password(db *d, const char *name, const char *password, size_t password_len, double at);
 
 /* Checks a name (ignoring ASCII case) and password. 0 and *id when they
- * match; DB_ACCOUNT_DENIED when the name is unknown, the account cannot log
+ * match; -EACCES when the name is unknown, the account cannot log
  * in, or the password is wrong, empty or too long: each of these costs one
  * Argon2id verification with the same parameters (an unknown name is checked
  * against a dummy hash), so the time taken does not tell whether a name
- * exists. -1 on a database or hashing failure (out of memory). Reads only. */
+ * exists. Another negative errno on a database or hashing failure. Reads
+ * only. */
 int db_account_verify(db *d, const char *name, const char *password, size_t password_len, int64_t *id);
 
 /* Issues a resume token for an account that can log in, valid from at until
  * expires_at (> at; the caller picks the lifetime): 32 random bytes into
  * token, of which only the hash is stored. Keeps at most
  * DB_ACCOUNT_TOKENS_MAX tokens for the account (the oldest go).
- * DB_ACCOUNT_UNKNOWN, DB_ACCOUNT_REFUSED (world, no password). */
+ * -ENOENT, -EPERM (world, no password). */
 int db_account_token_issue(db *d, int64_t account_id, double at, double expires_at,
                            uint8_t token[DB_ACCOUNT_TOKEN_BYTES]);
 
@@ -158,15 +152,15 @@ int db_account_token_issue(db *d, int64_t account_id, double at, double expires_
  * time, checks that now < expires_at and that the account can still log in,
  * and deletes the token (tokens are used once: issue a new one for the next
  * reconnection); an expired token found is deleted too. 0 and *account_id;
- * DB_ACCOUNT_DENIED for an unknown, used or expired token. */
+ * -EACCES for an unknown, used or expired token. */
 int db_account_token_redeem(db *d, const uint8_t token[DB_ACCOUNT_TOKEN_BYTES], double now, int64_t *account_id);
 
 /* Deletes every token with expires_at <= now (housekeeping; redeeming never
- * accepts them anyway). Returns how many, or -1. */
+ * accepts them anyway). Returns how many, or a negative errno. */
 int db_account_tokens_expire(db *d, double now);
 
 /* Deletes every token of one account (log out everywhere; a ban). Returns
- * how many, or -1. */
+ * how many, or a negative errno. */
 int db_account_tokens_revoke(db *d, int64_t account_id);
 
 #endif

@@ -1,5 +1,6 @@
 #include "db.h"
 
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -8,6 +9,7 @@
 
 #include "alloc.h"
 #include "dbInt.h"
+#include "err.h"
 #include "migrations.h"
 
 /* A writer waits this long for a lock held by another connection (the admin
@@ -69,50 +71,67 @@ double db_now(void)
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-static int fail(db *d, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static int fail(db *d, const char *fmt, ...)
+int db__fail(db *d, int rc, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(d->err, sizeof d->err, fmt, ap);
+    cvre_vfail(d->err, sizeof d->err, rc, fmt, ap);
     va_end(ap);
-    return -1;
+    return rc;
+}
+
+int db_errno(int code, int sys_errno)
+{
+    switch (code & 0xff) {
+    case SQLITE_BUSY:
+    case SQLITE_LOCKED: return -EBUSY;
+    case SQLITE_FULL: return -ENOSPC;
+    case SQLITE_NOMEM: return -ENOMEM;
+    case SQLITE_READONLY: return -EROFS;
+    case SQLITE_CONSTRAINT:
+        return code == SQLITE_CONSTRAINT_UNIQUE || code == SQLITE_CONSTRAINT_PRIMARYKEY ? -EEXIST : -EINVAL;
+    case SQLITE_CANTOPEN:
+        return sys_errno == ENOENT ? -ENOENT : sys_errno == EACCES || sys_errno == EPERM ? -EACCES : -EIO;
+    case SQLITE_INTERRUPT: return -EINTR;
+    case SQLITE_MISUSE:
+    case SQLITE_RANGE: return -EINVAL;
+    case SQLITE_TOOBIG: return -E2BIG;
+    default: return -EIO;
+    }
+}
+
+int db_sqlite_errno(sqlite3 *s) { return db_errno(sqlite3_extended_errcode(s), sqlite3_system_errno(s)); }
+
+int db__sql_fail(db *d, const char *context)
+{
+    const char *msg = sqlite3_errmsg(d->sql);
+    if (context)
+        return db__fail(d, db_sqlite_errno(d->sql), "%s: %s", context, msg);
+    return db__fail(d, db_sqlite_errno(d->sql), "%s", msg);
 }
 
 const char *db_error(const db *d) { return d->err; }
-
-int db__fail(db *d, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(d->err, sizeof d->err, fmt, ap);
-    va_end(ap);
-    return -1;
-}
 
 sqlite3 *db_sqlite(db *d) { return d->sql; }
 
 static int exec(db *d, const char *sql)
 {
     char *msg = NULL;
-    if (sqlite3_exec(d->sql, sql, NULL, NULL, &msg) != SQLITE_OK) {
-        fail(d, "%s", msg ? msg : sqlite3_errmsg(d->sql));
-        sqlite3_free(msg);
-        return -1;
-    }
-    return 0;
+    int code = sqlite3_exec(d->sql, sql, NULL, NULL, &msg);
+    if (code == SQLITE_OK)
+        return 0;
+    int rc = db__fail(d, db_errno(code, sqlite3_system_errno(d->sql)), "%s", msg ? msg : sqlite3_errmsg(d->sql));
+    sqlite3_free(msg);
+    return rc;
 }
 
+/* PRAGMA user_version (>= 0), or a negative errno. */
 static int user_version(db *d)
 {
     sqlite3_stmt *st;
-    int v = -1;
     if (sqlite3_prepare_v2(d->sql, "PRAGMA user_version", -1, &st, NULL) != SQLITE_OK)
-        return fail(d, "%s", sqlite3_errmsg(d->sql));
-    if (sqlite3_step(st) == SQLITE_ROW)
-        v = sqlite3_column_int(st, 0);
-    else
-        fail(d, "%s", sqlite3_errmsg(d->sql));
+        return db__sql_fail(d, NULL);
+    int v = sqlite3_step(st) == SQLITE_ROW ? sqlite3_column_int(st, 0) : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
     return v;
 }
@@ -121,24 +140,25 @@ static int user_version(db *d)
  * version bump, so a crash leaves the schema at a whole version. */
 static int migrate(db *d)
 {
-    int v = user_version(d);
+    int v = user_version(d), rc;
     if (v < 0)
-        return -1;
+        return v;
     if (v > db_migration_count)
-        return fail(d, "schema version %d is newer than this build knows (%d)", v, db_migration_count);
+        return db__fail(d, -ENOTSUP, "schema version %d is newer than this build knows (%d)", v,
+                        db_migration_count);
     for (; v < db_migration_count; v++) {
         char bump[64];
         snprintf(bump, sizeof bump, "PRAGMA user_version = %d", v + 1);
-        if (exec(d, "BEGIN IMMEDIATE") < 0)
-            return -1;
-        if (exec(d, db_migrations[v].sql) < 0 || exec(d, bump) < 0) {
+        if ((rc = exec(d, "BEGIN IMMEDIATE")) < 0)
+            return rc;
+        if ((rc = exec(d, db_migrations[v].sql)) < 0 || (rc = exec(d, bump)) < 0) {
             char why[sizeof d->err];
             memcpy(why, d->err, sizeof why);
             exec(d, "ROLLBACK");
-            return fail(d, "migration %s failed: %s", db_migrations[v].name, why);
+            return db__fail(d, rc, "migration %s failed: %s", db_migrations[v].name, why);
         }
-        if (exec(d, "COMMIT") < 0)
-            return -1;
+        if ((rc = exec(d, "COMMIT")) < 0)
+            return rc;
     }
     return 0;
 }
@@ -152,7 +172,10 @@ db *db_open(const char *path, int mode, char *err, size_t errlen)
     }
     int flags = mode == DB_READONLY ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE;
     if (sqlite3_open_v2(path, &d->sql, flags | SQLITE_OPEN_NOMUTEX, NULL) != SQLITE_OK) {
-        fail(d, "cannot open: %s", d->sql ? sqlite3_errmsg(d->sql) : "out of memory");
+        if (d->sql)
+            db__sql_fail(d, "cannot open");
+        else
+            db__fail(d, -ENOMEM, "cannot open: out of memory");
         goto fail;
     }
     sqlite3_busy_timeout(d->sql, DB_BUSY_TIMEOUT_MS);
@@ -162,8 +185,8 @@ db *db_open(const char *path, int mode, char *err, size_t errlen)
         if (v < 0)
             goto fail;
         if (v != db_migration_count) {
-            fail(d, "schema version %d, this build expects %d%s", v, db_migration_count,
-                 v == 0 ? " (not a cvre database, or empty)" : "");
+            db__fail(d, -ENOTSUP, "schema version %d, this build expects %d%s", v, db_migration_count,
+                     v == 0 ? " (not a cvre database, or empty)" : "");
             goto fail;
         }
         return d;
@@ -176,7 +199,7 @@ db *db_open(const char *path, int mode, char *err, size_t errlen)
         goto fail;
     for (int i = 0; i < ST_COUNT; i++)
         if (sqlite3_prepare_v3(d->sql, stmt_sql[i], -1, SQLITE_PREPARE_PERSISTENT, &d->st[i], NULL) != SQLITE_OK) {
-            fail(d, "prepare: %s", sqlite3_errmsg(d->sql));
+            db__sql_fail(d, "prepare");
             goto fail;
         }
     return d;
@@ -218,20 +241,16 @@ static int run(db *d, sqlite3_stmt *st)
     sqlite3_reset(st);
     sqlite3_clear_bindings(st);
     if (rc != SQLITE_DONE)
-        return fail(d, "%s", sqlite3_errmsg(d->sql));
+        return db__sql_fail(d, NULL);
     return 0;
 }
 
 int64_t db_session_last_id(db *d)
 {
     sqlite3_stmt *st;
-    int64_t id = -1;
     if (sqlite3_prepare_v2(d->sql, "SELECT coalesce(max(id), 0) FROM sessions", -1, &st, NULL) != SQLITE_OK)
-        return fail(d, "%s", sqlite3_errmsg(d->sql));
-    if (sqlite3_step(st) == SQLITE_ROW)
-        id = sqlite3_column_int64(st, 0);
-    else
-        fail(d, "%s", sqlite3_errmsg(d->sql));
+        return db__sql_fail(d, NULL);
+    int64_t id = sqlite3_step(st) == SQLITE_ROW ? sqlite3_column_int64(st, 0) : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
     return id;
 }
@@ -246,7 +265,7 @@ int db_owner_usage(db *d, const char *owner, uint32_t *count, uint64_t *triangle
                            "SELECT count(*), coalesce(sum(o.tri_count), 0) FROM objects o "
                            "JOIN users u ON u.id = o.owner_id WHERE u.name = ?1 AND o.removed_at IS NULL",
                            -1, &st, NULL) != SQLITE_OK)
-        return fail(d, "%s", sqlite3_errmsg(d->sql));
+        return db__sql_fail(d, NULL);
     sqlite3_bind_text(st, 1, owner, -1, SQLITE_STATIC);
     rc = sqlite3_step(st);
     if (rc == SQLITE_ROW) {
@@ -254,7 +273,7 @@ int db_owner_usage(db *d, const char *owner, uint32_t *count, uint64_t *triangle
         *triangles = (uint64_t)sqlite3_column_int64(st, 1);
     }
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW ? 0 : fail(d, "%s", sqlite3_errmsg(d->sql));
+    return rc == SQLITE_ROW ? 0 : db__sql_fail(d, NULL);
 }
 
 int db_sessions_close_stale(db *d, double now)
@@ -262,12 +281,12 @@ int db_sessions_close_stale(db *d, double now)
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(d->sql, "UPDATE sessions SET ended_at = ?1, end_reason = 'crashed' WHERE ended_at IS NULL",
                            -1, &st, NULL) != SQLITE_OK)
-        return fail(d, "%s", sqlite3_errmsg(d->sql));
+        return db__sql_fail(d, NULL);
     sqlite3_bind_double(st, 1, now);
-    int rc = sqlite3_step(st);
+    int rc = sqlite3_step(st) == SQLITE_DONE ? 0 : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
-    if (rc != SQLITE_DONE)
-        return fail(d, "%s", sqlite3_errmsg(d->sql));
+    if (rc < 0)
+        return rc;
     return sqlite3_changes(d->sql);
 }
 
@@ -286,23 +305,25 @@ int db_user_upsert(db *d, const char *name, double at, int64_t *user_id)
     sqlite3_stmt *st = d->st[ST_USER_UPSERT];
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 2, at);
-    if (run(d, st) < 0)
-        return -1;
+    int rc = run(d, st);
+    if (rc < 0)
+        return rc;
     st = d->st[ST_USER_ID];
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
-    int rc = sqlite3_step(st);
-    *user_id = rc == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
+    int step = sqlite3_step(st);
+    *user_id = step == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
     sqlite3_reset(st);
     sqlite3_clear_bindings(st);
-    if (rc == SQLITE_ROW)
+    if (step == SQLITE_ROW)
         return 0;
-    return rc == SQLITE_DONE ? fail(d, "user %s vanished", name) : fail(d, "%s", sqlite3_errmsg(d->sql));
+    return step == SQLITE_DONE ? db__fail(d, -EIO, "user %s vanished", name) : db__sql_fail(d, NULL);
 }
 
 int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id)
 {
-    if (db_user_upsert(d, name, at, user_id) < 0)
-        return -1;
+    int rc = db_user_upsert(d, name, at, user_id);
+    if (rc < 0)
+        return rc;
     sqlite3_stmt *st = d->st[ST_SESSION_JOIN];
     sqlite3_bind_int64(st, 1, id);
     sqlite3_bind_text(st, 2, name, -1, SQLITE_STATIC);
@@ -329,12 +350,13 @@ static void bind_floats(sqlite3_stmt *st, int first, const float *v, int n)
 
 int db_object_create(db *d, db_object *o, double at)
 {
-    if (db_begin(d) < 0)
-        return -1;
+    int rc = db_begin(d);
+    if (rc < 0)
+        return rc;
     sqlite3_stmt *st = d->st[ST_USER_UPSERT];
     sqlite3_bind_text(st, 1, o->owner, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 2, at);
-    if (run(d, st) < 0)
+    if ((rc = run(d, st)) < 0)
         goto fail;
     st = d->st[ST_OBJECT_INSERT];
     sqlite3_bind_text(st, 1, o->owner, -1, SQLITE_STATIC);
@@ -347,14 +369,14 @@ int db_object_create(db *d, db_object *o, double at)
     sqlite3_bind_int64(st, 10, o->tri_count);
     bind_floats(st, 11, o->min, 3);
     bind_floats(st, 14, o->max, 3);
-    if (run(d, st) < 0)
+    if ((rc = run(d, st)) < 0)
         goto fail;
     o->id = sqlite3_last_insert_rowid(d->sql);
     o->ecm_version = 1;
     st = d->st[ST_MESH_INSERT];
     sqlite3_bind_int64(st, 1, o->id);
     sqlite3_bind_blob64(st, 2, o->tris, (sqlite3_uint64)o->tri_count * 9 * sizeof(float), SQLITE_STATIC);
-    if (run(d, st) < 0)
+    if ((rc = run(d, st)) < 0)
         goto fail;
     st = d->st[ST_ECM_VERSION_INSERT];
     sqlite3_bind_int64(st, 1, o->id);
@@ -362,7 +384,7 @@ int db_object_create(db *d, db_object *o, double at)
     sqlite3_bind_double(st, 3, at);
     sqlite3_bind_text(st, 4, "import", -1, SQLITE_STATIC);
     sqlite3_bind_int64(st, 5, o->box_count);
-    if (run(d, st) < 0)
+    if ((rc = run(d, st)) < 0)
         goto fail;
     for (uint32_t i = 0; i < o->box_count; i++) {
         st = d->st[ST_ECM_BOX_INSERT];
@@ -370,14 +392,14 @@ int db_object_create(db *d, db_object *o, double at)
         sqlite3_bind_int64(st, 2, 1);
         sqlite3_bind_int64(st, 3, i);
         bind_floats(st, 4, o->boxes[i], 6);
-        if (run(d, st) < 0)
+        if ((rc = run(d, st)) < 0)
             goto fail;
     }
-    if (db_commit(d) == 0)
+    if ((rc = db_commit(d)) == 0)
         return 0;
 fail:
     sqlite3_exec(d->sql, "ROLLBACK", NULL, NULL, NULL);
-    return -1;
+    return rc;
 }
 
 int db_object_place(db *d, int64_t id, const float pos[3], float yaw, float scale)
@@ -412,7 +434,7 @@ static int load_boxes(db *d, sqlite3_stmt *bx, int64_t id, uint32_t version, flo
             float(*nb)[6] = cvre_realloc(*boxes, ncap * sizeof **boxes);
             if (!nb) {
                 sqlite3_reset(bx);
-                return fail(d, "out of memory loading boxes");
+                return db__fail(d, -ENOMEM, "out of memory loading boxes");
             }
             *boxes = nb;
             *cap = ncap;
@@ -422,7 +444,7 @@ static int load_boxes(db *d, sqlite3_stmt *bx, int64_t id, uint32_t version, flo
         (*n)++;
     }
     sqlite3_reset(bx);
-    return rc == SQLITE_DONE ? 0 : fail(d, "%s", sqlite3_errmsg(d->sql));
+    return rc == SQLITE_DONE ? 0 : db__sql_fail(d, NULL);
 }
 
 int db_objects_load(db *d, db_object_fn *fn, void *ctx)
@@ -430,7 +452,7 @@ int db_objects_load(db *d, db_object_fn *fn, void *ctx)
     sqlite3_stmt *ob = NULL, *bx = NULL;
     float(*boxes)[6] = NULL;
     uint32_t cap = 0;
-    int rc = -1, step;
+    int rc, step;
     if (sqlite3_prepare_v2(d->sql,
                            "SELECT o.id, u.name, o.name, o.format, o.pos_x, o.pos_y, o.pos_z, o.yaw, o.scale, "
                            "o.ecm_version, o.tri_count, o.min_x, o.min_y, o.min_z, o.max_x, o.max_y, o.max_z, "
@@ -441,7 +463,7 @@ int db_objects_load(db *d, db_object_fn *fn, void *ctx)
                            "SELECT min_x, min_y, min_z, max_x, max_y, max_z FROM ecm_boxes "
                            "WHERE object_id = ?1 AND version = ?2 ORDER BY box_index",
                            -1, &bx, NULL) != SQLITE_OK) {
-        fail(d, "%s", sqlite3_errmsg(d->sql));
+        rc = db__sql_fail(d, NULL);
         goto done;
     }
     while ((step = sqlite3_step(ob)) == SQLITE_ROW) {
@@ -460,23 +482,16 @@ int db_objects_load(db *d, db_object_fn *fn, void *ctx)
         }
         o.tris = sqlite3_column_blob(ob, 17);
         if ((size_t)sqlite3_column_bytes(ob, 17) != (size_t)o.tri_count * 9 * sizeof(float)) {
-            fail(d, "object %lld: mesh size does not match its triangle count", (long long)o.id);
+            rc = db__fail(d, -EIO, "object %lld: mesh size does not match its triangle count", (long long)o.id);
             goto done;
         }
-        if (load_boxes(d, bx, o.id, o.ecm_version, &boxes, &o.box_count, &cap) < 0)
+        if ((rc = load_boxes(d, bx, o.id, o.ecm_version, &boxes, &o.box_count, &cap)) < 0)
             goto done;
         o.boxes = (const float(*)[6])boxes;
-        int r = fn(ctx, &o);
-        if (r != 0) {
-            rc = r;
+        if ((rc = fn(ctx, &o)) != 0)
             goto done;
-        }
     }
-    if (step != SQLITE_DONE) {
-        fail(d, "%s", sqlite3_errmsg(d->sql));
-        goto done;
-    }
-    rc = 0;
+    rc = step == SQLITE_DONE ? 0 : db__sql_fail(d, NULL);
 done:
     sqlite3_finalize(ob);
     sqlite3_finalize(bx);

@@ -4,7 +4,15 @@
  * Opening a writable store sets WAL mode, a busy timeout and foreign keys,
  * and brings the schema up to date with the embedded migrations; a read-only
  * open (admin tools) only checks that the schema version is one this build
- * knows. Functions return 0 or -1; on -1 the message is in db_error().
+ * knows.
+ *
+ * Results (CONTRIBUTING.md): every function of the store (db.h, ecm.h,
+ * account.h, moderation.h, maint.h, dblog.h) returns 0, or a count, an id or
+ * 1 for "found" where it says so, on success, and a negative errno on
+ * failure, with the reason in db_error(). SQLite's own failures are mapped
+ * by db_errno; the store's refusals use the errno that names them (-ENOENT
+ * no such thing, -EEXIST taken, -EACCES wrong credentials, -EPERM not
+ * allowed for this one, -EINVAL bad argument, -ESTALE changed meanwhile).
  */
 #ifndef CVRE_DB_H
 #define CVRE_DB_H
@@ -25,6 +33,17 @@ void db_close(db *d);
 /* The last error message; valid until the next call on d. */
 const char *db_error(const db *d);
 sqlite3 *db_sqlite(db *d);
+/* The negative errno for an SQLite result code (primary or extended):
+ * BUSY and LOCKED -EBUSY, FULL -ENOSPC, NOMEM -ENOMEM, READONLY -EROFS,
+ * CONSTRAINT -EEXIST (unique, primary key) or -EINVAL (the others),
+ * CANTOPEN -ENOENT or -EACCES after sys_errno (sqlite3_system_errno; else
+ * -EIO), INTERRUPT -EINTR, MISUSE and RANGE -EINVAL, TOOBIG -E2BIG, every
+ * other code (IOERR, CORRUPT, NOTADB, ...) -EIO. The one place where the
+ * store's callers and modules turn SQLite's codes into errnos. */
+int db_errno(int code, int sys_errno);
+/* db_errno of the last failed call on connection s (db_sqlite(d) for a
+ * store's handle). */
+int db_sqlite_errno(sqlite3 *s);
 /* Schema version this build migrates to. */
 int db_schema_version(void);
 
@@ -41,9 +60,11 @@ void db_set_busy_timeout(db *d, int ms);
 int db_busy(db *d);
 
 /* Sessions. A new session id is max(id) + 1 at start-up, counted up in
- * memory, so that ids can be handed out before their row is written. */
+ * memory, so that ids can be handed out before their row is written.
+ * Returns the highest id in the store (0 if none), or a negative errno. */
 int64_t db_session_last_id(db *d);
-/* Closes sessions a crashed run left open. Returns how many, or -1. */
+/* Closes sessions a crashed run left open. Returns how many, or a negative
+ * errno. */
 int db_sessions_close_stale(db *d, double now);
 int db_session_open(db *d, int64_t id, const char *token_hex, const char *peer, double at);
 /* Creates the user (a users row: who appears in the logs) if new, stamps

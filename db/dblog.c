@@ -15,6 +15,7 @@
 
 #include "alloc.h"
 #include "db.h"
+#include "err.h"
 #include "log.h"
 
 /* Page cache of the writer's connection. The hot set is one leaf per object
@@ -193,13 +194,13 @@ int dblog_push(dblog *log, const dblog_row *row)
 {
     if (!row_is_finite(row)) {
         count(&log->invalid);
-        return -1;
+        return -EINVAL;
     }
     uint64_t head = atomic_load_explicit(&log->head, memory_order_relaxed);
     uint64_t tail = atomic_load_explicit(&log->tail, memory_order_acquire);
     if (head - tail > log->mask) {
         count(&log->dropped);
-        return -1;
+        return -ENOBUFS;
     }
     memcpy(&log->ring[head & log->mask], row, sizeof *row);
     /* Sequentially consistent, with the load of wake_at below: the writer
@@ -754,20 +755,14 @@ static void ckpt_stop(dblog *l)
 
 static int check_config(const dblog_config *cfg, char *err, size_t errlen)
 {
-    if (cfg->queue_rows < 2 || cfg->queue_rows > DBLOG_QUEUE_ROWS_MAX || (cfg->queue_rows & (cfg->queue_rows - 1))) {
-        snprintf(err, errlen, "queue_rows %u is not a power of two from 2 to %u", cfg->queue_rows,
-                 DBLOG_QUEUE_ROWS_MAX);
-        return -1;
-    }
-    if (cfg->batch_rows < 1 || cfg->batch_rows > cfg->queue_rows / 2) {
-        snprintf(err, errlen, "batch_rows %u is not from 1 to half the queue (%u)", cfg->batch_rows,
-                 cfg->queue_rows / 2);
-        return -1;
-    }
-    if (cfg->batch_ms < 1 || cfg->batch_ms > DBLOG_BATCH_MS_MAX) {
-        snprintf(err, errlen, "batch_ms %u is not from 1 to %u", cfg->batch_ms, DBLOG_BATCH_MS_MAX);
-        return -1;
-    }
+    if (cfg->queue_rows < 2 || cfg->queue_rows > DBLOG_QUEUE_ROWS_MAX || (cfg->queue_rows & (cfg->queue_rows - 1)))
+        return cvre_fail(err, errlen, -EINVAL, "queue_rows %u is not a power of two from 2 to %u", cfg->queue_rows,
+                         DBLOG_QUEUE_ROWS_MAX);
+    if (cfg->batch_rows < 1 || cfg->batch_rows > cfg->queue_rows / 2)
+        return cvre_fail(err, errlen, -EINVAL, "batch_rows %u is not from 1 to half the queue (%u)", cfg->batch_rows,
+                         cfg->queue_rows / 2);
+    if (cfg->batch_ms < 1 || cfg->batch_ms > DBLOG_BATCH_MS_MAX)
+        return cvre_fail(err, errlen, -EINVAL, "batch_ms %u is not from 1 to %u", cfg->batch_ms, DBLOG_BATCH_MS_MAX);
     return 0;
 }
 
@@ -912,5 +907,5 @@ int dblog_stop(dblog *log, dblog_stats *final)
     if (final)
         *final = s;
     destroy(log);
-    return s.lost ? -1 : 0;
+    return s.lost ? -EIO : 0;
 }

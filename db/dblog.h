@@ -50,8 +50,8 @@
  * it (WAL with synchronous=NORMAL: a commit survives the process; only the
  * operating system's crash can undo the last ones).
  *
- * Error convention (as db.h): functions return 0 or -1, or NULL with the
- * message in the caller's buffer.
+ * Error convention (as db.h): functions return 0 or a negative errno, or
+ * NULL with the message in the caller's buffer.
  */
 #ifndef CVRE_DBLOG_H
 #define CVRE_DBLOG_H
@@ -216,9 +216,10 @@ typedef struct dblog_stats {
 dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t errlen);
 
 /* Queues a copy of *row for the writer. Never blocks and never allocates.
- * Returns 0, or -1 if the row was refused and counted: the queue was full
- * (dropped), or a number in it is NaN or infinite (invalid; the NOT NULL
- * columns cannot hold it). Only one thread may push. */
+ * Returns 0, or a negative errno if the row was refused and counted:
+ * -ENOBUFS, the queue was full (dropped); -EINVAL, a number in it is NaN or
+ * infinite (invalid; the NOT NULL columns cannot hold it). Only one thread
+ * may push. */
 int dblog_push(dblog *log, const dblog_row *row);
 
 /* A consistent-enough snapshot of the counters (each one is exact, they are
@@ -229,7 +230,7 @@ void dblog_stats_get(const dblog *log, dblog_stats *out);
  * on) every queued row, in one last transaction, and frees log. Call it from
  * the pushing thread, or after that thread stopped pushing. If final is not
  * NULL it receives the last counters. Returns 0 if every row pushed and not
- * dropped was committed, -1 if some were lost. */
+ * dropped was committed, -EIO if some were lost. */
 int dblog_stop(dblog *log, dblog_stats *final);
 
 #endif

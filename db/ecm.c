@@ -1,5 +1,6 @@
 #include "ecm.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,10 +15,8 @@
 /* Versions are u32 on the wire; the store keeps them as INTEGER. */
 #define DB_ECM_VERSION_MAX UINT32_MAX
 
-static int sql_fail(db *d) { return db__fail(d, "%s", sqlite3_errmsg(db_sqlite(d))); }
-
-/* Steps st once: 1 and the row in st, 0 when there is none, -1 on error
- * (with the message). The caller resets st. */
+/* Steps st once: 1 and the row in st, 0 when there is none, a negative
+ * errno on error (with the message). The caller resets st. */
 static int step_row(db *d, sqlite3_stmt *st)
 {
     int rc = sqlite3_step(st);
@@ -25,18 +24,16 @@ static int step_row(db *d, sqlite3_stmt *st)
         return 1;
     if (rc == SQLITE_DONE)
         return 0;
-    return sql_fail(d);
+    return db__sql_fail(d, NULL);
 }
 
 /* Runs a statement that returns no rows, then resets it for the next use. */
 static int step_done(db *d, sqlite3_stmt *st)
 {
-    int rc = sqlite3_step(st);
-    if (rc != SQLITE_DONE)
-        sql_fail(d);
+    int rc = sqlite3_step(st) == SQLITE_DONE ? 0 : db__sql_fail(d, NULL);
     sqlite3_reset(st);
     sqlite3_clear_bindings(st);
-    return rc == SQLITE_DONE ? 0 : -1;
+    return rc;
 }
 
 /* Starts the read transaction a multi-statement read runs in, unless the
@@ -46,7 +43,7 @@ static int begin_read(db *d, int *own)
 {
     *own = sqlite3_get_autocommit(db_sqlite(d));
     if (*own && sqlite3_exec(db_sqlite(d), "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
-        return sql_fail(d);
+        return db__sql_fail(d, NULL);
     return 0;
 }
 
@@ -62,41 +59,42 @@ static void end_read(db *d, int own)
 static int check_change(db *d, const db_ecm_change *c, double at, const uint32_t *version)
 {
     if (!c || !version)
-        return db__fail(d, "ecm write: no change given");
+        return db__fail(d, -EINVAL, "ecm write: no change given");
     if (c->object_id <= 0)
-        return db__fail(d, "ecm write: object id %lld is not an object", (long long)c->object_id);
+        return db__fail(d, -EINVAL, "ecm write: object id %lld is not an object", (long long)c->object_id);
     if (c->parent_version == 0)
-        return db__fail(d, "ecm write: object %lld: parent version 0 does not exist (versions start at 1)",
+        return db__fail(d, -EINVAL,
+                        "ecm write: object %lld: parent version 0 does not exist (versions start at 1)",
                         (long long)c->object_id);
     size_t n = c->reason ? strnlen(c->reason, DB_ECM_REASON_MAX + 1) : 0;
     if (n == 0 || n > DB_ECM_REASON_MAX)
-        return db__fail(d, "ecm write: object %lld: the reason must be 1 to %u bytes", (long long)c->object_id,
-                        DB_ECM_REASON_MAX);
+        return db__fail(d, -EINVAL, "ecm write: object %lld: the reason must be 1 to %u bytes",
+                        (long long)c->object_id, DB_ECM_REASON_MAX);
     if (c->detail && strnlen(c->detail, DB_ECM_DETAIL_MAX + 1) > DB_ECM_DETAIL_MAX)
-        return db__fail(d, "ecm write: object %lld: the detail is longer than %u bytes", (long long)c->object_id,
-                        DB_ECM_DETAIL_MAX);
+        return db__fail(d, -EINVAL, "ecm write: object %lld: the detail is longer than %u bytes",
+                        (long long)c->object_id, DB_ECM_DETAIL_MAX);
     if (c->run_id < 0)
-        return db__fail(d, "ecm write: object %lld: run id %lld is not a run", (long long)c->object_id,
+        return db__fail(d, -EINVAL, "ecm write: object %lld: run id %lld is not a run", (long long)c->object_id,
                         (long long)c->run_id);
     if (c->ncluster_ids && (c->run_id == 0 || !c->cluster_ids))
-        return db__fail(d, "ecm write: object %lld: %u cluster ids without the run they belong to",
+        return db__fail(d, -EINVAL, "ecm write: object %lld: %u cluster ids without the run they belong to",
                         (long long)c->object_id, c->ncluster_ids);
     if (c->box_count < 1 || c->box_count > DB_ECM_BOXES_MAX || !c->boxes)
-        return db__fail(d, "ecm write: object %lld: %u boxes; a version has 1 to %u", (long long)c->object_id,
-                        c->boxes ? c->box_count : 0, DB_ECM_BOXES_MAX);
+        return db__fail(d, -EINVAL, "ecm write: object %lld: %u boxes; a version has 1 to %u",
+                        (long long)c->object_id, c->boxes ? c->box_count : 0, DB_ECM_BOXES_MAX);
     for (uint32_t i = 0; i < c->box_count; i++) {
         const float *b = c->boxes[i];
         for (int k = 0; k < 6; k++)
             if (!isfinite(b[k]))
-                return db__fail(d, "ecm write: object %lld: box %u has a NaN or infinite coordinate",
+                return db__fail(d, -EINVAL, "ecm write: object %lld: box %u has a NaN or infinite coordinate",
                                 (long long)c->object_id, i);
         for (int k = 0; k < 3; k++)
             if (b[k] > b[k + 3])
-                return db__fail(d, "ecm write: object %lld: box %u has min > max on axis %c", (long long)c->object_id,
-                                i, "xyz"[k]);
+                return db__fail(d, -EINVAL, "ecm write: object %lld: box %u has min > max on axis %c",
+                                (long long)c->object_id, i, "xyz"[k]);
     }
     if (!isfinite(at))
-        return db__fail(d, "ecm write: object %lld: the time is not finite", (long long)c->object_id);
+        return db__fail(d, -EINVAL, "ecm write: object %lld: the time is not finite", (long long)c->object_id);
     return 0;
 }
 
@@ -152,18 +150,14 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
     int removed = r == 1 && sqlite3_column_int(q, 1);
     sqlite3_reset(q);
     if (r < 0)
-        return -1;
+        return r;
     if (r == 0)
-        return db__fail(d, "ecm write: no object %lld", id);
-    if (removed) {
-        db__fail(d, "ecm write: object %lld was removed", id);
-        return DB_ECM_STALE;
-    }
-    if (in_force != (int64_t)c->parent_version) {
-        db__fail(d, "ecm write: object %lld: version %lld is in force, not %u", id, (long long)in_force,
-                 c->parent_version);
-        return DB_ECM_STALE;
-    }
+        return db__fail(d, -ENOENT, "ecm write: no object %lld", id);
+    if (removed)
+        return db__fail(d, -ESTALE, "ecm write: object %lld was removed", id);
+    if (in_force != (int64_t)c->parent_version)
+        return db__fail(d, -ESTALE, "ecm write: object %lld: version %lld is in force, not %u", id,
+                        (long long)in_force, c->parent_version);
 
     q = st[W_NEXT];
     sqlite3_bind_int64(q, 1, c->object_id);
@@ -171,22 +165,24 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
     int64_t next = r == 1 ? sqlite3_column_int64(q, 0) : 0;
     sqlite3_reset(q);
     if (r < 0)
-        return -1;
+        return r;
     if (next < 1 || next > (int64_t)DB_ECM_VERSION_MAX)
-        return db__fail(d, "ecm write: object %lld: no version number left after %lld", id, (long long)next - 1);
+        return db__fail(d, -EOVERFLOW, "ecm write: object %lld: no version number left after %lld", id,
+                        (long long)next - 1);
 
     if (c->restores) {
         sqlite3_bind_int64(st[W_HAS_VERSION], 1, c->object_id);
         sqlite3_bind_int64(st[W_HAS_VERSION], 2, c->restores);
         r = exists(d, st[W_HAS_VERSION]);
         if (r <= 0)
-            return r < 0 ? -1 : db__fail(d, "ecm write: object %lld has no version %u to restore", id, c->restores);
+            return r < 0 ? r : db__fail(d, -ENOENT, "ecm write: object %lld has no version %u to restore", id,
+                                        c->restores);
     }
     if (c->run_id) {
         sqlite3_bind_int64(st[W_HAS_RUN], 1, c->run_id);
         r = exists(d, st[W_HAS_RUN]);
         if (r <= 0)
-            return r < 0 ? -1 : db__fail(d, "ecm write: no cluster run %lld", (long long)c->run_id);
+            return r < 0 ? r : db__fail(d, -ENOENT, "ecm write: no cluster run %lld", (long long)c->run_id);
     }
     for (uint32_t i = 0; i < c->ncluster_ids; i++) {
         sqlite3_bind_int64(st[W_HAS_CLUSTER], 1, c->run_id);
@@ -194,8 +190,8 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
         sqlite3_bind_int64(st[W_HAS_CLUSTER], 3, c->cluster_ids[i]);
         r = exists(d, st[W_HAS_CLUSTER]);
         if (r <= 0)
-            return r < 0 ? -1
-                         : db__fail(d, "ecm write: cluster run %lld has no cluster %u of object %lld",
+            return r < 0 ? r
+                         : db__fail(d, -ENOENT, "ecm write: cluster run %lld has no cluster %u of object %lld",
                                     (long long)c->run_id, c->cluster_ids[i], id);
     }
 
@@ -212,8 +208,8 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
         sqlite3_bind_int64(q, 8, c->restores);
     if (c->detail)
         sqlite3_bind_text(q, 9, c->detail, -1, SQLITE_STATIC);
-    if (step_done(d, q) < 0)
-        return -1;
+    if ((r = step_done(d, q)) < 0)
+        return r;
     q = st[W_BOX];
     for (uint32_t i = 0; i < c->box_count; i++) {
         sqlite3_bind_int64(q, 1, c->object_id);
@@ -221,8 +217,8 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
         sqlite3_bind_int64(q, 3, i);
         for (int k = 0; k < 6; k++)
             sqlite3_bind_double(q, 4 + k, (double)c->boxes[i][k]);
-        if (step_done(d, q) < 0)
-            return -1;
+        if ((r = step_done(d, q)) < 0)
+            return r;
     }
     q = st[W_TIE];
     for (uint32_t i = 0; i < c->ncluster_ids; i++) {
@@ -230,47 +226,47 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
         sqlite3_bind_int64(q, 2, next);
         sqlite3_bind_int64(q, 3, c->run_id);
         sqlite3_bind_int64(q, 4, c->cluster_ids[i]);
-        if (step_done(d, q) < 0)
-            return -1;
+        if ((r = step_done(d, q)) < 0)
+            return r;
     }
     q = st[W_SET];
     sqlite3_bind_int64(q, 1, c->object_id);
     sqlite3_bind_int64(q, 2, next);
     sqlite3_bind_int64(q, 3, c->parent_version);
-    if (step_done(d, q) < 0)
-        return -1;
+    if ((r = step_done(d, q)) < 0)
+        return r;
     if (sqlite3_changes(db_sqlite(d)) != 1) /* checked above under the same lock: cannot happen */
-        return db__fail(d, "ecm write: object %lld changed under the write lock", id);
+        return db__fail(d, -EIO, "ecm write: object %lld changed under the write lock", id);
     q = st[W_EVENT];
     sqlite3_bind_int64(q, 1, c->object_id);
     sqlite3_bind_int64(q, 2, next);
     sqlite3_bind_double(q, 3, at);
     sqlite3_bind_text(q, 4, c->reason, -1, SQLITE_STATIC);
-    if (step_done(d, q) < 0)
-        return -1;
+    if ((r = step_done(d, q)) < 0)
+        return r;
     *version = (uint32_t)next;
     return 0;
 }
 
 int db_ecm_write(db *d, const db_ecm_change *c, double at, uint32_t *version)
 {
-    if (check_change(d, c, at, version) < 0)
-        return -1;
+    int rc = check_change(d, c, at, version);
+    if (rc < 0)
+        return rc;
     sqlite3 *s = db_sqlite(d);
     if (!sqlite3_get_autocommit(s))
-        return db__fail(d, "ecm write: called inside a transaction (it needs one of its own)");
+        return db__fail(d, -EINVAL, "ecm write: called inside a transaction (it needs one of its own)");
     sqlite3_stmt *st[W_COUNT] = {0};
-    int rc = -1;
     for (int i = 0; i < W_COUNT; i++)
         if (sqlite3_prepare_v2(s, write_sql[i], -1, &st[i], NULL) != SQLITE_OK) {
-            sql_fail(d);
+            rc = db__sql_fail(d, NULL);
             goto cleanup;
         }
-    if (db_begin(d) < 0) /* the message and db_busy() come from the BEGIN */
+    if ((rc = db_begin(d)) < 0) /* the message and db_busy() come from the BEGIN */
         goto cleanup;
     rc = write_locked(d, st, c, at, version);
-    if (rc == 0 && db_commit(d) < 0)
-        rc = -1;
+    if (rc == 0)
+        rc = db_commit(d);
     if (rc != 0)
         db_rollback(d);
 cleanup:
@@ -293,25 +289,25 @@ static int read_boxes(db *d, int64_t object_id, uint32_t version, float (**boxes
                            "FROM ecm_versions v LEFT JOIN ecm_boxes b ON b.object_id = v.object_id "
                            "AND b.version = v.version WHERE v.object_id = ?1 AND v.version = ?2 ORDER BY b.box_index",
                            -1, &st, NULL) != SQLITE_OK)
-        return sql_fail(d);
+        return db__sql_fail(d, NULL);
     sqlite3_bind_int64(st, 1, object_id);
     sqlite3_bind_int64(st, 2, version);
     float(*out)[6] = NULL;
     int64_t want = -1; /* the version's box_count; -1: no such version */
     uint32_t n = 0;
-    int rc = -1, r;
+    int rc, r;
     while ((r = step_row(d, st)) == 1) {
         if (want < 0) {
             want = sqlite3_column_int64(st, 0);
             /* Not trusted for the allocation beyond what a version may hold. */
             if (want < 1 || want > (int64_t)DB_ECM_BOXES_MAX) {
-                db__fail(d, "object %lld version %u: box count %lld out of range", (long long)object_id, version,
-                         (long long)want);
+                rc = db__fail(d, -EIO, "object %lld version %u: box count %lld out of range", (long long)object_id,
+                              version, (long long)want);
                 goto done;
             }
             out = cvre_malloc((size_t)want * sizeof *out);
             if (!out) {
-                db__fail(d, "out of memory reading %lld boxes", (long long)want);
+                rc = db__fail(d, -ENOMEM, "out of memory reading %lld boxes", (long long)want);
                 goto done;
             }
         }
@@ -321,15 +317,15 @@ static int read_boxes(db *d, int64_t object_id, uint32_t version, float (**boxes
             out[n][k] = (float)sqlite3_column_double(st, 2 + k);
         n++;
     }
-    if (r < 0)
+    if ((rc = r) < 0)
         goto done;
     if (want < 0) {
-        db__fail(d, "object %lld has no ECM version %u", (long long)object_id, version);
+        rc = db__fail(d, -ENOENT, "object %lld has no ECM version %u", (long long)object_id, version);
         goto done;
     }
     if (r == 1 || n != want) {
-        db__fail(d, "object %lld version %u: its stored boxes do not match its box count %lld", (long long)object_id,
-                 version, (long long)want);
+        rc = db__fail(d, -EIO, "object %lld version %u: its stored boxes do not match its box count %lld",
+                      (long long)object_id, version, (long long)want);
         goto done;
     }
     *boxes = out;
@@ -358,7 +354,7 @@ int db_ecm_events(db *d, int64_t after, db_ecm_event_fn *fn, void *ctx, int64_t 
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(db_sqlite(d), "SELECT id, object_id, version FROM ecm_events WHERE id > ?1 ORDER BY id LIMIT ?2",
                            -1, &st, NULL) != SQLITE_OK)
-        return sql_fail(d);
+        return db__sql_fail(d, NULL);
     int rc = 0;
     for (;;) {
         int n = 0, r;
@@ -367,8 +363,8 @@ int db_ecm_events(db *d, int64_t after, db_ecm_event_fn *fn, void *ctx, int64_t 
         while ((r = step_row(d, st)) == 1) {
             int64_t v = sqlite3_column_int64(st, 2);
             if (v < 1 || v > (int64_t)DB_ECM_VERSION_MAX) {
-                r = db__fail(d, "ecm event %lld: version %lld out of range", (long long)sqlite3_column_int64(st, 0),
-                             (long long)v);
+                r = db__fail(d, -EIO, "ecm event %lld: version %lld out of range",
+                             (long long)sqlite3_column_int64(st, 0), (long long)v);
                 break;
             }
             batch[n].id = sqlite3_column_int64(st, 0);
@@ -379,7 +375,7 @@ int db_ecm_events(db *d, int64_t after, db_ecm_event_fn *fn, void *ctx, int64_t 
         /* Reset before fn runs: no statement of ours is active while fn uses d. */
         sqlite3_reset(st);
         if (r < 0) {
-            rc = -1;
+            rc = r;
             break;
         }
         for (int i = 0; i < n; i++) {
@@ -400,12 +396,12 @@ int db_ecm_events_head(db *d, int64_t *last)
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(db_sqlite(d), "SELECT coalesce(max(id), 0) FROM ecm_events", -1, &st, NULL) != SQLITE_OK)
-        return sql_fail(d);
+        return db__sql_fail(d, NULL);
     int r = step_row(d, st);
     if (r == 1)
         *last = sqlite3_column_int64(st, 0);
     sqlite3_finalize(st);
-    return r == 1 ? 0 : -1; /* an aggregate always has its row */
+    return r == 1 ? 0 : r == 0 ? db__fail(d, -EIO, "ecm events: no maximum") : r; /* an aggregate has its row */
 }
 
 /* ---- one object, for the server ---- */
@@ -418,40 +414,39 @@ static int object_load(db *d, int64_t object_id, db_ecm_object *out)
                            "SELECT o.ecm_version, o.tri_count, o.removed_at IS NOT NULL, m.triangles "
                            "FROM objects o LEFT JOIN meshes m ON m.object_id = o.id WHERE o.id = ?1",
                            -1, &st, NULL) != SQLITE_OK)
-        return sql_fail(d);
+        return db__sql_fail(d, NULL);
     sqlite3_bind_int64(st, 1, object_id);
     long long id = (long long)object_id;
-    int rc = -1, r = step_row(d, st);
+    int rc, r = step_row(d, st);
     if (r <= 0) {
-        if (r == 0)
-            db__fail(d, "no object %lld", id);
+        rc = r < 0 ? r : db__fail(d, -ENOENT, "no object %lld", id);
         goto done;
     }
     int64_t version = sqlite3_column_int64(st, 0), tris = sqlite3_column_int64(st, 1);
     if (sqlite3_column_int(st, 2)) {
-        db__fail(d, "object %lld was removed", id);
+        rc = db__fail(d, -ENOENT, "object %lld was removed", id);
         goto done;
     }
     if (version < 1 || version > (int64_t)DB_ECM_VERSION_MAX || tris < 0 || tris > (int64_t)UINT32_MAX) {
-        db__fail(d, "object %lld: version %lld or triangle count %lld out of range", id, (long long)version,
-                 (long long)tris);
+        rc = db__fail(d, -EIO, "object %lld: version %lld or triangle count %lld out of range", id,
+                      (long long)version, (long long)tris);
         goto done;
     }
     if (sqlite3_column_type(st, 3) == SQLITE_NULL) {
-        db__fail(d, "object %lld has no mesh", id);
+        rc = db__fail(d, -EIO, "object %lld has no mesh", id);
         goto done;
     }
     /* The blob's length is checked against the count before anything is
      * copied: the count sizes the allocation. */
     size_t bytes = (size_t)tris * 9 * sizeof(float);
     if ((size_t)sqlite3_column_bytes(st, 3) != bytes) {
-        db__fail(d, "object %lld: mesh size does not match its triangle count", id);
+        rc = db__fail(d, -EIO, "object %lld: mesh size does not match its triangle count", id);
         goto done;
     }
     if (bytes) {
         out->tris = cvre_malloc(bytes);
         if (!out->tris) {
-            db__fail(d, "object %lld: out of memory for %lld triangles", id, (long long)tris);
+            rc = db__fail(d, -ENOMEM, "object %lld: out of memory for %lld triangles", id, (long long)tris);
             goto done;
         }
         memcpy(out->tris, sqlite3_column_blob(st, 3), bytes);
@@ -468,10 +463,10 @@ done:
 int db_ecm_object_load(db *d, int64_t object_id, db_ecm_object *out)
 {
     *out = (db_ecm_object){0};
-    int own;
-    if (begin_read(d, &own) < 0)
-        return -1;
-    int rc = object_load(d, object_id, out);
+    int own, rc = begin_read(d, &own);
+    if (rc < 0)
+        return rc;
+    rc = object_load(d, object_id, out);
     end_read(d, own);
     if (rc < 0)
         db_ecm_object_free(out);

@@ -11,8 +11,8 @@
  * and publishes each change to its clients. Versions only grow: a rollback to
  * version K writes a new version whose boxes are K's.
  *
- * Functions return 0 or -1 with the message in db_error(), except where said.
- * A failed call leaves no transaction of its own open, so the connection
+ * Functions return 0, or a negative errno with the message in db_error()
+ * (db.h). A failed call leaves no transaction of its own open, so the connection
  * stays usable. Every function here prepares its statements per call (none
  * is on a hot path: a poll of the feed costs one prepare, tens of us).
  */
@@ -22,11 +22,6 @@
 #include <stdint.h>
 
 #include "db.h"
-
-/* db_ecm_write's answer when the object's version in force is no longer the
- * one the change was computed from (or the object was removed): nothing is
- * written. */
-#define DB_ECM_STALE (-2)
 
 /* Most boxes in one version: what one OBJECT_INFO can carry
  * (PROTO_OBJECT_BOXES_MAX in protocol/proto.h, which db/ does not include;
@@ -65,20 +60,21 @@ typedef struct db_ecm_change {
  * (run_id, cluster_id) (duplicates count once), objects.ecm_version, and one
  * ecm_events row, all stamped `at`. Sets *version to the new number.
  *
- * Returns 0; DB_ECM_STALE, with nothing written, when the object was
- * removed or its version in force is not c->parent_version; -1 with nothing
- * written on invalid input (checked before anything is read: counts, NaN or
+ * Returns 0, or a negative errno with nothing written: -ESTALE when the
+ * object was removed or its version in force is not c->parent_version;
+ * -EINVAL on invalid input (checked before anything is read: counts, NaN or
  * infinite coordinates, min > max, empty or long texts, cluster ids without
- * a run), when the object, the run, one of the clusters or the restored
- * version does not exist, or on a database error (db_busy() tells a lock
- * held beyond the busy timeout). Must not be called inside a transaction
- * (-1: it needs one of its own). */
+ * a run) or inside a transaction (it needs one of its own); -ENOENT when
+ * the object, the run, one of the clusters or the restored version does
+ * not exist; -EOVERFLOW when the object has no version number left; the
+ * database's error otherwise (-EBUSY: a lock held beyond the busy
+ * timeout). */
 int db_ecm_write(db *d, const db_ecm_change *c, double at, uint32_t *version);
 
 /* The boxes of one version: *boxes (malloc'd, the caller frees) gets *count
- * boxes in box_index order. -1 with a message if there is no such version,
- * if the stored boxes do not match the version's box_count, or out of
- * memory; then *boxes is NULL and *count 0. */
+ * boxes in box_index order. -ENOENT if there is no such version, -EIO if
+ * the stored boxes do not match the version's box_count, -ENOMEM, or the
+ * database's error; then *boxes is NULL and *count 0. */
 int db_ecm_boxes(db *d, int64_t object_id, uint32_t version, float (**boxes)[6], uint32_t *count);
 
 /* The change feed: calls fn for each event with id > after, in id order, and
@@ -86,8 +82,8 @@ int db_ecm_boxes(db *d, int64_t object_id, uint32_t version, float (**boxes)[6],
  * *last is unchanged when there was none. If fn returns non-zero, stops and
  * returns that value; that event does not count as accepted, so the next
  * call from *last offers it again. Events are read in batches before fn is
- * called, so fn may use d (load the object, write a version). -1 on a
- * database error (events accepted before it stay in *last). */
+ * called, so fn may use d (load the object, write a version). A negative
+ * errno on a database error (events accepted before it stay in *last). */
 typedef int db_ecm_event_fn(void *ctx, int64_t event_id, int64_t object_id, uint32_t version);
 int db_ecm_events(db *d, int64_t after, db_ecm_event_fn *fn, void *ctx, int64_t *last);
 /* The id of the newest event, 0 if none (where a starting server begins). */
@@ -95,10 +91,10 @@ int db_ecm_events_head(db *d, int64_t *last);
 
 /* An object's mesh (9 floats a triangle, local) and the version in force
  * with its boxes, read in one snapshot; all malloc'd, the caller frees with
- * db_ecm_object_free. -1 if the object does not exist or was removed, if the
- * mesh blob's size does not match tri_count, if the boxes do not match
- * their version, or out of memory; then *out is zeroed (freeing it is
- * harmless). */
+ * db_ecm_object_free. -ENOENT if the object does not exist or was removed,
+ * -EIO if the mesh blob's size does not match tri_count or the boxes do not
+ * match their version, -ENOMEM, or the database's error; then *out is
+ * zeroed (freeing it is harmless). */
 typedef struct db_ecm_object {
     int64_t id;
     uint32_t version;

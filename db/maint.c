@@ -44,30 +44,30 @@ static void remove_partial(const char *tmp)
     }
 }
 
-/* fsync()s path (a file or a directory). */
+/* fsync()s path (a file or a directory): 0 or a negative errno. */
 static int sync_path(const char *path)
 {
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     if (fd < 0)
-        return -1;
-    int rc = fsync(fd);
-    int e = errno;
+        return -errno;
+    int rc = fsync(fd) < 0 ? -errno : 0;
     close(fd);
-    errno = e;
     return rc;
 }
 
-/* The first row of a one-column pragma on s, as text, into buf. */
+/* The first row of a one-column pragma on s, as text, into buf: 0, or a
+ * negative errno with the message in sqlite3_errmsg(s). */
 static int pragma_text(sqlite3 *s, const char *sql, char *buf, size_t len)
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return -1;
+        return db_sqlite_errno(s);
     int rc = sqlite3_step(st);
     if (rc == SQLITE_ROW)
         snprintf(buf, len, "%s", sqlite3_column_text(st, 0) ? (const char *)sqlite3_column_text(st, 0) : "");
+    rc = rc == SQLITE_ROW ? 0 : db_sqlite_errno(s);
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW ? 0 : -1;
+    return rc;
 }
 
 /* Writes the snapshot of src into the empty file tmp. */
@@ -87,17 +87,17 @@ static int copy_into(db *d, sqlite3 *src, const char *tmp, int vacuum)
             rc = sqlite3_step(st);
         }
         sqlite3_finalize(st);
-        if (rc != SQLITE_DONE)
-            db__fail(d, "VACUUM INTO: %s", sqlite3_errmsg(src));
+        rc = rc == SQLITE_DONE ? 0 : db__fail(d, db_sqlite_errno(src), "VACUUM INTO: %s", sqlite3_errmsg(src));
         if (strcmp(was, "0") != 0)
             sqlite3_exec(src, "PRAGMA query_only = 1", NULL, NULL, NULL);
-        return rc == SQLITE_DONE ? 0 : -1;
+        return rc;
     }
     sqlite3 *dst;
     if (sqlite3_open_v2(tmp, &dst, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
-        db__fail(d, "%s: %s", tmp, dst ? sqlite3_errmsg(dst) : "out of memory");
+        int rc = dst ? db__fail(d, db_sqlite_errno(dst), "%s: %s", tmp, sqlite3_errmsg(dst))
+                     : db__fail(d, -ENOMEM, "%s: out of memory", tmp);
         sqlite3_close(dst);
-        return -1;
+        return rc;
     }
     /* One step over every page: one read transaction, so one snapshot (a
      * stepwise copy would start again whenever the server commits). */
@@ -105,10 +105,9 @@ static int copy_into(db *d, sqlite3 *src, const char *tmp, int vacuum)
     int rc = b ? sqlite3_backup_step(b, -1) : sqlite3_errcode(dst);
     if (b)
         sqlite3_backup_finish(b);
-    if (rc != SQLITE_DONE)
-        db__fail(d, "copy: %s", b ? sqlite3_errstr(rc) : sqlite3_errmsg(dst));
+    rc = rc == SQLITE_DONE ? 0 : db__fail(d, db_errno(rc, 0), "copy: %s", b ? sqlite3_errstr(rc) : sqlite3_errmsg(dst));
     sqlite3_close(dst);
-    return rc == SQLITE_DONE ? 0 : -1;
+    return rc;
 }
 
 /* Makes the copy at tmp one self-contained file in the rollback journal
@@ -117,28 +116,29 @@ static int check_copy(db *d, const char *tmp, db_backup_stats *st)
 {
     sqlite3 *c;
     char text[256] = "";
-    int rc = -1;
+    int rc;
     if (sqlite3_open_v2(tmp, &c, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
-        db__fail(d, "%s: %s", tmp, c ? sqlite3_errmsg(c) : "out of memory");
+        rc = c ? db__fail(d, db_sqlite_errno(c), "%s: %s", tmp, sqlite3_errmsg(c))
+               : db__fail(d, -ENOMEM, "%s: out of memory", tmp);
         goto done;
     }
-    if (pragma_text(c, "PRAGMA journal_mode = DELETE", text, sizeof text) < 0 || strcmp(text, "delete") != 0) {
-        db__fail(d, "the copy stays in journal mode %s: %s", text, sqlite3_errmsg(c));
+    if ((rc = pragma_text(c, "PRAGMA journal_mode = DELETE", text, sizeof text)) < 0 || strcmp(text, "delete") != 0) {
+        rc = db__fail(d, rc < 0 ? rc : -EIO, "the copy stays in journal mode %s: %s", text, sqlite3_errmsg(c));
         goto done;
     }
-    if (pragma_text(c, "PRAGMA integrity_check", text, sizeof text) < 0) {
-        db__fail(d, "integrity_check of the copy: %s", sqlite3_errmsg(c));
+    if ((rc = pragma_text(c, "PRAGMA integrity_check", text, sizeof text)) < 0) {
+        rc = db__fail(d, rc, "integrity_check of the copy: %s", sqlite3_errmsg(c));
         goto done;
     }
     if (strcmp(text, "ok") != 0) {
-        db__fail(d, "the copy fails integrity_check: %s", text);
+        rc = db__fail(d, -EIO, "the copy fails integrity_check: %s", text);
         goto done;
     }
     char n[3][32];
-    if (pragma_text(c, "PRAGMA user_version", n[0], sizeof n[0]) < 0 ||
-        pragma_text(c, "PRAGMA page_count", n[1], sizeof n[1]) < 0 ||
-        pragma_text(c, "PRAGMA page_size", n[2], sizeof n[2]) < 0) {
-        db__fail(d, "reading the copy: %s", sqlite3_errmsg(c));
+    if ((rc = pragma_text(c, "PRAGMA user_version", n[0], sizeof n[0])) < 0 ||
+        (rc = pragma_text(c, "PRAGMA page_count", n[1], sizeof n[1])) < 0 ||
+        (rc = pragma_text(c, "PRAGMA page_size", n[2], sizeof n[2])) < 0) {
+        rc = db__fail(d, rc, "reading the copy: %s", sqlite3_errmsg(c));
         goto done;
     }
     st->schema = atoi(n[0]);
@@ -157,28 +157,25 @@ int db_backup(db *d, const char *dest, int vacuum, db_backup_stats *out)
     char tmp[PATH_MAX], dir[PATH_MAX];
     struct stat sb;
     if (!*dest || strlen(dest) + sizeof ".partial-XXXXXX" > sizeof tmp)
-        return db__fail(d, "not a usable file name for the copy: \"%s\"", dest);
-    if (lstat(dest, &sb) == 0) {
-        db__fail(d, "%s exists: the copy goes to a new file", dest);
-        return DB_MAINT_EXISTS;
-    }
+        return db__fail(d, -EINVAL, "not a usable file name for the copy: \"%s\"", dest);
+    if (lstat(dest, &sb) == 0)
+        return db__fail(d, -EEXIST, "%s exists: the copy goes to a new file", dest);
     snprintf(tmp, sizeof tmp, "%s.partial-XXXXXX", dest);
     int fd = mkstemp(tmp);
     if (fd < 0)
-        return db__fail(d, "cannot write beside %s: %s", dest, strerror(errno));
+        return db__fail(d, -errno, "cannot write beside %s: %s", dest, strerror(errno));
     close(fd);
-    if (copy_into(d, db_sqlite(d), tmp, vacuum) < 0 || check_copy(d, tmp, &st) < 0)
+    int rc;
+    if ((rc = copy_into(d, db_sqlite(d), tmp, vacuum)) < 0 || (rc = check_copy(d, tmp, &st)) < 0)
         goto fail;
-    if (sync_path(tmp) < 0) {
-        db__fail(d, "cannot sync %s: %s", tmp, strerror(errno));
+    if ((rc = sync_path(tmp)) < 0) {
+        db__fail(d, rc, "cannot sync %s: %s", tmp, strerror(-rc));
         goto fail;
     }
-    /* link(), not rename(): a dest made meanwhile is never replaced. */
+    /* link(), not rename(): a dest made meanwhile is never replaced (-EEXIST). */
     if (link(tmp, dest) < 0) {
-        int e = errno;
-        db__fail(d, "cannot name the copy %s: %s", dest, strerror(e));
-        remove_partial(tmp);
-        return e == EEXIST ? DB_MAINT_EXISTS : -1;
+        rc = db__fail(d, -errno, "cannot name the copy %s: %s", dest, strerror(errno));
+        goto fail;
     }
     unlink(tmp);
     /* The directory's entry for dest, made durable too. */
@@ -188,15 +185,15 @@ int db_backup(db *d, const char *dest, int vacuum, db_backup_stats *out)
         snprintf(dir, sizeof dir, "/");
     else if (slash)
         *slash = 0;
-    if (sync_path(slash ? dir : ".") < 0)
-        return db__fail(d, "the copy is %s, but its directory could not be synced: %s", dest, strerror(errno));
+    if ((rc = sync_path(slash ? dir : ".")) < 0)
+        return db__fail(d, rc, "the copy is %s, but its directory could not be synced: %s", dest, strerror(-rc));
     st.seconds = (mono_ms() - t0) / 1e3;
     if (out)
         *out = st;
     return 0;
 fail:
     remove_partial(tmp);
-    return -1;
+    return rc;
 }
 
 /* ---- retention ---------------------------------------------------------- */
@@ -332,23 +329,23 @@ static int on_commit(void *arg, sqlite3 *conn, const char *name, int pages)
 }
 
 /* One transaction. Returns 0 (*more set, r->out updated, *held the time
- * the write lock was held) or -1. */
+ * the write lock was held) or a negative errno. */
 static int retention_txn(struct retention *r, int *more, double *held)
 {
     memset(&r->txn, 0, sizeof r->txn);
-    if (db_begin(r->d) < 0)
-        return -1;
+    int rc = db_begin(r->d);
+    if (rc < 0)
+        return rc;
     double t0 = mono_ms(); /* the write lock is ours from here */
-    int rc = remove_some(r, t0, more);
-    if (rc != SQLITE_OK) {
-        db__fail(r->d, "%s", sqlite3_errmsg(r->sql));
+    if (remove_some(r, t0, more) != SQLITE_OK) {
+        rc = db__sql_fail(r->d, NULL);
         db_rollback(r->d);
-        return -1;
+        return rc;
     }
     r->released_ms = 0;
-    if (db_commit(r->d) < 0) {
+    if ((rc = db_commit(r->d)) < 0) {
         db_rollback(r->d);
-        return -1;
+        return rc;
     }
     if (r->released_ms == 0) /* the hook is not called when nothing was written */
         r->released_ms = mono_ms();
@@ -372,24 +369,23 @@ int db_retention(db *d, double before, const db_retention_config *cfg, db_retent
     const db_retention_config *c = cfg ? cfg : &defaults;
     memset(out, 0, sizeof *out);
     if (c->units_max < 1 || c->txn_ms < 1)
-        return db__fail(d, "retention wants txn_ms >= 1 and units_max >= 1");
+        return db__fail(d, -EINVAL, "retention wants txn_ms >= 1 and units_max >= 1");
     double latest = db_now() - DB_RETENTION_MIN_AGE_S;
-    if (!isfinite(before) || before > latest) {
-        db__fail(d, "the cutoff must be at least %.0f s in the past: the collision log may still write there",
-                 DB_RETENTION_MIN_AGE_S);
-        return DB_MAINT_TOO_RECENT;
-    }
+    if (!isfinite(before) || before > latest)
+        return db__fail(d, -ERANGE,
+                        "the cutoff must be at least %.0f s in the past: the collision log may still write there",
+                        DB_RETENTION_MIN_AGE_S);
     struct retention r = {.d = d, .sql = db_sqlite(d), .cut = dblog_bucket(before), .cfg = c, .out = out};
     out->cutoff = (double)r.cut * DBLOG_BUCKET_S;
     int rc = 0;
     for (int i = 0; i < RS_COUNT; i++)
         if (sqlite3_prepare_v2(r.sql, retention_sql[i], -1, &r.st[i], NULL) != SQLITE_OK) {
-            rc = db__fail(d, "prepare: %s", sqlite3_errmsg(r.sql));
+            rc = db__sql_fail(d, "prepare");
             goto done;
         }
     sqlite3_wal_hook(r.sql, on_commit, &r);
     for (int more = 1; more;) {
-        double held;
+        double held = 0;
         if ((rc = retention_txn(&r, &more, &held)) < 0)
             break;
         if (more) /* the checkpoint after the commit counts towards the pause */

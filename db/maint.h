@@ -30,8 +30,8 @@
  *   Freed pages are reused by later rows; the file does not shrink (a
  *   backup with vacuum = 1 is a compacted copy).
  *
- * Functions return 0 or -1 with the message in db_error(), except where a
- * DB_MAINT_* answer is said.
+ * Functions return 0, or a negative errno with the message in db_error()
+ * (db.h).
  */
 #ifndef CVRE_MAINT_H
 #define CVRE_MAINT_H
@@ -39,11 +39,6 @@
 #include <stdint.h>
 
 #include "db.h"
-
-/* db_backup: the destination exists; nothing written. */
-#define DB_MAINT_EXISTS (-2)
-/* db_retention: the cutoff is too recent; nothing removed. */
-#define DB_MAINT_TOO_RECENT (-3)
 
 /* Retention refuses a cutoff less than this far before now (seconds). The
  * collision log's writer keeps the groups of the newest bucket it wrote in
@@ -97,7 +92,8 @@ typedef struct db_backup_stats {
  * with PRAGMA integrity_check, synced, and only then linked to dest, so
  * dest either does not exist or is a whole, checked copy; the temporary
  * file is removed on any failure. Returns 0 (*out filled, if not NULL),
- * DB_MAINT_EXISTS if dest exists, or -1. */
+ * -EEXIST if dest exists, -EINVAL if dest is empty or too long, or another
+ * negative errno (the file system's, or the database's). */
 int db_backup(db *d, const char *dest, int vacuum, db_backup_stats *out);
 
 typedef struct db_retention_config {
@@ -122,9 +118,10 @@ typedef struct db_retention_stats {
  * read-write handle outside a transaction. Only whole buckets go: a row at
  * or after the start of before's bucket stays. cfg NULL takes the
  * defaults above. *out (required) counts what was committed, also when an
- * error ends the run part way; running again continues. Returns 0,
- * DB_MAINT_TOO_RECENT if before is later than now - DB_RETENTION_MIN_AGE_S
- * (or not finite), or -1. */
+ * error ends the run part way; running again continues. Returns 0;
+ * -ERANGE, nothing removed, if before is later than now -
+ * DB_RETENTION_MIN_AGE_S (or not finite); -EINVAL for a cfg with txn_ms or
+ * units_max 0; or the database's error. */
 int db_retention(db *d, double before, const db_retention_config *cfg, db_retention_stats *out);
 
 #endif

@@ -1,5 +1,6 @@
 #include "moderation.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -9,37 +10,30 @@
 #include "account.h"
 #include "dbInt.h"
 
-static int sql_fail(db *d) { return db__fail(d, "%s", sqlite3_errmsg(db_sqlite(d))); }
-
-/* Prepares sql; NULL with the message on failure. */
-static sqlite3_stmt *prepare(db *d, const char *sql)
+/* Prepares sql into *st; 0, or a negative errno with the message (and
+ * *st NULL). */
+static int prepare(db *d, const char *sql, sqlite3_stmt **st)
 {
-    sqlite3_stmt *st = NULL;
-
-    if (sqlite3_prepare_v2(db_sqlite(d), sql, -1, &st, NULL) != SQLITE_OK) {
-        sql_fail(d);
-        return NULL;
-    }
-    return st;
+    return sqlite3_prepare_v2(db_sqlite(d), sql, -1, st, NULL) == SQLITE_OK ? 0 : db__sql_fail(d, NULL);
 }
 
-/* Steps st to its end and finalizes it; 0 or -1. */
+/* Steps st to its end and finalizes it; 0 or a negative errno. */
 static int finish(db *d, sqlite3_stmt *st)
 {
     int rc = sqlite3_step(st);
 
-    if (rc != SQLITE_DONE && rc != SQLITE_ROW)
-        sql_fail(d);
+    rc = rc == SQLITE_DONE || rc == SQLITE_ROW ? 0 : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
-    return rc == SQLITE_DONE || rc == SQLITE_ROW ? 0 : -1;
+    return rc;
 }
 
 int db__admin_event(db *d, const char *kind, int64_t session_id, const char *name, double at)
 {
-    sqlite3_stmt *st = prepare(d, "INSERT INTO admin_events(kind, session_id, name, at) VALUES (?1, ?2, ?3, ?4)");
+    sqlite3_stmt *st;
+    int rc = prepare(d, "INSERT INTO admin_events(kind, session_id, name, at) VALUES (?1, ?2, ?3, ?4)", &st);
 
-    if (!st)
-        return -1;
+    if (rc < 0)
+        return rc;
     sqlite3_bind_text(st, 1, kind, -1, SQLITE_STATIC);
     if (session_id)
         sqlite3_bind_int64(st, 2, session_id);
@@ -50,13 +44,13 @@ int db__admin_event(db *d, const char *kind, int64_t session_id, const char *nam
 }
 
 /* Ends the write transaction: COMMIT if rc is 0, else ROLLBACK; returns rc
- * (or -1 when the commit fails). */
+ * (or the commit's error). */
 static int end_write(db *d, int rc)
 {
-    if (rc == 0 && db_commit(d) == 0)
+    if (rc == 0 && (rc = db_commit(d)) == 0)
         return 0;
     db_rollback(d);
-    return rc ? rc : -1;
+    return rc;
 }
 
 int db_kick(db *d, int64_t session_id, double at)
@@ -64,19 +58,17 @@ int db_kick(db *d, int64_t session_id, double at)
     sqlite3_stmt *st;
     int rc;
 
-    if (db_begin(d) != 0)
-        return -1;
-    st = prepare(d, "SELECT 1 FROM sessions WHERE id = ?1 AND ended_at IS NULL");
-    if (!st)
-        return end_write(d, -1);
+    if ((rc = db_begin(d)) != 0)
+        return rc;
+    if ((rc = prepare(d, "SELECT 1 FROM sessions WHERE id = ?1 AND ended_at IS NULL", &st)) < 0)
+        return end_write(d, rc);
     sqlite3_bind_int64(st, 1, session_id);
     rc = sqlite3_step(st);
     sqlite3_finalize(st);
     if (rc != SQLITE_ROW) {
         if (rc != SQLITE_DONE)
-            return end_write(d, sql_fail(d));
-        db__fail(d, "no session %lld is open", (long long)session_id);
-        return end_write(d, DB_MOD_NO_SESSION);
+            return end_write(d, db__sql_fail(d, NULL));
+        return end_write(d, db__fail(d, -ENOENT, "no session %lld is open", (long long)session_id));
     }
     return end_write(d, db__admin_event(d, "kick", session_id, NULL, at));
 }
@@ -88,15 +80,15 @@ int db_ban(db *d, const char *name, double until, double at)
     int rc;
 
     if (!name || !*name || strlen(name) > DB_ACCOUNT_NAME_MAX)
-        return db__fail(d, "ban: a name is 1 to %u bytes", DB_ACCOUNT_NAME_MAX);
-    if (db_begin(d) != 0)
-        return -1;
+        return db__fail(d, -EINVAL, "ban: a name is 1 to %u bytes", DB_ACCOUNT_NAME_MAX);
+    if ((rc = db_begin(d)) != 0)
+        return rc;
     /* a ban in force gets its new end; the row of one whose time was up is a new ban */
-    st = prepare(d, "INSERT INTO bans(name, until, created_at) VALUES (?1, ?2, ?3) "
+    rc = prepare(d, "INSERT INTO bans(name, until, created_at) VALUES (?1, ?2, ?3) "
                     "ON CONFLICT(name) DO UPDATE SET until = excluded.until, created_at = CASE WHEN bans.until "
-                    "<= excluded.created_at THEN excluded.created_at ELSE bans.created_at END");
-    if (!st)
-        return end_write(d, -1);
+                    "<= excluded.created_at THEN excluded.created_at ELSE bans.created_at END", &st);
+    if (rc < 0)
+        return end_write(d, rc);
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
     if (until > 0)
         sqlite3_bind_double(st, 2, until);
@@ -110,9 +102,11 @@ int db_ban(db *d, const char *name, double until, double at)
     if (rc == 0) {
         int found = db_account_find(d, name, &acc);
         if (found == 0)
-            rc = db_account_tokens_revoke(d, acc.id) < 0 ? -1 : 0;
-        else if (found != DB_ACCOUNT_UNKNOWN)
-            rc = -1;
+            rc = db_account_tokens_revoke(d, acc.id);
+        else if (found != -ENOENT)
+            rc = found;
+        if (rc > 0)
+            rc = 0; /* how many tokens went */
     }
     return end_write(d, rc);
 }
@@ -122,27 +116,24 @@ int db_unban(db *d, const char *name, double at)
     sqlite3_stmt *st;
     int rc;
 
-    if (db_begin(d) != 0)
-        return -1;
+    if ((rc = db_begin(d)) != 0)
+        return rc;
     /* only a ban in force is lifted (an ended one is no ban, as for
      * db_banned); ended rows go as well */
-    st = prepare(d, "DELETE FROM bans WHERE name = ?1 AND (until IS NULL OR until > ?2)");
-    if (!st)
-        return end_write(d, -1);
+    if ((rc = prepare(d, "DELETE FROM bans WHERE name = ?1 AND (until IS NULL OR until > ?2)", &st)) < 0)
+        return end_write(d, rc);
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 2, at);
     rc = finish(d, st);
     if (rc == 0) {
         int lifted = sqlite3_changes(db_sqlite(d));
-        sqlite3_stmt *old = prepare(d, "DELETE FROM bans WHERE name = ?1");
-        if (!old)
-            return end_write(d, -1);
+        sqlite3_stmt *old;
+        if ((rc = prepare(d, "DELETE FROM bans WHERE name = ?1", &old)) < 0)
+            return end_write(d, rc);
         sqlite3_bind_text(old, 1, name, -1, SQLITE_STATIC);
         rc = finish(d, old);
-        if (rc == 0 && lifted == 0) {
-            db__fail(d, "%s is not banned", name);
-            return end_write(d, DB_MOD_NOT_BANNED);
-        }
+        if (rc == 0 && lifted == 0)
+            return end_write(d, db__fail(d, -ENOENT, "%s is not banned", name));
     }
     if (rc == 0)
         rc = db__admin_event(d, "unban", 0, name, at);
@@ -151,22 +142,20 @@ int db_unban(db *d, const char *name, double at)
 
 int db_banned(db *d, const char *name, double now, double *until)
 {
-    sqlite3_stmt *st = prepare(d, "SELECT coalesce(until, 0) FROM bans WHERE name = ?1 "
-                                  "AND (until IS NULL OR until > ?2)");
-    int rc;
+    sqlite3_stmt *st;
+    int rc = prepare(d, "SELECT coalesce(until, 0) FROM bans WHERE name = ?1 AND (until IS NULL OR until > ?2)", &st);
 
     *until = 0;
-    if (!st)
-        return -1;
+    if (rc < 0)
+        return rc;
     sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 2, now);
     rc = sqlite3_step(st);
     if (rc == SQLITE_ROW)
         *until = sqlite3_column_double(st, 0);
-    else if (rc != SQLITE_DONE)
-        sql_fail(d);
+    rc = rc == SQLITE_ROW ? 1 : rc == SQLITE_DONE ? 0 : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW ? 1 : rc == SQLITE_DONE ? 0 : -1;
+    return rc;
 }
 
 /* Most actions read per call: a server applies them in one go. */
@@ -179,14 +168,14 @@ int db_admin_events(db *d, int64_t after, db_admin_event_fn *fn, void *ctx, int6
         int64_t session_id;
         char name[DB_ACCOUNT_NAME_MAX + 1];
     } *batch = calloc(FEED_BATCH, sizeof *batch);
-    sqlite3_stmt *st = batch ? prepare(d, "SELECT id, kind, coalesce(session_id, 0), coalesce(name, '') "
-                                          "FROM admin_events WHERE id > ?1 ORDER BY id LIMIT ?2")
-                             : NULL;
-    int n = 0, rc;
+    sqlite3_stmt *st;
+    int n = 0, rc = batch ? prepare(d, "SELECT id, kind, coalesce(session_id, 0), coalesce(name, '') "
+                                       "FROM admin_events WHERE id > ?1 ORDER BY id LIMIT ?2", &st)
+                          : db__fail(d, -ENOMEM, "out of memory");
 
-    if (!st) {
+    if (rc < 0) {
         free(batch);
-        return batch ? -1 : db__fail(d, "out of memory");
+        return rc;
     }
     sqlite3_bind_int64(st, 1, after);
     sqlite3_bind_int(st, 2, FEED_BATCH);
@@ -198,27 +187,25 @@ int db_admin_events(db *d, int64_t after, db_admin_event_fn *fn, void *ctx, int6
         snprintf(batch[n].name, sizeof batch[n].name, "%s", name ? (const char *)name : "");
         n++;
     }
-    if (rc != SQLITE_DONE)
-        sql_fail(d);
+    rc = rc == SQLITE_DONE ? 0 : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
     for (int i = 0; i < n; i++)
         fn(ctx, batch[i].kind, batch[i].session_id, batch[i].name);
     free(batch);
-    return rc == SQLITE_DONE ? 0 : -1;
+    return rc;
 }
 
 int db_admin_events_head(db *d, int64_t *last)
 {
-    sqlite3_stmt *st = prepare(d, "SELECT coalesce(max(id), 0) FROM admin_events");
-    int rc;
+    sqlite3_stmt *st;
+    int rc = prepare(d, "SELECT coalesce(max(id), 0) FROM admin_events", &st);
 
-    if (!st)
-        return -1;
+    if (rc < 0)
+        return rc;
     rc = sqlite3_step(st);
     if (rc == SQLITE_ROW)
         *last = sqlite3_column_int64(st, 0);
-    else
-        sql_fail(d);
+    rc = rc == SQLITE_ROW ? 0 : db__sql_fail(d, NULL);
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW ? 0 : -1;
+    return rc;
 }

@@ -10,9 +10,9 @@
  * objects pass to the world account), and the auth worker refuses a
  * banned name's joins (db_banned).
  *
- * Functions return 0 or -1 with the message in db_error(), except where a
- * DB_MOD_* answer is said; those that write use one transaction of their
- * own and must not be called inside one.
+ * Functions return 0, or a negative errno with the message in db_error()
+ * (db.h); those that write use one transaction of their own and must not be
+ * called inside one.
  */
 #ifndef CVRE_MODERATION_H
 #define CVRE_MODERATION_H
@@ -21,19 +21,18 @@
 
 #include "db.h"
 
-/* db_kick: no session of that id is open. Nothing written. */
-#define DB_MOD_NO_SESSION (-2)
-/* db_unban: the name is not banned. Nothing written. */
-#define DB_MOD_NOT_BANNED (-3)
-
-/* Asks running servers to disconnect session id. */
+/* Asks running servers to disconnect session id. -ENOENT, nothing
+ * written, if no session of that id is open. */
 int db_kick(db *d, int64_t session_id, double at);
-/* Bars name (1..32 bytes) from joining until `until` (0: until unbanned)
- * and asks running servers to disconnect its sessions. Banning a banned
- * name sets its new end. An account's resume tokens are revoked too. */
+/* Bars name (1..32 bytes; else -EINVAL) from joining until `until` (0:
+ * until unbanned) and asks running servers to disconnect its sessions.
+ * Banning a banned name sets its new end. An account's resume tokens are
+ * revoked too. */
 int db_ban(db *d, const char *name, double until, double at);
+/* Lifts a ban; -ENOENT, nothing written, if the name is not banned. */
 int db_unban(db *d, const char *name, double at);
-/* 1 and *until (0: no end) if name is banned at `now`, 0 if not, -1. */
+/* 1 and *until (0: no end) if name is banned at `now`, 0 if not, or a
+ * negative errno. */
 int db_banned(db *d, const char *name, double now, double *until);
 
 /* The feed: calls fn for each action with id > after, in id order (kind

@@ -82,11 +82,11 @@ static void admit_guest(auth *a, const auth_job *job, auth_result *r)
                  "the name \"%s\" belongs to an account: log in with its password", acc.name);
         return;
     }
-    if (rc == DB_ACCOUNT_UNKNOWN && check_ban(a, job->name, r) != 0)
+    if (rc == -ENOENT && check_ban(a, job->name, r) != 0)
         return;
     snprintf(r->name, sizeof r->name, "%s", job->name);
     snprintf(r->user, sizeof r->user, "guest%lld:%s", (long long)job->session, job->name);
-    if (rc != DB_ACCOUNT_UNKNOWN || db_user_upsert(a->db, r->user, db_now(), &r->user_id) != 0) {
+    if (rc != -ENOENT || db_user_upsert(a->db, r->user, db_now(), &r->user_id) != 0) {
         log_error("guest join of session %lld: %s", (long long)job->session, db_error(a->db));
         r->status = PROTO_ERR_INTERNAL;
         snprintf(r->message, sizeof r->message, "the server could not record the join");
@@ -116,11 +116,11 @@ static void *run_job(void *ctx, void *arg)
     if (rc == 0 && job->credential == PROTO_CRED_TOKEN) {
         db_account acc; /* a token is the account's, whatever name came with it */
         if (db_account_get(a->db, id, &acc) != 0 || strcasecmp(acc.name, job->name) != 0)
-            rc = DB_ACCOUNT_DENIED;
+            rc = -EACCES;
     }
     if (rc == 0) {
         admit_account(a, id, r);
-    } else if (rc == DB_ACCOUNT_DENIED) {
+    } else if (rc == -EACCES) {
         r->status = PROTO_ERR_AUTH;
         snprintf(r->message, sizeof r->message, "login failed: %s",
                  job->credential == PROTO_CRED_PASSWORD ? "wrong name or password"

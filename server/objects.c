@@ -561,8 +561,8 @@ static int restore_one(void *ctx, const db_object *o)
     return 0;
 }
 
-/* Restores the scene from the store. Returns 0, or -1 (the store failed:
- * db_error). */
+/* Restores the scene from the store. Returns 0, or the store's negative
+ * errno (db_error says why). */
 static int restore_all(server *s)
 {
     restore r = {.s = s};

@@ -281,17 +281,17 @@ static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_fou
     ecm_applied a;
     char err[512];
     int rc = ecm_apply(r->db, &r->cfg.ecm, run_id, f, (uint32_t)k, &a, err, sizeof err);
-    if (rc == ECM_APPLY_WRITTEN) {
+    if (rc == 0 && a.version) {
         atomic_fetch_add_explicit(&r->versions_written, 1, memory_order_relaxed);
         log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %zu clusters of run %lld "
                  "(digitize %.1f ms, divide %.1f ms, in all %.1f ms)",
                  (long long)t->id, t->version, a.version, a.boxes_before, a.boxes_after, k, (long long)run_id,
                  a.stats.voxel_ms, a.stats.divide_ms, a.total_ms);
-    } else if (rc == ECM_APPLY_UNCHANGED) {
+    } else if (rc == 0) { /* unchanged */
         log_info("object %lld v%u: %zu clusters of run %lld press on real geometry only; map unchanged",
                  (long long)t->id, t->version, k, (long long)run_id);
         settle(t, f, k);
-    } else if (rc == ECM_APPLY_STALE)
+    } else if (rc == -ESTALE)
         log_info("object %lld: changed while it was refined; the next round uses the new version", (long long)t->id);
     else
         log_error("refiner: %s", err);

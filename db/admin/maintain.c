@@ -1,5 +1,6 @@
 #include "maintain.h"
 
+#include <errno.h>
 #include <string.h>
 #include <time.h>
 
@@ -91,7 +92,7 @@ static int backup(db *ro, const maintain_request *r, int format, char *err, size
                                       {"seconds", OUT_REAL, 0}};
     db_backup_stats st;
     int rc = db_backup(ro, r->file, r->vacuum, &st);
-    if (rc == DB_MAINT_EXISTS)
+    if (rc == -EEXIST)
         return query_fail(err, errlen, QUERY_REFUSED, "%s; nothing written", db_error(ro));
     if (rc != 0)
         return query_fail(err, errlen, QUERY_ERROR, "backup failed: %s", db_error(ro));

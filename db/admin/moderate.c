@@ -1,5 +1,6 @@
 #include "moderate.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -161,10 +162,10 @@ static int write_action(db *d, const moderate_request *r, const ban *lifted, int
              : r->verb == MODERATE_BAN ? db_ban(d, r->name, r->minutes ? now + (double)r->minutes * 60.0 : 0, now)
                                        : db_unban(d, lifted->name, now);
     /* Another process may have come between the check and this write. */
-    if (rc == DB_MOD_NO_SESSION)
+    if (rc == -ENOENT && r->verb == MODERATE_KICK)
         return query_fail(err, errlen, QUERY_NOT_FOUND, "session %lld ended meanwhile; nothing written",
                           (long long)r->session);
-    if (rc == DB_MOD_NOT_BANNED)
+    if (rc == -ENOENT && r->verb == MODERATE_UNBAN)
         return query_fail(err, errlen, QUERY_NOT_FOUND, "%s was unbanned meanwhile; nothing written", r->name);
     if (rc != 0)
         return query_fail(err, errlen, QUERY_ERROR, "%s failed: %s%s", verbs[r->verb], db_error(d),

@@ -1,5 +1,6 @@
 #include "query.h"
 
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -770,7 +771,7 @@ int query_rollback(db *d, int64_t id, uint32_t k, uint32_t in_force, int format,
                        .detail = "cvre-admin rollback", .box_count = n, .boxes = (const float(*)[6])boxes};
     int rc = db_ecm_write(d, &c, db_now(), &version);
     free(boxes);
-    if (rc == DB_ECM_STALE)
+    if (rc == -ESTALE)
         return query_fail(err, errlen, QUERY_REFUSED, "object %lld changed meanwhile (%s); nothing written: look again",
                     (long long)id, db_error(d));
     if (rc < 0)

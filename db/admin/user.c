@@ -193,13 +193,13 @@ static int new_password(const user_request *r, const char *name, char *pw, size_
 static int check(db *ro, const user_request *r, db_account *a, char *err, size_t errlen)
 {
     int rc = db_account_find(ro, r->name, a);
-    if (rc != 0 && rc != DB_ACCOUNT_UNKNOWN)
+    if (rc != 0 && rc != -ENOENT)
         return query_fail(err, errlen, QUERY_ERROR, "%s", db_error(ro));
     if (r->verb == USER_ADD)
         return rc == 0 ? query_fail(err, errlen, QUERY_REFUSED, "an account named \"%s\" exists already; nothing written",
                                     a->name)
                        : QUERY_OK;
-    if (rc == DB_ACCOUNT_UNKNOWN)
+    if (rc == -ENOENT)
         return query_fail(err, errlen, QUERY_NOT_FOUND, "no account named \"%s\"", r->name);
     if (a->id == DB_ACCOUNT_WORLD)
         return query_fail(err, errlen, QUERY_REFUSED,
@@ -217,9 +217,9 @@ static int write_account(db *d, const user_request *r, const db_account *a, cons
              : r->verb == USER_PASSWD ? db_account_set_password(d, a->name, pw, len, db_now())
                                       : db_account_delete(d, a->name, &objects);
     /* Another writer may have come between the check and this write. */
-    if (rc == DB_ACCOUNT_EXISTS || rc == DB_ACCOUNT_REFUSED)
+    if (rc == -EEXIST || rc == -EPERM)
         return query_fail(err, errlen, QUERY_REFUSED, "%s; nothing written", db_error(d));
-    if (rc == DB_ACCOUNT_UNKNOWN)
+    if (rc == -ENOENT)
         return query_fail(err, errlen, QUERY_NOT_FOUND, "no account named \"%s\" (any more); nothing written",
                           r->name);
     if (rc != 0)

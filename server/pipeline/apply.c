@@ -8,21 +8,27 @@
 
 #include "alloc.h"
 #include "ecm.h"
+#include "err.h"
 
-/* The object's uniform scale (world metres per local unit), or -1. */
+/* The object's uniform scale (world metres per local unit) into *scale: 0,
+ * or a negative errno with the message in err (-EIO: no positive scale). */
 static int object_scale(db *d, int64_t id, double *scale, char *err, size_t errlen)
 {
+    sqlite3 *s = db_sqlite(d);
     sqlite3_stmt *st = NULL;
-    int rc = -1;
-    if (sqlite3_prepare_v2(db_sqlite(d), "SELECT scale FROM objects WHERE id = ?1", -1, &st, NULL) == SQLITE_OK) {
+    int rc = -EIO; /* no row, or no positive scale */
+    if (sqlite3_prepare_v2(s, "SELECT scale FROM objects WHERE id = ?1", -1, &st, NULL) != SQLITE_OK) {
+        rc = db_sqlite_errno(s);
+    } else {
         sqlite3_bind_int64(st, 1, id);
-        if (sqlite3_step(st) == SQLITE_ROW) {
-            *scale = sqlite3_column_double(st, 0);
-            rc = *scale > 0 ? 0 : -1;
-        }
+        int step = sqlite3_step(st);
+        if (step == SQLITE_ROW && (*scale = sqlite3_column_double(st, 0)) > 0)
+            rc = 0;
+        else if (step != SQLITE_ROW && step != SQLITE_DONE)
+            rc = db_sqlite_errno(s);
     }
     if (rc < 0)
-        snprintf(err, errlen, "object %lld: no usable scale", (long long)id);
+        cvre_fail(err, errlen, rc, "object %lld: no usable scale", (long long)id);
     sqlite3_finalize(st);
     return rc;
 }
@@ -46,18 +52,12 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     memset(out, 0, sizeof *out);
     db_ecm_object o = {0};
     ecm_result r = {0};
-    double scale;
-    int rc = ECM_APPLY_DB_ERROR;
-    if (db_ecm_object_load(d, object_id, &o) < 0) {
-        /* Removed or gone: what the clusters were about no longer stands. */
-        rc = ECM_APPLY_STALE;
+    double scale = 0;
+    int rc = -ESTALE;
+    /* Removed or gone: what the clusters were about no longer stands. */
+    if (db_ecm_object_load(d, object_id, &o) < 0 || o.version != version)
         goto done;
-    }
-    if (o.version != version) {
-        rc = ECM_APPLY_STALE;
-        goto done;
-    }
-    if (object_scale(d, object_id, &scale, err, errlen) < 0)
+    if ((rc = object_scale(d, object_id, &scale, err, errlen)) < 0)
         goto done;
     ecm_params lp = *p;
     for (int a = 0; a < 3; a++)
@@ -66,17 +66,15 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     char why[256];
     if (ecm_refine(&lp, o.tris, o.tri_count, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why,
                    sizeof why) < 0) {
-        snprintf(err, errlen, "object %lld: %s", (long long)object_id, why);
-        rc = ECM_APPLY_REFUSED;
+        /* Out of memory too: the refinement did not run, the store is fine. */
+        rc = cvre_fail(err, errlen, -EINVAL, "object %lld: %s", (long long)object_id, why);
         goto done;
     }
     out->stats = r;
     out->stats.boxes = NULL;
     out->boxes_after = r.count;
-    if (r.count == o.box_count && memcmp(r.boxes, o.boxes, r.count * sizeof *r.boxes) == 0) {
-        rc = ECM_APPLY_UNCHANGED;
-        goto done;
-    }
+    if (r.count == o.box_count && memcmp(r.boxes, o.boxes, r.count * sizeof *r.boxes) == 0)
+        goto done; /* unchanged: rc is 0, out->version 0 */
     char detail[256];
     snprintf(detail, sizeof detail,
              "depth %u, max boxes %u, max empty %.2f: %u -> %u boxes, %u problem boxes, %u kept whole at "
@@ -85,13 +83,9 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     db_ecm_change c = {.object_id = object_id, .parent_version = version, .reason = "refine", .run_id = run_id,
                        .ncluster_ids = run_id ? n : 0, .cluster_ids = cluster_ids, .detail = detail,
                        .box_count = r.count, .boxes = (const float(*)[6])r.boxes};
-    int w = db_ecm_write(d, &c, db_now(), &out->version);
-    if (w == DB_ECM_STALE)
-        rc = ECM_APPLY_STALE;
-    else if (w < 0)
-        snprintf(err, errlen, "object %lld: writing the new version: %s", (long long)object_id, db_error(d));
-    else
-        rc = ECM_APPLY_WRITTEN;
+    rc = db_ecm_write(d, &c, db_now(), &out->version);
+    if (rc < 0 && rc != -ESTALE)
+        cvre_fail(err, errlen, rc, "object %lld: writing the new version: %s", (long long)object_id, db_error(d));
 done:
     clock_gettime(CLOCK_MONOTONIC, &t1);
     out->total_ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;

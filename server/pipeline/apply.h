@@ -17,25 +17,24 @@
 
 /* What became of one object. */
 typedef struct ecm_applied {
-    uint32_t version;       /* the version written (0 if none) */
+    uint32_t version;       /* the version written; 0: none (unchanged, or a failure) */
     uint32_t boxes_before, boxes_after;
     ecm_result stats;       /* counts and times; no boxes */
     double total_ms;        /* load, refine, write */
 } ecm_applied;
 
-enum {
-    ECM_APPLY_WRITTEN = 0,
-    ECM_APPLY_UNCHANGED = 1, /* the refined boxes are the ones in force: nothing written */
-    ECM_APPLY_STALE = 2,     /* the object changed version or left meanwhile: nothing written */
-    ECM_APPLY_REFUSED = -1,  /* refine.h refused the input (an object without triangles...) */
-    ECM_APPLY_DB_ERROR = -2, /* the store failed */
-};
-
 /*
  * Refines the object the n clusters f were found on (all of one object and
  * version, of run run_id; 0: none recorded). p's avatar is in metres; it is
- * divided by the object's scale. Returns one of ECM_APPLY_*; with the last
- * two, a message in err.
+ * divided by the object's scale. Returns:
+ *   0         done: out->version is the version written, or 0 when the
+ *             refined boxes are the ones in force (unchanged: nothing
+ *             written; a success, since there is nothing to do);
+ *   -ESTALE   the object changed version or left meanwhile: nothing written;
+ *   -EINVAL   refine.h refused the input (an object without triangles...),
+ *             or could not run (out of memory), with the message in err;
+ *   any other negative errno: the store failed (db/db.h), with the
+ *             message in err.
  */
 int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f, uint32_t n, ecm_applied *out,
               char *err, size_t errlen);

@@ -313,16 +313,16 @@ int main(int argc, char **argv)
         size_t first = k;
         while (k < nfound && found[k].object_id == objs[i].id)
             k++;
-        outcome[i] = -2; /* no clusters: not refined */
+        outcome[i] = 1; /* no clusters: not refined (ecm_apply answers 0 or a negative errno) */
         if (k == first)
             continue;
         outcome[i] = ecm_apply(d, &ep, run_id, found + first, (uint32_t)(k - first), &applied[i], err, sizeof err);
-        if (outcome[i] == ECM_APPLY_DB_ERROR) {
+        if (outcome[i] < 0 && outcome[i] != -ESTALE && outcome[i] != -EINVAL) { /* the store failed */
             fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
             rc = EXIT_DB;
             goto done;
         }
-        if (outcome[i] == ECM_APPLY_REFUSED) {
+        if (outcome[i] == -EINVAL) {
             fprintf(stderr, "cvre-cluster: %s; not refined\n", err);
             refused++;
         }
@@ -343,14 +343,17 @@ int main(int argc, char **argv)
         printf("],\"problem_boxes\":%llu,\"refined\":[", (unsigned long long)problem_boxes);
         int first = 1;
         for (size_t i = 0; i < nobjs; i++) {
-            if (!apply || outcome[i] == -2)
+            if (!apply || outcome[i] > 0)
                 continue;
-            static const char *const names[] = {"written", "unchanged", "stale"};
             const ecm_applied *a = &applied[i];
             printf("%s{\"object\":%lld,\"from\":%u,\"outcome\":\"%s\",\"version\":%u,\"boxes_before\":%u,"
                    "\"boxes_after\":%u,\"capped\":%u,\"voxel_ms\":%.3f,\"divide_ms\":%.3f,\"total_ms\":%.3f}",
                    first ? "" : ",", (long long)objs[i].id, objs[i].version,
-                   outcome[i] >= 0 ? names[outcome[i]] : "refused", a->version, a->boxes_before, a->boxes_after,
+                   outcome[i] == -EINVAL   ? "refused"
+                   : outcome[i] == -ESTALE ? "stale"
+                   : a->version            ? "written"
+                                           : "unchanged",
+                   a->version, a->boxes_before, a->boxes_after,
                    a->stats.capped, a->stats.voxel_ms, a->stats.divide_ms, a->total_ms);
             first = 0;
         }
@@ -368,13 +371,13 @@ int main(int argc, char **argv)
         }
         for (size_t i = 0; apply && i < nobjs; i++) {
             const ecm_applied *a = &applied[i];
-            if (outcome[i] == ECM_APPLY_WRITTEN)
+            if (outcome[i] == 0 && a->version)
                 printf("  object %lld: v%u -> v%u, %u -> %u boxes (%.1f ms)\n", (long long)objs[i].id,
                        objs[i].version, a->version, a->boxes_before, a->boxes_after, a->total_ms);
-            else if (outcome[i] == ECM_APPLY_UNCHANGED)
+            else if (outcome[i] == 0)
                 printf("  object %lld: v%u unchanged: its clusters press on real geometry only\n",
                        (long long)objs[i].id, objs[i].version);
-            else if (outcome[i] == ECM_APPLY_STALE)
+            else if (outcome[i] == -ESTALE)
                 printf("  object %lld: changed meanwhile; not refined\n", (long long)objs[i].id);
         }
     }

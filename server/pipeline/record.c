@@ -3,6 +3,8 @@
 #include <math.h>
 #include <stdio.h>
 
+#include "err.h"
+
 uint32_t cluster_problem_box(const float (*boxes)[6], uint32_t n, const float p[3])
 {
     uint32_t best = 0;
@@ -41,7 +43,8 @@ int cluster_record(db *d, const cluster_run *run, const cluster_found *found, si
     sqlite3 *sql = db_sqlite(d);
     sqlite3_stmt *st = NULL;
     uint64_t problem_boxes = cluster_problem_boxes(found, n);
-    if (db_begin(d) < 0)
+    int rc = db_begin(d);
+    if (rc < 0)
         goto fail;
     if (sqlite3_prepare_v2(sql,
                            "INSERT INTO cluster_runs(started_at, finished_at, eps, min_points, min_users, since, "
@@ -94,12 +97,14 @@ int cluster_record(db *d, const cluster_run *run, const cluster_found *found, si
     }
     sqlite3_finalize(st);
     st = NULL;
-    if (db_commit(d) < 0)
+    if ((rc = db_commit(d)) < 0)
         goto fail;
     return 0;
 fail:
-    snprintf(err, errlen, "recording the clustering run: %s", sqlite3_errmsg(sql));
+    if (rc == 0) /* a statement failed (db_begin and db_commit return why) */
+        rc = db_sqlite_errno(sql);
+    cvre_fail(err, errlen, rc, "recording the clustering run: %s", sqlite3_errmsg(sql));
     sqlite3_finalize(st);
     db_rollback(d);
-    return -1;
+    return rc;
 }

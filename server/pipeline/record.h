@@ -45,7 +45,8 @@ uint32_t cluster_problem_box(const float (*boxes)[6], uint32_t n, const float p[
 uint64_t cluster_problem_boxes(const cluster_found *found, size_t n);
 
 /* Writes the run and its n clusters in one transaction; sets *run_id.
- * Returns 0, or -1 with the message in err (nothing written). */
+ * Returns 0, or a negative errno (db/db.h) with the message in err
+ * (nothing written). */
 int cluster_record(db *d, const cluster_run *run, const cluster_found *found, size_t n, int64_t *run_id, char *err,
                    size_t errlen);
 

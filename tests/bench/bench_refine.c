@@ -131,7 +131,7 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         double t0 = bench_now_ms();
         ecm_applied a;
         int rc = ecm_apply(d, &p, 0, &cl, 1, &a, err, sizeof err);
-        if (rc != ECM_APPLY_WRITTEN) {
+        if (rc != 0 || !a.version) { /* an error, or nothing written */
             fprintf(stderr, "%s: refinement: %d %s\n", label, rc, err);
             return -1;
         }

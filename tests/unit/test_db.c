@@ -1,5 +1,6 @@
 /* The store: migrations, session records, stale sessions after a crash, and
  * the schema-version checks that guard read-only opens. */
+#include <errno.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -64,7 +65,7 @@ static void test_sessions_round_trip(void **state)
     assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'crashed'"), 1);
     assert_int_equal(scalar(d, "SELECT count(*) FROM sessions WHERE end_reason = 'quit'"), 1);
     /* Duplicate ids are refused, with a message. */
-    assert_int_equal(db_session_open(d, 2, "x", "y", 1.0), -1);
+    assert_int_equal(db_session_open(d, 2, "x", "y", 1.0), -EEXIST);
     assert_non_null(strstr(db_error(d), "UNIQUE"));
     db_close(d);
 

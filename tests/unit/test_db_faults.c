@@ -105,7 +105,7 @@ typedef int op_fn(db *d, void *ctx);
 
 /* Runs op with its 1st, 2nd, ... data statement interrupted until it runs
  * through untouched; then it must return want. Every interrupted run must
- * return -1 with SQLite's reason; an atomic op must also leave every table
+ * return -EINTR (SQLITE_INTERRUPT, passed up as it is) with SQLite's reason; an atomic op must also leave every table
  * as it was. Returns how many statements op ran. */
 static int sweep(db *d, const char *what, op_fn *op, void *ctx, int atomic, int want)
 {
@@ -121,7 +121,7 @@ static int sweep(db *d, const char *what, op_fn *op, void *ctx, int atomic, int 
                 fail_msg("%s: returned %d untouched, wanted %d (%s)", what, rc, want, db_error(d));
             return statements;
         }
-        if (rc != -1)
+        if (rc != -EINTR)
             fail_msg("%s: its statement %d was interrupted, yet it returned %d", what, j, rc);
         if (!strstr(db_error(d), "interrupted"))
             fail_msg("%s: statement %d: the message \"%s\" does not say what failed", what, j, db_error(d));
@@ -404,21 +404,21 @@ static void test_arguments_refused(void **state)
     int64_t id;
 
     (void)state;
-    assert_int_equal(db_account_add(d, "ann", "pw", 2, 0, NAN, &id), -1);
+    assert_int_equal(db_account_add(d, "ann", "pw", 2, 0, NAN, &id), -EINVAL);
     assert_string_equal(db_error(d), "account: the time is not finite");
-    assert_int_equal(db_account_delete(d, NULL, NULL), -1);
+    assert_int_equal(db_account_delete(d, NULL, NULL), -EINVAL);
     assert_string_equal(db_error(d), "account: no name given");
-    assert_int_equal(db_account_set_password(d, NULL, "pw", 2, 1), -1);
+    assert_int_equal(db_account_set_password(d, NULL, "pw", 2, 1), -EINVAL);
     assert_string_equal(db_error(d), "account: no name given");
-    assert_int_equal(db_account_set_password(d, "ann", "pw", 2, INFINITY), -1);
+    assert_int_equal(db_account_set_password(d, "ann", "pw", 2, INFINITY), -EINVAL);
     assert_string_equal(db_error(d), "account: the time is not finite");
-    assert_int_equal(db_account_token_issue(d, 1, 1, 2, NULL), -1);
+    assert_int_equal(db_account_token_issue(d, 1, 1, 2, NULL), -EINVAL);
     assert_string_equal(db_error(d), "account: no token buffer given");
-    assert_int_equal(db_account_token_redeem(d, NULL, 1, &id), -1);
+    assert_int_equal(db_account_token_redeem(d, NULL, 1, &id), -EINVAL);
     assert_string_equal(db_error(d), "account: no token given");
-    assert_int_equal(db_account_token_redeem(d, t, NAN, &id), -1);
+    assert_int_equal(db_account_token_redeem(d, t, NAN, &id), -EINVAL);
     assert_string_equal(db_error(d), "account: the time is not finite");
-    assert_int_equal(db_account_tokens_expire(d, NAN), -1);
+    assert_int_equal(db_account_tokens_expire(d, NAN), -EINVAL);
     assert_string_equal(db_error(d), "account: the time is not finite");
     db_close(d);
 }

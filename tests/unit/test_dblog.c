@@ -5,6 +5,7 @@
  * committed id never runs ahead of the table, and a database file deleted
  * or renamed under the writer is noticed. Build it once with
  * -fsanitize=thread too: the producer and writer share a ring. */
+#include <errno.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -245,10 +246,10 @@ static void test_invalid_rows_refused(void **state)
     dblog_row r;
     make_row(&r, 1);
     r.world[1] = NAN;
-    assert_int_equal(dblog_push(l, &r), -1);
+    assert_int_equal(dblog_push(l, &r), -EINVAL);
     make_row(&r, 2);
     r.vel[2] = INFINITY;
-    assert_int_equal(dblog_push(l, &r), -1);
+    assert_int_equal(dblog_push(l, &r), -EINVAL);
     make_row(&r, 3);
     assert_int_equal(dblog_push(l, &r), 0);
     dblog_stats st;
@@ -426,7 +427,7 @@ static void test_disk_full(void **state)
         make_row(&r, i);
         assert_int_equal(dblog_push(l, &r), 0);
     }
-    assert_int_equal(dblog_stop(l, &st), -1); /* rows were lost */
+    assert_int_equal(dblog_stop(l, &st), -EIO); /* rows were lost */
     log_set_level(level);
     signal(SIGXFSZ, SIG_DFL);
     assert_int_equal(st.pushed, 7000);
@@ -603,7 +604,7 @@ static void test_file_moved(void **state)
     wait_logged("was deleted or replaced while the server runs", 2);
     assert_int_equal(st.written, 400);
     assert_int_equal(st.lost, 250);
-    assert_int_equal(dblog_stop(l, &st), -1);
+    assert_int_equal(dblog_stop(l, &st), -EIO);
     restore_stderr();
     assert_int_equal(st.pushed, 650);
     assert_int_equal(st.written + st.lost, 650);

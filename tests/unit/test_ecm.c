@@ -5,6 +5,7 @@
  * paths: out of memory, a lock held elsewhere, a failure in mid-transaction,
  * a read-only handle, corrupted rows. Every refusal must leave the tables as
  * they were and the connection usable. */
+#include <errno.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -211,7 +212,7 @@ static void test_write_read_round_trip(void **state)
     /* Unknown version. */
     float(*none)[6] = (float(*)[6])1;
     uint32_t nn = 5;
-    assert_int_equal(db_ecm_boxes(d, id, 6, &none, &nn), -1);
+    assert_int_equal(db_ecm_boxes(d, id, 6, &none, &nn), -ENOENT);
     assert_null(none);
     assert_int_equal(nn, 0);
     assert_non_null(strstr(db_error(d), "no ECM version 6"));
@@ -229,18 +230,18 @@ static void test_stale_and_removed(void **state)
     counts before = count(d, id);
     /* Computed from version 1, but 2 is in force now. */
     v = 77;
-    assert_int_equal(db_ecm_write(d, &c, 2, &v), DB_ECM_STALE);
+    assert_int_equal(db_ecm_write(d, &c, 2, &v), -ESTALE);
     assert_int_equal(v, 77);
     assert_non_null(strstr(db_error(d), "version 2 is in force, not 1"));
     assert_counts(count(d, id), before);
     /* A parent from the future is stale too. */
     c.parent_version = 9;
-    assert_int_equal(db_ecm_write(d, &c, 2, &v), DB_ECM_STALE);
+    assert_int_equal(db_ecm_write(d, &c, 2, &v), -ESTALE);
     assert_counts(count(d, id), before);
     /* Removed: stale, whatever the parent. */
     assert_int_equal(db_object_remove(d, id, 5), 0);
     c.parent_version = 2;
-    assert_int_equal(db_ecm_write(d, &c, 6, &v), DB_ECM_STALE);
+    assert_int_equal(db_ecm_write(d, &c, 6, &v), -ESTALE);
     assert_non_null(strstr(db_error(d), "removed"));
     assert_counts(count(d, id), before);
     /* The connection is fine: no transaction left open, writes go on. */
@@ -266,27 +267,28 @@ static void test_invalid_input(void **state)
     uint32_t cl[] = {1, 5};
     const struct {
         const char *what, *message;
+        int rc;
         db_ecm_change c;
         float box[6];
     } cases[] = {
-        {"no boxes", "0 boxes", {.box_count = 0}, {0, 0, 0, 1, 1, 1}},
-        {"too many boxes", "1025 boxes", {.box_count = DB_ECM_BOXES_MAX + 1}, {0, 0, 0, 1, 1, 1}},
-        {"NaN", "NaN or infinite", {.box_count = 1}, {0, NAN, 0, 1, 1, 1}},
-        {"infinite", "NaN or infinite", {.box_count = 1}, {0, 0, 0, 1, 1, INFINITY}},
-        {"min > max", "min > max on axis y", {.box_count = 1}, {0, 2, 0, 1, 1, 1}},
-        {"no reason", "reason", {.box_count = 1, .reason = ""}, {0, 0, 0, 1, 1, 1}},
-        {"long reason", "reason", {.box_count = 1, .reason = "refinement-by-the-voxel-job-number-one"},
+        {"no boxes", "0 boxes", -EINVAL, {.box_count = 0}, {0, 0, 0, 1, 1, 1}},
+        {"too many boxes", "1025 boxes", -EINVAL, {.box_count = DB_ECM_BOXES_MAX + 1}, {0, 0, 0, 1, 1, 1}},
+        {"NaN", "NaN or infinite", -EINVAL, {.box_count = 1}, {0, NAN, 0, 1, 1, 1}},
+        {"infinite", "NaN or infinite", -EINVAL, {.box_count = 1}, {0, 0, 0, 1, 1, INFINITY}},
+        {"min > max", "min > max on axis y", -EINVAL, {.box_count = 1}, {0, 2, 0, 1, 1, 1}},
+        {"no reason", "reason", -EINVAL, {.box_count = 1, .reason = ""}, {0, 0, 0, 1, 1, 1}},
+        {"long reason", "reason", -EINVAL, {.box_count = 1, .reason = "refinement-by-the-voxel-job-number-one"},
          {0, 0, 0, 1, 1, 1}},
-        {"long detail", "detail", {.box_count = 1, .detail = longtext}, {0, 0, 0, 1, 1, 1}},
-        {"clusters without a run", "without the run", {.box_count = 1, .ncluster_ids = 1, .cluster_ids = cl},
+        {"long detail", "detail", -EINVAL, {.box_count = 1, .detail = longtext}, {0, 0, 0, 1, 1, 1}},
+        {"clusters without a run", "without the run", -EINVAL, {.box_count = 1, .ncluster_ids = 1, .cluster_ids = cl},
          {0, 0, 0, 1, 1, 1}},
-        {"negative run", "not a run", {.box_count = 1, .run_id = -1}, {0, 0, 0, 1, 1, 1}},
-        {"parent 0", "parent version 0", {.box_count = 1, .parent_version = 0}, {0, 0, 0, 1, 1, 1}},
-        {"no object", "no object 42", {.box_count = 1, .object_id = 42}, {0, 0, 0, 1, 1, 1}},
-        {"no run", "no cluster run 4", {.box_count = 1, .run_id = 4}, {0, 0, 0, 1, 1, 1}},
-        {"no cluster", "has no cluster 5 of object 1",
+        {"negative run", "not a run", -EINVAL, {.box_count = 1, .run_id = -1}, {0, 0, 0, 1, 1, 1}},
+        {"parent 0", "parent version 0", -EINVAL, {.box_count = 1, .parent_version = 0}, {0, 0, 0, 1, 1, 1}},
+        {"no object", "no object 42", -ENOENT, {.box_count = 1, .object_id = 42}, {0, 0, 0, 1, 1, 1}},
+        {"no run", "no cluster run 4", -ENOENT, {.box_count = 1, .run_id = 4}, {0, 0, 0, 1, 1, 1}},
+        {"no cluster", "has no cluster 5 of object 1", -ENOENT,
          {.box_count = 1, .run_id = 3, .ncluster_ids = 2, .cluster_ids = cl}, {0, 0, 0, 1, 1, 1}},
-        {"no such version to restore", "no version 8 to restore", {.box_count = 1, .restores = 8},
+        {"no such version to restore", "no version 8 to restore", -ENOENT, {.box_count = 1, .restores = 8},
          {0, 0, 0, 1, 1, 1}},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -308,7 +310,7 @@ static void test_invalid_input(void **state)
         uint32_t v = 77;
         int rc = db_ecm_write(d, &c, 10, &v);
         free(big);
-        if (rc != -1 || !strstr(db_error(d), cases[i].message))
+        if (rc != cases[i].rc || !strstr(db_error(d), cases[i].message))
             fail_msg("%s: rc %d, message \"%s\"", cases[i].what, rc, db_error(d));
         assert_int_equal(v, 77);
         assert_counts(count(d, id), before);
@@ -317,11 +319,11 @@ static void test_invalid_input(void **state)
     /* NULL boxes, no version out, no change, a time that is not finite. */
     db_ecm_change c = {.object_id = id, .parent_version = 1, .reason = "refine", .box_count = 1};
     uint32_t v;
-    assert_int_equal(db_ecm_write(d, &c, 10, &v), -1);
+    assert_int_equal(db_ecm_write(d, &c, 10, &v), -EINVAL);
     c.boxes = MBR;
-    assert_int_equal(db_ecm_write(d, &c, 10, NULL), -1);
-    assert_int_equal(db_ecm_write(d, NULL, 10, &v), -1);
-    assert_int_equal(db_ecm_write(d, &c, NAN, &v), -1);
+    assert_int_equal(db_ecm_write(d, &c, 10, NULL), -EINVAL);
+    assert_int_equal(db_ecm_write(d, NULL, 10, &v), -EINVAL);
+    assert_int_equal(db_ecm_write(d, &c, NAN, &v), -EINVAL);
     assert_counts(count(d, id), before);
     /* Boxes of zero size are allowed (min == max), and the write works. */
     const float flat[1][6] = {{1, 1, 1, 1, 1, 1}};
@@ -488,10 +490,10 @@ static void test_object_load(void **state)
     assert_int_equal(db_commit(d), 0);
     db_ecm_object_free(&o);
 
-    /* Out of memory on the triangles, then on the boxes: -1, nothing kept. */
+    /* Out of memory on the triangles, then on the boxes: -ENOMEM, nothing kept. */
     for (long k = 0; k < 2; k++) {
         cvre_alloc_fail_after(k);
-        assert_int_equal(db_ecm_object_load(d, id, &o), -1);
+        assert_int_equal(db_ecm_object_load(d, id, &o), -ENOMEM);
         cvre_alloc_fail_after(-1);
         assert_non_null(strstr(db_error(d), "out of memory"));
         assert_null(o.tris);
@@ -501,24 +503,24 @@ static void test_object_load(void **state)
     float(*b)[6];
     uint32_t n;
     cvre_alloc_fail_after(0);
-    assert_int_equal(db_ecm_boxes(d, id, 2, &b, &n), -1);
+    assert_int_equal(db_ecm_boxes(d, id, 2, &b, &n), -ENOMEM);
     cvre_alloc_fail_after(-1);
     assert_null(b);
 
     /* Unknown, removed, corrupted. */
-    assert_int_equal(db_ecm_object_load(d, 99, &o), -1);
+    assert_int_equal(db_ecm_object_load(d, 99, &o), -ENOENT);
     assert_non_null(strstr(db_error(d), "no object 99"));
     int64_t gone = make_object(d, "gone");
     assert_int_equal(db_object_remove(d, gone, 5), 0);
-    assert_int_equal(db_ecm_object_load(d, gone, &o), -1);
+    assert_int_equal(db_ecm_object_load(d, gone, &o), -ENOENT);
     assert_non_null(strstr(db_error(d), "removed"));
     assert_null(o.tris);
     sql(d, "UPDATE meshes SET triangles = x'00000000' WHERE object_id = 1");
-    assert_int_equal(db_ecm_object_load(d, id, &o), -1);
+    assert_int_equal(db_ecm_object_load(d, id, &o), -EIO);
     assert_non_null(strstr(db_error(d), "mesh size does not match"));
     assert_null(o.tris);
     sql(d, "UPDATE objects SET tri_count = 1000000000 WHERE id = 1"); /* a count that would size a huge copy */
-    assert_int_equal(db_ecm_object_load(d, id, &o), -1);
+    assert_int_equal(db_ecm_object_load(d, id, &o), -EIO);
     assert_non_null(strstr(db_error(d), "mesh size does not match"));
     sql(d, "UPDATE objects SET tri_count = 0 WHERE id = 1");
     sql(d, "UPDATE meshes SET triangles = x'' WHERE object_id = 1");
@@ -527,7 +529,7 @@ static void test_object_load(void **state)
     assert_null(o.tris);
     db_ecm_object_free(&o);
     sql(d, "DELETE FROM meshes WHERE object_id = 1");
-    assert_int_equal(db_ecm_object_load(d, id, &o), -1);
+    assert_int_equal(db_ecm_object_load(d, id, &o), -EIO);
     assert_non_null(strstr(db_error(d), "no mesh"));
 
     /* Boxes that do not match their version's box_count. */
@@ -537,20 +539,20 @@ static void test_object_load(void **state)
                                   1, &v),
                      0);
     sql(d, "DELETE FROM ecm_boxes WHERE object_id = 3 AND version = 2 AND box_index = 1");
-    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -1);
+    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -EIO);
     assert_non_null(strstr(db_error(d), "do not match"));
-    assert_int_equal(db_ecm_object_load(d, x, &o), -1);
+    assert_int_equal(db_ecm_object_load(d, x, &o), -EIO);
     sql(d, "INSERT INTO ecm_boxes VALUES (3, 2, 1, 0, 0, 0, 1, 1, 1), (3, 2, 3, 0, 0, 0, 1, 1, 1)");
-    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -1); /* one too many */
+    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -EIO); /* one too many */
     sql(d, "DELETE FROM ecm_boxes WHERE object_id = 3 AND version = 2 AND box_index >= 2");
-    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -1); /* the last one missing */
+    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -EIO); /* the last one missing */
     assert_non_null(strstr(db_error(d), "do not match"));
     sql(d, "INSERT INTO ecm_boxes VALUES (3, 2, 2, 0, 0, 0, 1, 1, 1)");
     assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), 0);
     assert_int_equal(n, 3);
     free(b);
     sql(d, "UPDATE ecm_versions SET box_count = 2000000 WHERE object_id = 3 AND version = 2");
-    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -1);
+    assert_int_equal(db_ecm_boxes(d, x, 2, &b, &n), -EIO);
     assert_non_null(strstr(db_error(d), "out of range"));
     db_close(d);
 }
@@ -569,7 +571,7 @@ static void test_database_errors(void **state)
     assert_int_equal(sqlite3_open(path, &other), SQLITE_OK);
     assert_int_equal(sqlite3_exec(other, "BEGIN IMMEDIATE", NULL, NULL, NULL), SQLITE_OK);
     db_set_busy_timeout(d, 50);
-    assert_int_equal(db_ecm_write(d, &c, 1, &v), -1);
+    assert_int_equal(db_ecm_write(d, &c, 1, &v), -EBUSY);
     assert_true(db_busy(d));
     assert_int_equal(sqlite3_exec(other, "ROLLBACK", NULL, NULL, NULL), SQLITE_OK);
     sqlite3_close(other);
@@ -577,7 +579,7 @@ static void test_database_errors(void **state)
 
     /* A failure after the version and its boxes went in: all rolled back. */
     sql(d, "CREATE TEMP TRIGGER boom BEFORE INSERT ON ecm_events BEGIN SELECT raise(ABORT, 'feed refused'); END");
-    assert_int_equal(db_ecm_write(d, &c, 1, &v), -1);
+    assert_int_equal(db_ecm_write(d, &c, 1, &v), -EINVAL); /* RAISE(ABORT): a constraint */
     assert_non_null(strstr(db_error(d), "feed refused"));
     assert_true(sqlite3_get_autocommit(db_sqlite(d)));
     assert_counts(count(d, id), before);
@@ -586,7 +588,7 @@ static void test_database_errors(void **state)
     /* Inside the caller's transaction: refused, and that transaction is
      * left alone. */
     assert_int_equal(db_begin(d), 0);
-    assert_int_equal(db_ecm_write(d, &c, 1, &v), -1);
+    assert_int_equal(db_ecm_write(d, &c, 1, &v), -EINVAL);
     assert_non_null(strstr(db_error(d), "inside a transaction"));
     assert_false(sqlite3_get_autocommit(db_sqlite(d)));
     assert_int_equal(db_commit(d), 0);
@@ -601,7 +603,7 @@ static void test_database_errors(void **state)
     db *ro = db_open(path, DB_READONLY, err, sizeof err);
     assert_non_null(ro);
     c.parent_version = 2;
-    assert_int_equal(db_ecm_write(ro, &c, 1, &v), -1);
+    assert_int_equal(db_ecm_write(ro, &c, 1, &v), -EROFS);
     assert_non_null(strstr(db_error(ro), "readonly"));
     assert_true(sqlite3_get_autocommit(db_sqlite(ro)));
     int64_t head;
@@ -616,12 +618,12 @@ static void test_database_errors(void **state)
     /* A database without the feed (tables gone): errors, not crashes. */
     d = open_rw();
     sql(d, "DROP TABLE ecm_events");
-    assert_int_equal(db_ecm_events_head(d, &head), -1);
+    assert_int_equal(db_ecm_events_head(d, &head), -EIO);
     assert_non_null(strstr(db_error(d), "no such table"));
     struct seen s = {.stop_at = -1};
     int64_t last = 0;
-    assert_int_equal(db_ecm_events(d, 0, on_event, &s, &last), -1);
-    assert_int_equal(db_ecm_write(d, &c, 1, &v), -1);
+    assert_int_equal(db_ecm_events(d, 0, on_event, &s, &last), -EIO);
+    assert_int_equal(db_ecm_write(d, &c, 1, &v), -EIO);
     db_close(d);
 }
 

@@ -4,6 +4,7 @@
  * cutoff, and runs beside the collision log's writer without costing it a
  * failure; a backup is one checked, self-contained snapshot in a new file,
  * never replaces one, and leaves nothing behind when it fails. */
+#include <errno.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -203,7 +204,7 @@ static void test_retention_splits_long_segments(void **state)
     db_retention_stats st;
     db_retention_config one = {.txn_ms = 1000, .pause_ms = 0, .units_max = 96};
     double before = BASE + 25; /* the first two buckets */
-    assert_int_equal(db_retention(d, before, &one, &st), -1);
+    assert_int_equal(db_retention(d, before, &one, &st), -EINVAL); /* RAISE(ABORT): a constraint */
     assert_non_null(strstr(db_error(d), "interrupted"));
     assert_int_equal(st.transactions, 1);
     assert_int_equal(st.collisions, 96);
@@ -249,7 +250,7 @@ static void test_retention_interrupted_among_groups(void **state)
     assert_int_equal(sqlite3_exec(s, sql, NULL, NULL, NULL), SQLITE_OK);
     db *d = testdb_open();
     db_retention_stats st, st2;
-    assert_int_equal(db_retention(d, before, &quick, &st), -1);
+    assert_int_equal(db_retention(d, before, &quick, &st), -EINVAL);
     assert_int_equal(st.collisions, old.rows);
     assert_true(st.groups <= 60); /* those before the 61st, at most */
     check_consistent(s);
@@ -272,22 +273,22 @@ static void test_retention_refusals(void **state)
     log_rows(10, BASE, 10);
     db *d = testdb_open();
     db_retention_stats st;
-    assert_int_equal(db_retention(d, db_now(), NULL, &st), DB_MAINT_TOO_RECENT);
+    assert_int_equal(db_retention(d, db_now(), NULL, &st), -ERANGE);
     assert_non_null(strstr(db_error(d), "in the past"));
-    assert_int_equal(db_retention(d, db_now() - DB_RETENTION_MIN_AGE_S + 60, NULL, &st), DB_MAINT_TOO_RECENT);
-    assert_int_equal(db_retention(d, NAN, NULL, &st), DB_MAINT_TOO_RECENT);
-    assert_int_equal(db_retention(d, INFINITY, NULL, &st), DB_MAINT_TOO_RECENT);
+    assert_int_equal(db_retention(d, db_now() - DB_RETENTION_MIN_AGE_S + 60, NULL, &st), -ERANGE);
+    assert_int_equal(db_retention(d, NAN, NULL, &st), -ERANGE);
+    assert_int_equal(db_retention(d, INFINITY, NULL, &st), -ERANGE);
     db_retention_config bad = {.txn_ms = 50, .pause_ms = 0, .units_max = 0};
-    assert_int_equal(db_retention(d, BASE + 100, &bad, &st), -1);
+    assert_int_equal(db_retention(d, BASE + 100, &bad, &st), -EINVAL);
     bad = (db_retention_config){.txn_ms = 0, .pause_ms = 0, .units_max = 100};
-    assert_int_equal(db_retention(d, BASE + 100, &bad, &st), -1);
+    assert_int_equal(db_retention(d, BASE + 100, &bad, &st), -EINVAL);
     assert_int_equal(testdb_scalar(db_sqlite(d), "SELECT count(*) FROM collisions"), 10);
     /* Another connection holding the write lock past the busy timeout:
      * an error that says so, nothing removed. */
     sqlite3 *w = raw();
     assert_int_equal(sqlite3_exec(w, "BEGIN IMMEDIATE", NULL, NULL, NULL), SQLITE_OK);
     db_set_busy_timeout(d, 20);
-    assert_int_equal(db_retention(d, BASE + 100, NULL, &st), -1);
+    assert_int_equal(db_retention(d, BASE + 100, NULL, &st), -EBUSY);
     assert_true(db_busy(d));
     assert_int_equal(st.transactions, 0);
     assert_int_equal(sqlite3_exec(w, "ROLLBACK", NULL, NULL, NULL), SQLITE_OK);
@@ -457,9 +458,9 @@ static void test_backup_copies_and_checks(void **state)
     FILE *f = fopen(a, "w");
     fputs("precious", f);
     fclose(f);
-    assert_int_equal(db_backup(d, a, 0, &st), DB_MAINT_EXISTS);
+    assert_int_equal(db_backup(d, a, 0, &st), -EEXIST);
     assert_non_null(strstr(db_error(d), "exists"));
-    assert_int_equal(db_backup(d, b, 1, &st), DB_MAINT_EXISTS);
+    assert_int_equal(db_backup(d, b, 1, &st), -EEXIST);
     char text[16] = "";
     f = fopen(a, "r");
     assert_non_null(fgets(text, sizeof text, f));
@@ -469,9 +470,9 @@ static void test_backup_copies_and_checks(void **state)
     /* A directory that does not exist; an empty name. */
     char c[160];
     snprintf(c, sizeof c, "%s/missing/copy.db", dir);
-    assert_int_equal(db_backup(d, c, 0, &st), -1);
+    assert_int_equal(db_backup(d, c, 0, &st), -ENOENT);
     assert_non_null(strstr(db_error(d), "cannot write beside"));
-    assert_int_equal(db_backup(d, "", 0, &st), -1);
+    assert_int_equal(db_backup(d, "", 0, &st), -EINVAL);
     db_close(d);
 }
 
@@ -525,9 +526,9 @@ static void test_backup_of_a_damaged_database(void **state)
     snprintf(a, sizeof a, "%s/pages.db", dir);
     snprintf(b, sizeof b, "%s/vacuum.db", dir);
     db_backup_stats st;
-    assert_int_equal(db_backup(d, a, 0, &st), -1);
+    assert_int_equal(db_backup(d, a, 0, &st), -EIO);
     assert_non_null(strstr(db_error(d), "integrity_check"));
-    assert_int_equal(db_backup(d, b, 1, &st), -1);
+    assert_int_equal(db_backup(d, b, 1, &st), -EIO);
     assert_non_null(strstr(db_error(d), "VACUUM INTO"));
     assert_int_equal(access(a, F_OK), -1);
     assert_int_equal(access(b, F_OK), -1);
