@@ -23,6 +23,7 @@
 #include <seccomp.h>
 
 #include "alloc.h"
+#include "err.h"
 #include "import.h"
 #include "import_pipe.h"
 
@@ -84,19 +85,19 @@ static unsigned long long data_now(void)
 /* Limits that hold from here on. Under a sanitizer (SANDBOX_LIMIT_DATA)
  * the limit is on data mappings instead, counted from what is mapped now
  * (the server also tells that build's allocator to return NULL rather than
- * abort). */
+ * abort). 0 or -errno. */
 static int set_limits(unsigned long memory_mb, unsigned long cpu_seconds)
 {
     struct rlimit cpu = {cpu_seconds, cpu_seconds + 1}, none = {0, 0}, files = {SANDBOX_FILES, SANDBOX_FILES};
 #ifndef SANDBOX_LIMIT_DATA
     struct rlimit mem = {memory_mb << 20, memory_mb << 20};
     if (setrlimit(RLIMIT_AS, &mem) != 0)
-        return -1;
+        return -errno;
 #else
     unsigned long long data = data_now() + ((unsigned long long)memory_mb << 20);
     struct rlimit mem = {data, data};
     if (setrlimit(RLIMIT_DATA, &mem) != 0)
-        return -1;
+        return -errno;
 #endif
     /* no file descriptors beyond stdin, stdout and stderr (the seccomp
      * filter forbids opening anything too); no RLIMIT_FSIZE: stderr may be
@@ -104,7 +105,7 @@ static int set_limits(unsigned long memory_mb, unsigned long cpu_seconds)
      * SIGXFSZ instead of saying what happened */
     if (setrlimit(RLIMIT_CPU, &cpu) != 0 || setrlimit(RLIMIT_NOFILE, &files) != 0 ||
         setrlimit(RLIMIT_CORE, &none) != 0)
-        return -1;
+        return -errno;
     return 0;
 }
 
@@ -117,7 +118,8 @@ static struct scmp_arg_cmp arg(unsigned int n, enum scmp_compare op, scmp_datum_
 
 /* The seccomp filter: reads from stdin, writes to stdout and stderr, memory
  * that is never executable, futexes (Assimp's locks), signals to itself
- * (abort), the clock, and exit. Anything else kills the process. */
+ * (abort), the clock, and exit. Anything else kills the process. 0 or
+ * -errno (libseccomp's results are). */
 static int sandbox(void)
 {
     static const int plain[] = {
@@ -132,7 +134,7 @@ static int sandbox(void)
 #endif
     };
     scmp_filter_ctx ctx = seccomp_init(SCMP_ACT_KILL_PROCESS);
-    int rc = ctx ? 0 : -1;
+    int rc = ctx ? 0 : -ENOMEM;
 
     for (size_t i = 0; rc == 0 && i < sizeof plain / sizeof plain[0]; i++)
         rc = seccomp_rule_add(ctx, SCMP_ACT_ALLOW, plain[i], 0);
@@ -155,15 +157,17 @@ static int sandbox(void)
 }
 
 /* Moves exactly n bytes: reads them from stdin into p, or (writing) writes
- * them from p to stdout. -1 on an error or an early end. */
+ * them from p to stdout. 0, -EPIPE at an early end, or -errno. */
 static int move_all(uint8_t *p, size_t n, int writing)
 {
     while (n) {
         ssize_t k = writing ? write(1, p, n) : read(0, p, n);
         if (k < 0 && errno == EINTR)
             continue;
-        if (k <= 0)
-            return -1;
+        if (k < 0)
+            return -errno;
+        if (k == 0)
+            return -EPIPE;
         p += k;
         n -= (size_t)k;
     }
@@ -175,11 +179,12 @@ static int move_all(uint8_t *p, size_t n, int writing)
  * Test builds only (-DCVRE_TEST_HOOKS=ON): an upload that starts with
  * "cvre-import-test:" followed by a word makes the helper misbehave the way
  * a hostile file might make Assimp: crash, spin, allocate without end, or
- * answer too much or garbage. Returns the status to answer, or 1 if the
- * data is not such a request.
+ * answer too much or garbage. True if the data is such a request; then
+ * *status is the status to answer, with m and err as import_model fills
+ * them.
  */
-static int test_hook(const uint8_t *data, size_t len, uint32_t max_triangles, import_mesh *m,
-                     char *err, size_t errlen)
+static int test_request(const uint8_t *data, size_t len, uint32_t max_triangles, import_mesh *m,
+                        char *err, size_t errlen, int *status)
 {
     static const char prefix[] = "cvre-import-test:";
     size_t pl = sizeof prefix - 1;
@@ -187,7 +192,7 @@ static int test_hook(const uint8_t *data, size_t len, uint32_t max_triangles, im
     size_t wl = len - pl;
 
     if (len < pl || memcmp(data, prefix, pl) != 0)
-        return 1;
+        return 0;
     while (wl && (word[wl - 1] == '\n' || word[wl - 1] == ' '))
         wl--;
 #define IS(w) (wl == sizeof(w) - 1 && memcmp(word, w, wl) == 0)
@@ -201,8 +206,8 @@ static int test_hook(const uint8_t *data, size_t len, uint32_t max_triangles, im
         for (;;) {
             void **p = malloc(1u << 20);
             if (!p) {
-                snprintf(err, errlen, "out of memory");
-                return -ENOMEM;
+                *status = cvre_fail(err, errlen, -ENOMEM, "out of memory");
+                return 1;
             }
             memset(p, 1, 1u << 20);
             *p = kept;
@@ -213,16 +218,21 @@ static int test_hook(const uint8_t *data, size_t len, uint32_t max_triangles, im
          * with a NaN corner */
         uint32_t n = IS("flood") ? 2 * max_triangles + 64 : 1;
         m->tris = calloc((size_t)n, 36u);
-        if (!m->tris)
-            return -ENOMEM;
+        if (!m->tris) {
+            *status = -ENOMEM;
+            return 1;
+        }
         m->ntris = n;
         m->max[0] = m->max[1] = m->max[2] = 0;
         if (IS("nan"))
             m->tris[4] = __builtin_nanf("");
-        return 0;
+        if (errlen)
+            err[0] = 0; /* as import_model leaves it on success */
+        *status = 0;
+        return 1;
     }
 #undef IS
-    return 1;
+    return 0;
 }
 #endif
 
@@ -241,7 +251,7 @@ int main(int argc, char **argv)
     uint32_t data_len = 0;
     size_t have = 0;
     long head_len = 0;
-    int c, rc;
+    int c, rc, tested = 0;
 
     while ((c = getopt_long(argc, argv, "", options, NULL)) != -1) {
         char *end;
@@ -268,8 +278,8 @@ int main(int argc, char **argv)
         return EXIT_USAGE;
     }
     import_prepare();
-    if (set_limits(memory_mb, cpu_seconds) != 0 || sandbox() != 0) {
-        fprintf(stderr, "cvre-import: cannot limit itself: %s\n", strerror(errno));
+    if ((rc = set_limits(memory_mb, cpu_seconds)) != 0 || (rc = sandbox()) != 0) {
+        fprintf(stderr, "cvre-import: cannot limit itself: %s\n", strerror(-rc));
         return EXIT_SETUP;
     }
 
@@ -287,11 +297,10 @@ int main(int argc, char **argv)
     data = cvre_malloc(data_len);
     if (!data || move_all(data, data_len, 0) != 0)
         sandbox_exit(EXIT_REQUEST);
-    rc = 1;
 #ifdef CVRE_TEST_HOOKS
-    rc = test_hook(data, data_len, opt.max_triangles, &mesh, err, sizeof err);
+    tested = test_request(data, data_len, opt.max_triangles, &mesh, err, sizeof err, &rc);
 #endif
-    if (rc == 1)
+    if (!tested)
         rc = import_model(data, data_len, hint[0] ? hint : NULL, &opt, &mesh, err, sizeof err);
     free(data);
     /* the head, then the triangles straight from the mesh: no copy */

@@ -40,12 +40,12 @@ long import_pipe_request_parse(const uint8_t *p, size_t n, import_options *opt, 
     size_t hl;
 
     if (n < 18)
-        return n >= 4 && memcmp(p, request_magic, 4) != 0 ? -1 : 0;
+        return n >= 4 && memcmp(p, request_magic, 4) != 0 ? -EPROTO : 0;
     if (memcmp(p, request_magic, 4) != 0 || le_get_u32(p + 4) != IMPORT_PIPE_VERSION || p[8] > 1)
-        return -1;
+        return -EPROTO;
     hl = p[17];
     if (hl > IMPORT_PIPE_HINT_MAX)
-        return -1;
+        return -EPROTO;
     if (n < 18 + hl + 4)
         return 0;
     opt->z_up = p[8];

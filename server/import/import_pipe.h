@@ -44,7 +44,7 @@ size_t import_pipe_request_head(uint8_t *out, const char *hint, const import_opt
 
 /* Decodes a request head from p[0..n). Returns the head's length and fills
  * *opt, hint (IMPORT_PIPE_HINT_MAX + 1 bytes, NUL-terminated) and
- * *data_len; 0 when more bytes are needed; -1 when it is malformed. */
+ * *data_len; 0 when more bytes are needed; -EPROTO when it is malformed. */
 long import_pipe_request_parse(const uint8_t *p, size_t n, import_options *opt, char *hint,
                                uint32_t *data_len);
 

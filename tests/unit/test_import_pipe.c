@@ -31,10 +31,10 @@ static void test_request_round_trip(void **state)
     assert_int_equal(got.z_up, 1);
     assert_true(got.unit_scale == 0.01f && got.max_triangles == 12345);
     head[0] = 'X';
-    assert_int_equal(import_pipe_request_parse(head, n, &got, hint, &len), -1);
+    assert_int_equal(import_pipe_request_parse(head, n, &got, hint, &len), -EPROTO);
     head[0] = 'C';
     head[17] = IMPORT_PIPE_HINT_MAX + 1; /* hint longer than allowed */
-    assert_int_equal(import_pipe_request_parse(head, n, &got, hint, &len), -1);
+    assert_int_equal(import_pipe_request_parse(head, n, &got, hint, &len), -EPROTO);
 }
 
 /* A good answer with two triangles. */
