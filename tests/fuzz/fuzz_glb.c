@@ -21,6 +21,7 @@
 #include <string.h>
 
 #include "fz.h"
+#include "le.h"
 
 #define GLB_MAGIC 0x46546c67u /* "glTF" */
 #define CHUNK_JSON 0x4e4f534au
@@ -46,14 +47,14 @@ static int glb_read(const uint8_t *p, size_t n, glb *g)
     size_t json_len, at;
 
     memset(g, 0, sizeof *g);
-    if (n < 20 || fz_get_u32le(p) != GLB_MAGIC || (json_len = fz_get_u32le(p + 12)) > n - 20)
+    if (n < 20 || le_get_u32(p) != GLB_MAGIC || (json_len = le_get_u32(p + 12)) > n - 20)
         return 0;
     g->doc = json_loadb((const char *)p + 20, json_len, JSON_ALLOW_NUL, NULL);
     if (!g->doc)
         return 0;
     at = 20 + json_len;
-    if (n - at >= 8 && fz_get_u32le(p + at + 4) == CHUNK_BIN) {
-        size_t len = fz_get_u32le(p + at);
+    if (n - at >= 8 && le_get_u32(p + at + 4) == CHUNK_BIN) {
+        size_t len = le_get_u32(p + at);
         if (len > n - at - 8)
             len = n - at - 8;
         if ((g->bin = malloc(len + 1)) != NULL) {
@@ -630,8 +631,8 @@ static void mutate_container(uint8_t *p, size_t n)
         return;
     at = fields[fz_below(4)];
     if (fz_one_in(4) && n >= 28) /* the BIN chunk's header, if there is one */
-        at = 20 + fz_get_u32le(p + 12) <= n - 8 ? 20 + fz_get_u32le(p + 12) + 4 * fz_below(2) : at;
-    v = fz_get_u32le(p + at);
+        at = 20 + le_get_u32(p + 12) <= n - 8 ? 20 + le_get_u32(p + 12) + 4 * fz_below(2) : at;
+    v = le_get_u32(p + at);
     switch (fz_below(4)) {
     case 0: v += fz_below(9) - 4; break;
     case 1: v = fz_count(v); break;

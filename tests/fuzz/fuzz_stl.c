@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "fz.h"
+#include "le.h"
 
 /* Triangles the mutator keeps; inputs past it are cut to it. */
 #define TRIS_MAX 2048
@@ -46,16 +47,7 @@ static const char *const templates[] = {
 
 static int is_binary(const uint8_t *p, size_t n)
 {
-    return n >= 84 && (n - 84) % 50 == 0 && (n - 84) / 50 == fz_get_u32le(p + 80);
-}
-
-static float get_f32(const uint8_t *p)
-{
-    uint32_t u = fz_get_u32le(p);
-    float f;
-
-    memcpy(&f, &u, sizeof f);
-    return f;
+    return n >= 84 && (n - 84) % 50 == 0 && (n - 84) / 50 == le_get_u32(p + 80);
 }
 
 /* Reads p[0..n) as binary STL if it has the binary form's size (or does
@@ -68,14 +60,14 @@ static int stl_read(const uint8_t *p, size_t n, stl *s)
     if (is_binary(p, n) || (n >= 84 && memcmp(p, "solid", 5) != 0)) {
         s->binary = 1;
         memcpy(s->header, p, 80);
-        s->count = fz_get_u32le(p + 80);
+        s->count = le_get_u32(p + 80);
         for (size_t at = 84; at + 50 <= n && s->ntris < TRIS_MAX; at += 50, s->ntris++) {
             tri *t = &s->t[s->ntris];
             for (int k = 0; k < 3; k++)
-                t->n[k] = get_f32(p + at + 4 * (size_t)k);
+                t->n[k] = le_get_f32(p + at + 4 * (size_t)k);
             for (int k = 0; k < 9; k++)
-                t->v[k] = get_f32(p + at + 12 + 4 * (size_t)k);
-            t->attr = (uint16_t)(p[at + 48] | p[at + 49] << 8);
+                t->v[k] = le_get_f32(p + at + 12 + 4 * (size_t)k);
+            t->attr = le_get_u16(p + at + 48);
         }
         return 1;
     }
