@@ -96,9 +96,57 @@ static void test_version_checks(void **state)
     assert_non_null(strstr(err, "cannot open"));
 }
 
+/* SQLite's result codes as the store's callers see them (db_errno). */
+static void test_errno_mapping(void **state)
+{
+    (void)state;
+    static const struct {
+        int code, sys, want;
+    } cases[] = {
+        {SQLITE_BUSY, 0, -EBUSY},
+        {SQLITE_BUSY_SNAPSHOT, 0, -EBUSY},
+        {SQLITE_LOCKED, 0, -EBUSY},
+        {SQLITE_FULL, 0, -ENOSPC},
+        {SQLITE_NOMEM, 0, -ENOMEM},
+        {SQLITE_READONLY, 0, -EROFS},
+        {SQLITE_READONLY_DBMOVED, 0, -EROFS},
+        {SQLITE_CONSTRAINT_UNIQUE, 0, -EEXIST},
+        {SQLITE_CONSTRAINT_PRIMARYKEY, 0, -EEXIST},
+        {SQLITE_CONSTRAINT_CHECK, 0, -EINVAL},
+        {SQLITE_CONSTRAINT_TRIGGER, 0, -EINVAL},
+        {SQLITE_CANTOPEN, ENOENT, -ENOENT},
+        {SQLITE_CANTOPEN, EACCES, -EACCES},
+        {SQLITE_CANTOPEN, EPERM, -EACCES},
+        {SQLITE_CANTOPEN, 0, -EIO},
+        {SQLITE_INTERRUPT, 0, -EINTR},
+        {SQLITE_MISUSE, 0, -EINVAL},
+        {SQLITE_TOOBIG, 0, -E2BIG},
+        {SQLITE_IOERR_WRITE, ENOSPC, -EIO},
+        {SQLITE_CORRUPT, 0, -EIO},
+        {SQLITE_NOTADB, 0, -EIO},
+        {SQLITE_ERROR, 0, -EIO},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        if (db_errno(cases[i].code, cases[i].sys) != cases[i].want)
+            fail_msg("SQLite code %d (errno %d): %d, wanted %d", cases[i].code, cases[i].sys,
+                     db_errno(cases[i].code, cases[i].sys), cases[i].want);
+    /* A connection's last failure, through the same table. */
+    char err[256];
+    db *d = db_open(path, DB_READWRITE, err, sizeof err);
+    assert_non_null(d);
+    assert_int_not_equal(sqlite3_exec(db_sqlite(d), "INSERT INTO sessions(id) VALUES (NULL, 1)", NULL, NULL, NULL),
+                         SQLITE_OK);
+    assert_int_equal(db_sqlite_errno(db_sqlite(d)), -EIO); /* a plain SQL error */
+    assert_int_equal(db_session_open(d, 1, "00", "p", 1.0), 0);
+    assert_int_equal(db_session_open(d, 1, "00", "p", 1.0), -EEXIST);
+    assert_int_equal(db_sqlite_errno(db_sqlite(d)), -EEXIST);
+    db_close(d);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_errno_mapping, setup, teardown),
         cmocka_unit_test_setup_teardown(test_sessions_round_trip, setup, teardown),
         cmocka_unit_test_setup_teardown(test_version_checks, setup, teardown),
     };
