@@ -5,9 +5,10 @@
  * Parsing is Assimp's (C API); this module decides which files reach it.
  * Only the formats in import_formats() are accepted, recognised by their
  * content, and each is pre-checked where Assimp 5.2.5 was found to crash,
- * hang, leak or allocate without bound on hostile input (see import.c).
- * The file is read from memory only: references to other files (OBJ
- * mtllib, glTF buffer and image URIs) are never opened.
+ * hang, leak or allocate without bound on hostile input (see import.c and
+ * each format's import_FORMAT.c). The file is read from memory only:
+ * references to other files (OBJ mtllib, glTF buffer and image URIs) are
+ * never opened.
  *
  * Every function here may be called from any thread. Assimp's parse step
  * is serialised internally (it keeps its last error in a global); the

@@ -1,7 +1,7 @@
 /*
  * fuzz_glb.c: structure-aware fuzz target for GLB uploads: the importer's
- * GLB pre-check (server/import/import.c check_glb, jansson) and Assimp's
- * glTF 2 reader.
+ * GLB pre-check (server/import/import_glb.c over import_json.c, jansson) and
+ * Assimp's glTF 2 reader.
  *
  * Inputs are GLB files. The mutator takes one apart (header, JSON chunk
  * parsed with jansson, BIN chunk) and changes its structure before putting

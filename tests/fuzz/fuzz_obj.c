@@ -1,6 +1,6 @@
 /*
  * fuzz_obj.c: structure-aware fuzz target for OBJ uploads: the importer's
- * OBJ pre-check (server/import/import.c check_obj) and Assimp's OBJ reader.
+ * OBJ pre-check (server/import/import_obj.c) and Assimp's OBJ reader.
  *
  * Inputs are OBJ text. The generator writes vertices, texture coordinates
  * and normals, then faces, lines and points in every index form (v, v/t,

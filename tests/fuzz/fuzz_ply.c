@@ -1,6 +1,6 @@
 /*
  * fuzz_ply.c: structure-aware fuzz target for PLY uploads: the importer's
- * PLY pre-check (server/import/import.c check_ply, which walks the body the
+ * PLY pre-check (server/import/import_ply.c, which walks the body the
  * header declares) and Assimp's PLY reader.
  *
  * Inputs are PLY files, ASCII or binary of either byte order. The mutator

@@ -1,7 +1,7 @@
 /*
  * fuzz_stl.c: structure-aware fuzz target for STL uploads: the importer's
- * STL recognition and ASCII pre-check (server/import/import.c is_binary_stl,
- * check_stl) and Assimp's STL reader.
+ * STL recognition and ASCII pre-check (server/import/import_stl.c) and
+ * Assimp's STL reader.
  *
  * Inputs are STL files, binary or ASCII. The mutator reads the triangles
  * out of either form and writes them back, now and then in the other
