@@ -29,11 +29,10 @@ typedef struct map_request {
 } map_request;
 
 /* Reads what r asks for from d (read-only), writes the picture (whole,
- * replacing the file) and prints the figures. Returns QUERY_OK,
- * QUERY_NOT_FOUND (no such object, the object was removed, no such
- * version) or QUERY_ERROR (a failed query, a stored value that does not
- * add up, the picture or the output could not be written), with a message
- * in err (query.h's codes). */
+ * replacing the file) and prints the figures. Returns 0, -ENOENT (no such
+ * object, the object was removed, no such version) or -EIO (a failed
+ * query, a stored value that does not add up, the picture or the output
+ * could not be written), with a message in err (query.h's results). */
 int map_run(db *d, const map_request *r, char *err, size_t errlen);
 
 #endif

@@ -112,6 +112,36 @@ def texts(elem):
     return ["".join(t.itertext()) for t in elem.iter(SVG_NS + "text")]
 
 
+FONT_PX = {"title": 13, "label": 10}  # map_svg.c's style sheet; other text 12 px
+
+
+def text_boxes(root):
+    """Every text element with its estimated box (x0, y0, x1, y1): 0.6 em a
+    character (DejaVu Sans averages about 0.55), from 0.8 em above the
+    baseline to 0.2 em below."""
+    out = []
+    for t in root.iter(SVG_NS + "text"):
+        size = FONT_PX.get(t.get("class"), 12)
+        text = "".join(t.itertext())
+        x, y = float(t.get("x")), float(t.get("y"))
+        out.append((t, text, (x, y - 0.8 * size, x + 0.6 * size * len(text), y + 0.2 * size)))
+    return out
+
+
+def check_page(root):
+    """The page holds every text (titles and captions are not cut), and no
+    two object labels overlap."""
+    w, h = float(root.get("width")), float(root.get("height"))
+    boxes = text_boxes(root)
+    for _, text, (x0, y0, x1, y1) in boxes:
+        assert 0 <= x0 and x1 <= w and 0 <= y0 and y1 <= h, (text, (x0, y0, x1, y1), (w, h))
+    labels = [(text, b) for t, text, b in boxes if t.get("class") == "label"]
+    for i, (ta, a) in enumerate(labels):
+        for tb, b in labels[i + 1:]:
+            assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], ("labels overlap", ta, a, tb, b)
+    return labels
+
+
 def check_inside(root, v):
     """Every rect and point of view v lies inside its frame (1 px of slack:
     flat boxes are drawn 0.5 px wide)."""
@@ -164,6 +194,7 @@ def test_versions_one_and_two():
         f = json.loads(out)
         figures[version] = f
         root = parse(path)
+        check_page(root)
         for name, word in (("top", "TOP"), ("side", "SIDE")):
             v = view(root, name)
             assert any(t.startswith(word) for t in texts(v)), texts(v)
@@ -227,6 +258,7 @@ def test_whole_world():
     assert chair["version"] == 1 and chair["boxes"] == 1 and chair["points"] == 0 and chair["run"] is None, chair
     assert 0 < chair["tightness"] <= 1 and chair["full_voxel_boxes"] > 1, chair
     root = parse(path)
+    check_page(root)  # the captions are wider than the 760 px the page used to stop at
     for name in ("top", "side"):
         v = view(root, name)
         check_inside(root, v)
@@ -248,6 +280,46 @@ def test_whole_world():
     assert abs(got - want) < 0.05 and abs(want - (mbr[2] - mbr[0]) / (mbr[3] - mbr[1])) > 0.1, (got, want)
     caption = " ".join(texts(view(root, "caption")))
     assert "World: 2 objects" in caption, caption
+
+
+def test_crowded_world_labels():
+    """30 chairs within a few metres of the spawn point and the room 10 m
+    away: every text is inside the page, no two labels overlap, each label
+    lies inside the TOP frame, and every object is either labelled (beside
+    its box or, farther out, with a leader line) or listed under the
+    caption as having no room."""
+    d = tmpdir()
+    world = os.path.join(d, "crowded.world")
+    with open(world, "w") as f:
+        f.write(f"object {os.path.abspath(ROOM)} name room up z at 10 0 0\n")
+        for i in range(30):
+            f.write(f"object {os.path.abspath(CHAIR)} name chair-{i:02d}-with-a-long-name "
+                    f"at {(i % 6) * 0.7 - 2:.2f} 0.312 {(i // 6) * 0.7 - 2:.2f}\n")
+    srv = Server(A.bin, "--world", world)
+    assert srv.stop() == 0
+    path = os.path.join(d, "crowded.svg")
+    _, out, _ = admin("map", "--svg", path, "--json", db=srv.db)
+    ids = {f["object"]: f["name"] for f in json.loads(out)}
+    assert len(ids) == 31, ids
+    root = parse(path)
+    labels = check_page(root)
+    top = view(root, "top")
+    frame = by_class(top, "rect", "frame")[0]
+    fx0, fy0 = float(frame.get("x")), float(frame.get("y"))
+    fx1, fy1 = fx0 + float(frame.get("width")), fy0 + float(frame.get("height"))
+    for text, (x0, y0, x1, y1) in labels:
+        assert fx0 <= x0 and x1 <= fx1 and fy0 <= y0 and y1 <= fy1, (text, (x0, y0, x1, y1))
+    caption = " ".join(texts(view(root, "caption")))
+    labelled = {int(t.split()[0][1:]) for t, _ in labels}
+    listed = {i for i in ids if f"#{i} {ids[i]}" in caption}
+    assert labelled | listed == set(ids) and not labelled & listed, (sorted(labelled), sorted(listed))
+    assert len(labelled) >= 12, sorted(labelled)  # most find room
+    if listed:
+        assert "No room in TOP for the label" in caption, caption
+    assert by_class(top, "path", "leader"), "no label was moved away from its chair"
+    for t, _ in labels:  # each labels its own object's group
+        i = int(t.split()[0][1:])
+        assert any(x.startswith(f"#{i} ") for x in texts(view(top, f"top-o{i}"))), i
 
 
 def test_names_are_escaped():
@@ -490,6 +562,7 @@ def test_renders_in_chromium():
     print(f"     chromium rendered the map in {took:.1f}s ({len(colours)} colours)", flush=True)
 
 
-run([test_versions_one_and_two, test_same_database_same_bytes, test_whole_world, test_names_are_escaped,
+run([test_versions_one_and_two, test_same_database_same_bytes, test_whole_world, test_crowded_world_labels,
+     test_names_are_escaped,
      test_subsample_and_clusters_of_many_points, test_union_of_overlapping_boxes, test_errors,
      test_renders_in_chromium])
