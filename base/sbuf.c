@@ -1,6 +1,7 @@
 /* sbuf.c: see sbuf.h. */
 #include "sbuf.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -55,6 +56,22 @@ void sb_real(sbuf *b, double v)
     for (int prec = 15; prec <= 17; prec++) {
         snprintf(t, sizeof t, "%.*g", prec, v);
         if (strtod(t, NULL) == v)
+            break;
+    }
+    sb_puts(b, t);
+}
+
+void sb_real32(sbuf *b, double v)
+{
+    char t[64];
+    if (!(fabs(v) <= FLT_MAX) || (double)(float)v != v) { /* not finite, beyond a float, or finer */
+        sb_real(b, v);
+        return;
+    }
+    float f = (float)v;
+    for (int prec = 6; prec <= 9; prec++) { /* FLT_DECIMAL_DIG is 9 */
+        snprintf(t, sizeof t, "%.*g", prec, v);
+        if (strtof(t, NULL) == f)
             break;
     }
     sb_puts(b, t);

@@ -541,14 +541,20 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
     return 0;
 }
 
+/* The one place a command's result (query.h: 0 or a negative errno) becomes
+ * the exit status the usage text documents; prints the message of a
+ * failure. */
 static int exit_status(int rc, const char *err)
 {
-    if (rc == QUERY_OK)
+    if (rc == 0)
         return 0;
     fprintf(stderr, "%s: %s\n", prog, err);
-    return rc == QUERY_NOT_FOUND ? EXIT_NOT_FOUND : rc == QUERY_REFUSED ? EXIT_REFUSED
-           : rc == QUERY_USAGE   ? EXIT_USAGE
-                                 : EXIT_DB;
+    switch (rc) {
+    case -ENOENT: return EXIT_NOT_FOUND;
+    case -EPERM: return EXIT_REFUSED;
+    case -EINVAL: return EXIT_USAGE;
+    default: return EXIT_DB;
+    }
 }
 
 /* The one write. The read-only handle ro (whose open checked the schema
@@ -561,7 +567,7 @@ static int rollback(db *ro, const char *path, int format, int64_t id, uint32_t k
     uint32_t in_force = 0;
     int rc = query_rollback_check(db_sqlite(ro), id, k, &in_force, err, sizeof err);
     db_close(ro);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return exit_status(rc, err);
     db *d = db_open(path, DB_READWRITE, err, sizeof err);
     if (!d) {

@@ -4,6 +4,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "err.h"
 #include "maint.h"
 #include "out.h"
 #include "query.h"
@@ -93,13 +94,13 @@ static int backup(db *ro, const maintain_request *r, int format, char *err, size
     db_backup_stats st;
     int rc = db_backup(ro, r->file, r->vacuum, &st);
     if (rc == -EEXIST)
-        return query_fail(err, errlen, QUERY_REFUSED, "%s; nothing written", db_error(ro));
+        return cvre_fail(err, errlen, -EPERM, "%s; nothing written", db_error(ro));
     if (rc != 0)
-        return query_fail(err, errlen, QUERY_ERROR, "backup failed: %s", db_error(ro));
+        return cvre_fail(err, errlen, -EIO, "backup failed: %s", db_error(ro));
     sqlite3 *s = db_sqlite(ro);
     sqlite3_stmt *q;
     if (sqlite3_prepare_v2(s, "SELECT ?1, ?2, ?3, ?4, ?5, 'ok', ?6", -1, &q, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_text(q, 1, r->file, -1, SQLITE_STATIC);
     sqlite3_bind_text(q, 2, r->vacuum ? "vacuum" : "pages", -1, SQLITE_STATIC);
     sqlite3_bind_int64(q, 3, st.bytes);
@@ -118,12 +119,12 @@ static int retention(const char *path, const maintain_request *r, int format, ch
     char why[512];
     db *d = db_open(path, DB_READWRITE, why, sizeof why);
     if (!d)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot open for writing: %s", why);
+        return cvre_fail(err, errlen, -EIO, "cannot open for writing: %s", why);
     double t0 = mono_s();
     db_retention_stats st;
     int rc = db_retention(d, db_now() - (double)r->days * 86400.0, NULL, &st);
     if (rc != 0) {
-        rc = query_fail(err, errlen, QUERY_ERROR,
+        rc = cvre_fail(err, errlen, -EIO,
                         "retention stopped: %s%s; %llu collisions were removed before (run it again to go on)",
                         db_error(d), db_busy(d) ? " (the server held the write lock without a pause)" : "",
                         (unsigned long long)st.collisions);
@@ -133,7 +134,7 @@ static int retention(const char *path, const maintain_request *r, int format, ch
     sqlite3 *s = db_sqlite(d);
     sqlite3_stmt *q;
     if (sqlite3_prepare_v2(s, "SELECT ?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9", -1, &q, NULL) != SQLITE_OK) {
-        rc = query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        rc = cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     } else {
         const uint64_t n[] = {st.collisions, st.segments, st.groups, st.cells, st.user_entries, st.transactions};
         sqlite3_bind_double(q, 1, st.cutoff);

@@ -3,7 +3,7 @@
  * db/maint.h. main.c parses and checks the arguments; these functions run
  * the command on the database and print what it did.
  *
- * Return values are query.h's (QUERY_OK, QUERY_REFUSED, QUERY_ERROR) with
+ * Return values are query.h's (0, -EPERM, -EIO) with
  * a message in err.
  */
 #ifndef CVRE_ADMIN_MAINTAIN_H
@@ -36,7 +36,7 @@ extern const char maintain_retention_help[];
 
 /* Runs r on the database at path, whose read-only handle ro (schema
  * version checked) it takes over and closes. backup copies from ro
- * (QUERY_REFUSED, nothing written, if the file exists); retention closes
+ * (-EPERM, nothing written, if the file exists); retention closes
  * ro, opens path read-write and removes what is older than r->days days.
  * Each prints its figures as one record in format (out.h). */
 int maintain_run(db *ro, const char *path, const maintain_request *r, int format, char *err, size_t errlen);

@@ -358,4 +358,3 @@ cleanup:
     free(views[1].mask);
     return rc;
 }
-

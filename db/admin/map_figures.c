@@ -22,7 +22,7 @@ void map__figures_json(sbuf *b, const mobj *o, size_t drawn)
         sb_real(b, o->occupied_volume / o->union_volume);
     else
         sb_puts(b, "null");
-    sb_printf(b, ", \"full_voxel_boxes\": %llu, \"depth\": %u, \"points\": %zu, \"clusters\": %zu", 
+    sb_printf(b, ", \"full_voxel_boxes\": %llu, \"depth\": %u, \"points\": %zu, \"clusters\": %zu",
               (unsigned long long)o->voxels, MAP_DEPTH, o->npts, o->nclusters);
     sb_printf(b, ", \"points_drawn\": %zu, \"points_version\": %u, \"run\": ", drawn, o->points_version);
     if (o->has_run)

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "account.h"
+#include "err.h"
 #include "moderation.h"
 #include "out.h"
 #include "query.h"
@@ -58,7 +59,7 @@ static sqlite3_stmt *prepare_bans(sqlite3 *s, const char *name, char *err, size_
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, ban_sql, -1, &st, NULL) != SQLITE_OK) {
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
         return NULL;
     }
     sqlite3_bind_double(st, sqlite3_bind_parameter_index(st, ":now"), db_now());
@@ -72,16 +73,16 @@ static int print_bans(sqlite3 *s, const char *name, int format, char *err, size_
 {
     sqlite3_stmt *st = prepare_bans(s, name, err, errlen);
     if (!st)
-        return QUERY_ERROR;
+        return -EIO;
     return query_print(s, st, ban_cols, LEN(ban_cols), name ? OUT_RECORD : OUT_ROWS, format, err, errlen);
 }
 
-/* The ban in force of name into *b; QUERY_NOT_FOUND if there is none. */
+/* The ban in force of name into *b; -ENOENT if there is none. */
 static int find_ban(sqlite3 *s, const char *name, ban *b, char *err, size_t errlen)
 {
     sqlite3_stmt *st = prepare_bans(s, name, err, errlen);
     if (!st)
-        return QUERY_ERROR;
+        return -EIO;
     int rc = sqlite3_step(st);
     if (rc == SQLITE_ROW) {
         snprintf(b->name, sizeof b->name, "%s", (const char *)sqlite3_column_text(st, 0));
@@ -89,12 +90,12 @@ static int find_ban(sqlite3 *s, const char *name, ban *b, char *err, size_t errl
         b->until = b->forever ? 0 : sqlite3_column_double(st, 1);
         b->since = sqlite3_column_double(st, 2);
     } else if (rc != SQLITE_DONE) {
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     }
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW    ? QUERY_OK
-           : rc == SQLITE_DONE ? query_fail(err, errlen, QUERY_NOT_FOUND, "%s is not banned", name)
-                               : QUERY_ERROR;
+    return rc == SQLITE_ROW    ? 0
+           : rc == SQLITE_DONE ? cvre_fail(err, errlen, -ENOENT, "%s is not banned", name)
+                               : -EIO;
 }
 
 /* What unban prints: the ban it lifted, as bans showed it. */
@@ -102,7 +103,7 @@ static int print_lifted(sqlite3 *s, const ban *b, int format, char *err, size_t 
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, "SELECT ?1, ?2, ?3", -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_text(st, 1, b->name, -1, SQLITE_STATIC);
     if (b->forever)
         sqlite3_bind_text(st, 2, "never", -1, SQLITE_STATIC);
@@ -114,25 +115,25 @@ static int print_lifted(sqlite3 *s, const ban *b, int format, char *err, size_t 
 
 /* ---- sessions ---- */
 
-/* Whether session id is open, on the read-only snapshot: QUERY_NOT_FOUND
+/* Whether session id is open, on the read-only snapshot: -ENOENT
  * with what became of it otherwise. */
 static int check_session(sqlite3 *s, int64_t id, char *err, size_t errlen)
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, "SELECT ended_at IS NULL, coalesce(end_reason, '') FROM sessions WHERE id = ?1", -1,
                            &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_int64(st, 1, id);
     int rc = sqlite3_step(st);
     if (rc == SQLITE_ROW && sqlite3_column_int(st, 0))
-        rc = QUERY_OK;
+        rc = 0;
     else if (rc == SQLITE_ROW)
-        rc = query_fail(err, errlen, QUERY_NOT_FOUND, "session %lld is not open (it ended: %s); nothing written",
+        rc = cvre_fail(err, errlen, -ENOENT, "session %lld is not open (it ended: %s); nothing written",
                         (long long)id, (const char *)sqlite3_column_text(st, 1));
     else if (rc == SQLITE_DONE)
-        rc = query_fail(err, errlen, QUERY_NOT_FOUND, "no session %lld", (long long)id);
+        rc = cvre_fail(err, errlen, -ENOENT, "no session %lld", (long long)id);
     else
-        rc = query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        rc = cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
     return rc;
 }
@@ -147,7 +148,7 @@ static int print_session(sqlite3 *s, int64_t id, int format, char *err, size_t e
                            "SELECT s.id, u.name, s.peer, s.started_at, s.joined_at "
                            "FROM sessions s LEFT JOIN users u ON u.id = s.user_id WHERE s.id = ?1",
                            -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_int64(st, 1, id);
     return query_print(s, st, cols, LEN(cols), OUT_RECORD, format, err, errlen);
 }
@@ -163,12 +164,12 @@ static int write_action(db *d, const moderate_request *r, const ban *lifted, int
                                        : db_unban(d, lifted->name, now);
     /* Another process may have come between the check and this write. */
     if (rc == -ENOENT && r->verb == MODERATE_KICK)
-        return query_fail(err, errlen, QUERY_NOT_FOUND, "session %lld ended meanwhile; nothing written",
+        return cvre_fail(err, errlen, -ENOENT, "session %lld ended meanwhile; nothing written",
                           (long long)r->session);
     if (rc == -ENOENT && r->verb == MODERATE_UNBAN)
-        return query_fail(err, errlen, QUERY_NOT_FOUND, "%s was unbanned meanwhile; nothing written", r->name);
+        return cvre_fail(err, errlen, -ENOENT, "%s was unbanned meanwhile; nothing written", r->name);
     if (rc != 0)
-        return query_fail(err, errlen, QUERY_ERROR, "%s failed: %s%s", verbs[r->verb], db_error(d),
+        return cvre_fail(err, errlen, -EIO, "%s failed: %s%s", verbs[r->verb], db_error(d),
                           db_busy(d) ? " (another process held the write lock)" : "");
     sqlite3 *s = db_sqlite(d);
     return r->verb == MODERATE_KICK ? print_session(s, r->session, format, err, errlen)
@@ -179,7 +180,7 @@ static int write_action(db *d, const moderate_request *r, const ban *lifted, int
 int moderate_run(db *ro, const char *path, const moderate_request *r, int format, char *err, size_t errlen)
 {
     ban lifted = {0};
-    int rc = QUERY_OK;
+    int rc = 0;
     if (r->verb == MODERATE_BANS)
         rc = print_bans(db_sqlite(ro), NULL, format, err, errlen);
     else if (r->verb == MODERATE_KICK)
@@ -187,12 +188,12 @@ int moderate_run(db *ro, const char *path, const moderate_request *r, int format
     else if (r->verb == MODERATE_UNBAN)
         rc = find_ban(db_sqlite(ro), r->name, &lifted, err, errlen);
     db_close(ro);
-    if (rc != QUERY_OK || r->verb == MODERATE_BANS)
+    if (rc != 0 || r->verb == MODERATE_BANS)
         return rc;
     char why[512];
     db *d = db_open(path, DB_READWRITE, why, sizeof why);
     if (!d)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot open for writing: %s", why);
+        return cvre_fail(err, errlen, -EIO, "cannot open for writing: %s", why);
     rc = write_action(d, r, &lifted, format, err, errlen);
     db_close(d);
     return rc;

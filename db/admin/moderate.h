@@ -10,7 +10,7 @@
  * kicked or banned session gets bye and is closed), so the commands return
  * before that happens and print what they asked for.
  *
- * Return values are query.h's (QUERY_OK, QUERY_NOT_FOUND, QUERY_ERROR) with
+ * Return values are query.h's (0, -ENOENT, -EIO) with
  * a message in err.
  */
 #ifndef CVRE_ADMIN_MODERATE_H
@@ -50,7 +50,7 @@ int moderate_name_check(const char *name, char *why, size_t whylen);
 /* Runs r on the database at path, whose read-only handle ro it takes over
  * and closes. bans prints the bans in force. kick checks that the session
  * is open, ban nothing more than main.c did, unban that the name is banned
- * now (QUERY_NOT_FOUND otherwise, nothing written); then each writes through
+ * now (-ENOENT otherwise, nothing written); then each writes through
  * db/moderation.h on a read-write handle and prints, in format (out.h), the
  * session it asked servers to close, the ban as it now stands, or the ban
  * it lifted. */

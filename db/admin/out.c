@@ -4,12 +4,15 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "alloc.h"
+#include "json.h"
+#include "sbuf.h"
+#include "timefmt.h"
 
 /* Longest formatted cell other than text: an ISO time or a %.17g number. */
 #define OUT_CELL_MAX 64
+_Static_assert(OUT_CELL_MAX >= TIMEFMT_ISO_MAX, "a time fits a cell");
 /* Most columns in a result: the widest, collisions, has 21. */
 #define OUT_MAX_COLUMNS 64
 
@@ -21,6 +24,7 @@ struct out {
     /* Table form: cells of the shown columns, row after row. */
     char **cells;
     size_t ncells, cap;
+    sbuf line; /* CSV and JSON form: the row being built */
 };
 
 out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int vertical)
@@ -43,38 +47,6 @@ out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int verti
     return o;
 }
 
-/* Unix seconds as ISO-8601 UTC with `digits` decimals (3 or 6). Values no
- * calendar can show are printed as numbers. */
-static void format_time(char *buf, double t, int digits)
-{
-    double scale = digits == 3 ? 1e3 : 1e6;
-    if (!isfinite(t) || fabs(t) > 1e11) {
-        snprintf(buf, OUT_CELL_MAX, "%.17g", t);
-        return;
-    }
-    long long units = llround(t * scale), per = (long long)scale;
-    long long secs = units / per, frac = units % per;
-    if (frac < 0) {
-        frac += per;
-        secs--;
-    }
-    time_t tt = (time_t)secs;
-    struct tm tm;
-    gmtime_r(&tt, &tm);
-    size_t n = strftime(buf, OUT_CELL_MAX, "%Y-%m-%dT%H:%M:%S", &tm);
-    snprintf(buf + n, OUT_CELL_MAX - n, ".%0*lldZ", digits, frac);
-}
-
-/* The shortest %g form that reads back as the same double. */
-static void format_real(char *buf, double v)
-{
-    for (int prec = 15; prec <= 17; prec++) {
-        snprintf(buf, OUT_CELL_MAX, "%.*g", prec, v);
-        if (strtod(buf, NULL) == v)
-            return;
-    }
-}
-
 static void format_duration(char *buf, double s)
 {
     long long t = llround(s);
@@ -95,8 +67,9 @@ static char *table_cell(sqlite3_stmt *st, int i, int kind)
         kind = OUT_TEXT; /* a word instead of a time: never */
     switch (kind) {
     case OUT_INT: snprintf(buf, sizeof buf, "%lld", (long long)sqlite3_column_int64(st, i)); break;
-    case OUT_REAL: snprintf(buf, sizeof buf, "%.3f", sqlite3_column_double(st, i)); break;
-    case OUT_TIME: format_time(buf, sqlite3_column_double(st, i), 3); break;
+    case OUT_REAL:
+    case OUT_FLOAT: snprintf(buf, sizeof buf, "%.3f", sqlite3_column_double(st, i)); break;
+    case OUT_TIME: timefmt_iso(buf, sqlite3_column_double(st, i), 3); break;
     case OUT_SECONDS: format_duration(buf, sqlite3_column_double(st, i)); break;
     case OUT_BOOL: snprintf(buf, sizeof buf, "%s", sqlite3_column_int64(st, i) ? "yes" : "no"); break;
     default: {
@@ -112,77 +85,60 @@ static char *table_cell(sqlite3_stmt *st, int i, int kind)
     return strcpy(cvre_xmalloc(strlen(buf) + 1), buf);
 }
 
-static void csv_text(FILE *f, const unsigned char *t, size_t n)
+/* Text as a CSV field: quoted when it holds a comma, a quote or a line
+ * break, quotes doubled. */
+static void csv_text(sbuf *b, const char *t, size_t n)
 {
     if (!memchr(t, ',', n) && !memchr(t, '"', n) && !memchr(t, '\n', n) && !memchr(t, '\r', n)) {
-        fwrite(t, 1, n, f);
+        sb_put(b, t, n);
         return;
     }
-    fputc('"', f);
+    sb_put(b, "\"", 1);
     for (size_t k = 0; k < n; k++) {
         if (t[k] == '"')
-            fputc('"', f);
-        fputc(t[k], f);
+            sb_put(b, "\"", 1);
+        sb_put(b, t + k, 1);
     }
-    fputc('"', f);
+    sb_put(b, "\"", 1);
 }
 
-static void json_text(FILE *f, const unsigned char *t, size_t n)
-{
-    fputc('"', f);
-    for (size_t k = 0; k < n; k++) {
-        unsigned char c = t[k];
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20 || c == 0x7f)
-            fprintf(f, "\\u%04x", c);
-        else
-            fputc(c, f);
-    }
-    fputc('"', f);
-}
-
-/* One cell in CSV or JSON form. */
-static void stream_cell(out *o, sqlite3_stmt *st, int i)
+/* Appends one cell in CSV or JSON form to b. */
+static void stream_cell(const out *o, sbuf *b, sqlite3_stmt *st, int i)
 {
     int json = o->format == OUT_JSON, kind = o->cols[i].kind;
     char buf[OUT_CELL_MAX];
     if (sqlite3_column_type(st, i) == SQLITE_NULL) {
         if (json)
-            fputs("null", o->f);
+            sb_puts(b, "null");
         return;
     }
     if (kind == OUT_TIME && sqlite3_column_type(st, i) == SQLITE_TEXT)
         kind = OUT_TEXT; /* a word instead of a time: never */
     double v = kind == OUT_INT || kind == OUT_BOOL || kind == OUT_TEXT ? 0 : sqlite3_column_double(st, i);
     switch (kind) {
-    case OUT_INT: fprintf(o->f, "%lld", (long long)sqlite3_column_int64(st, i)); break;
-    case OUT_BOOL:
-        fputs(sqlite3_column_int64(st, i) ? (json ? "true" : "1") : (json ? "false" : "0"), o->f);
-        break;
+    case OUT_INT: sb_printf(b, "%lld", (long long)sqlite3_column_int64(st, i)); break;
+    case OUT_BOOL: sb_puts(b, sqlite3_column_int64(st, i) ? (json ? "true" : "1") : (json ? "false" : "0")); break;
     case OUT_TIME:
-        format_time(buf, v, 6);
-        if (json)
-            fprintf(o->f, "\"%s\"", buf);
-        else
-            fputs(buf, o->f);
+        timefmt_iso(buf, v, 6);
+        sb_printf(b, json ? "\"%s\"" : "%s", buf);
         break;
     case OUT_REAL:
+    case OUT_FLOAT:
     case OUT_SECONDS:
-        if (json && !isfinite(v)) {
-            fputs("null", o->f); /* JSON has no infinity */
-        } else {
-            format_real(buf, v);
-            fputs(buf, o->f);
-        }
+        if (!json && !isfinite(v))
+            sb_printf(b, "%g", v); /* CSV says inf or nan; JSON, which has neither, null */
+        else if (kind == OUT_FLOAT)
+            sb_real32(b, v);
+        else
+            sb_real(b, v);
         break;
     default: {
-        const unsigned char *t = sqlite3_column_text(st, i);
+        const char *t = (const char *)sqlite3_column_text(st, i);
         size_t n = (size_t)sqlite3_column_bytes(st, i);
         if (json)
-            json_text(o->f, t, n);
+            json_put_string(b, t, n);
         else
-            csv_text(o->f, t, n);
+            csv_text(b, t, n);
     }
     }
 }
@@ -199,22 +155,28 @@ void out_row(out *o, sqlite3_stmt *st)
             }
             o->cells[o->ncells++] = table_cell(st, i, o->cols[i].kind);
         }
-    } else if (o->format == OUT_CSV) {
-        for (int i = 0; i < o->ncols; i++) {
-            if (i)
-                fputc(',', o->f);
-            stream_cell(o, st, i);
-        }
-        fputs("\r\n", o->f);
     } else {
-        if (o->vertical == OUT_RECORD_BARE && o->rows)
-            abort(); /* a programming error: a bare record is one row */
-        fputs(o->vertical == OUT_RECORD_BARE ? "{" : o->rows ? ",\n{" : "\n{", o->f);
-        for (int i = 0; i < o->ncols; i++) {
-            fprintf(o->f, "%s\"%s\": ", i ? ", " : "", o->cols[i].name);
-            stream_cell(o, st, i);
+        /* The row is built whole, then written in one go. */
+        sbuf *b = &o->line;
+        sb_clear(b);
+        if (o->format == OUT_CSV) {
+            for (int i = 0; i < o->ncols; i++) {
+                if (i)
+                    sb_put(b, ",", 1);
+                stream_cell(o, b, st, i);
+            }
+            sb_puts(b, "\r\n");
+        } else {
+            if (o->vertical == OUT_RECORD_BARE && o->rows)
+                abort(); /* a programming error: a bare record is one row */
+            sb_puts(b, o->vertical == OUT_RECORD_BARE ? "{" : o->rows ? ",\n{" : "\n{");
+            for (int i = 0; i < o->ncols; i++) {
+                sb_printf(b, "%s\"%s\": ", i ? ", " : "", o->cols[i].name); /* names never need escaping */
+                stream_cell(o, b, st, i);
+            }
+            sb_put(b, "}", 1);
         }
-        fputc('}', o->f);
+        fwrite(b->p, 1, b->len, o->f); /* a failure shows in ferror at out_end */
     }
     o->rows++;
 }
@@ -267,7 +229,7 @@ static void print_table(out *o)
     for (size_t r = 0; r <= o->ncells / (size_t)n + 1; r++) {
         for (int k = 0; k < n; k++) {
             int kind = o->cols[shown[k]].kind;
-            int right = kind == OUT_INT || kind == OUT_REAL || kind == OUT_SECONDS;
+            int right = kind == OUT_INT || kind == OUT_REAL || kind == OUT_FLOAT || kind == OUT_SECONDS;
             const char *s = r == 0 ? o->cols[shown[k]].name : NULL;
             if (r == 1) {
                 for (size_t i = 0; i < w[k]; i++)
@@ -301,6 +263,7 @@ long out_end(out *o)
     for (size_t i = 0; i < o->ncells; i++)
         free(o->cells[i]);
     free(o->cells);
+    sb_free(&o->line);
     free(o);
     if (fflush(f) != 0 || ferror(f))
         return -1;

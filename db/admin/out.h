@@ -7,8 +7,11 @@
  *     vertical result (one record) prints as "field  value" lines.
  *   - csv: RFC 4180, a header line, every column; NULL is an empty field.
  *   - json: one JSON array of objects, one object per line, every column;
- *     NULL is null. Times are ISO-8601 strings in UTC to the microsecond,
- *     reals are printed with the fewest digits that read back exactly.
+ *     NULL is null. Times are ISO-8601 strings in UTC to the microsecond.
+ * In CSV and JSON, reals are printed with the fewest digits that read back
+ * exactly (sb_real), and values stored from 32-bit floats (OUT_FLOAT) with
+ * the fewest that read back as the same float (sb_real32: 0.9, not
+ * 0.89999997615814209).
  * Table output is held until out_end, to size the columns; the others
  * stream. Out of memory aborts (cvre_xmalloc): this is a command-line tool.
  */
@@ -23,6 +26,9 @@ enum out_format { OUT_TABLE, OUT_CSV, OUT_JSON };
 enum out_kind {
     OUT_INT,      /* integer */
     OUT_REAL,     /* real number */
+    OUT_FLOAT,    /* real number that was a float before it was stored (a
+                   * coordinate, a normal, a velocity): %.3f in a table, as
+                   * sb_real32 otherwise */
     OUT_TIME,     /* Unix seconds (REAL), printed as ISO-8601 UTC; a TEXT value
                    * (a word such as "never") is printed as text */
     OUT_SECONDS,  /* a duration in seconds: h:mm:ss in a table, a number otherwise */

@@ -9,6 +9,7 @@
 #include "db.h"
 #include "dblog.h"
 #include "ecm.h"
+#include "err.h"
 #include "out.h"
 
 /* Longest SQL text assembled here (the collisions query with every filter
@@ -16,15 +17,6 @@
 #define QUERY_SQL_MAX 4096
 
 #define LEN(a) ((int)(sizeof(a) / sizeof((a)[0])))
-
-int query_fail(char *err, size_t errlen, int code, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err, errlen, fmt, ap);
-    va_end(ap);
-    return code;
-}
 
 /* Appends constant fragments to a SQL buffer. Overflow is a programming
  * error (the fragments are fixed), so it aborts. */
@@ -71,33 +63,50 @@ static void bind_filter(sqlite3_stmt *st, const query_filter *f, int64_t user_id
     if (f->has_region)
         for (int i = 0; i < 6; i++)
             bind_double(st, corner[i], f->region[i]);
-    bind_int(st, ":limit", f->limit > 0 ? f->limit : -1); /* SQLite: a negative limit is none */
+    /* One row more than asked: print_rows tells whether more match. SQLite:
+     * a negative limit is none. */
+    bind_int(st, ":limit", f->limit > 0 ? f->limit + 1 : -1);
     bind_double(st, ":now", db_now());
 }
 
-/* Prints the rows of the prepared statement st as cols, then finalizes it. */
+/* Prints the rows of the prepared statement st as cols, then finalizes it.
+ * limit > 0: st was bound to return one row more (bind_filter); at most
+ * limit are printed, and if one more came, a line on stderr says that the
+ * answer was cut short, so that stdout stays the rows alone in every
+ * format. */
 static int print_rows(sqlite3 *s, sqlite3_stmt *st, const out_column *cols, int ncols, int vertical, int format,
-                      char *err, size_t errlen)
+                      int64_t limit, char *err, size_t errlen)
 {
     out *o = out_begin(format, stdout, cols, ncols, vertical);
-    int rc;
-    while ((rc = sqlite3_step(st)) == SQLITE_ROW)
+    int rc, more = 0;
+    int64_t shown = 0;
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+        if (limit > 0 && shown == limit) {
+            more = 1;
+            break;
+        }
         out_row(o, st);
+        shown++;
+    }
     long rows = out_end(o);
-    if (rc != SQLITE_DONE)
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+    int ok = rc == SQLITE_DONE || more;
+    if (!ok)
+        cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
-    if (rc != SQLITE_DONE)
-        return QUERY_ERROR;
+    if (!ok)
+        return -EIO;
     if (rows < 0)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot write the output");
-    return QUERY_OK;
+        return cvre_fail(err, errlen, -EIO, "cannot write the output");
+    if (more)
+        fprintf(stderr, "cvre-admin: showing the first %lld rows; more match (--limit N for more, --limit 0 for all)\n",
+                (long long)limit);
+    return 0;
 }
 
 int query_print(sqlite3 *s, sqlite3_stmt *st, const struct out_column *cols, int ncols, int vertical, int format,
                 char *err, size_t errlen)
 {
-    return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
+    return print_rows(s, st, cols, ncols, vertical, format, 0, err, errlen);
 }
 
 /* Runs sql with f's values and prints its rows as cols. */
@@ -106,9 +115,9 @@ static int run(sqlite3 *s, const char *sql, const query_filter *f, int64_t user_
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     bind_filter(st, f, user_id, ranges);
-    return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
+    return print_rows(s, st, cols, ncols, vertical, format, f->limit, err, errlen);
 }
 
 /* One integer from a statement with one parameter; *found tells whether a
@@ -118,7 +127,7 @@ static int lookup(sqlite3 *s, const char *sql, const char *text, int64_t num, in
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     if (text)
         sqlite3_bind_text(st, 1, text, -1, SQLITE_STATIC);
     else
@@ -128,12 +137,12 @@ static int lookup(sqlite3 *s, const char *sql, const char *text, int64_t num, in
     if (*found)
         *out_id = sqlite3_column_int64(st, 0);
     else if (rc != SQLITE_DONE)
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW || rc == SQLITE_DONE ? QUERY_OK : QUERY_ERROR;
+    return rc == SQLITE_ROW || rc == SQLITE_DONE ? 0 : -EIO;
 }
 
-/* Resolves the user and object a filter names; QUERY_NOT_FOUND if either
+/* Resolves the user and object a filter names; -ENOENT if either
  * does not exist, so that a typo does not read as "no collisions". */
 static int resolve(sqlite3 *s, const query_filter *f, int64_t *user_id, char *err, size_t errlen)
 {
@@ -142,19 +151,19 @@ static int resolve(sqlite3 *s, const query_filter *f, int64_t *user_id, char *er
     *user_id = 0;
     if (f->user) {
         rc = lookup(s, "SELECT id FROM users WHERE name = ?1", f->user, 0, user_id, &found, err, errlen);
-        if (rc != QUERY_OK)
+        if (rc != 0)
             return rc;
         if (!found)
-            return query_fail(err, errlen, QUERY_NOT_FOUND, "no user named \"%s\"", f->user);
+            return cvre_fail(err, errlen, -ENOENT, "no user named \"%s\"", f->user);
     }
     if (f->has_object) {
         rc = lookup(s, "SELECT id FROM objects WHERE id = ?1", NULL, f->object, &id, &found, err, errlen);
-        if (rc != QUERY_OK)
+        if (rc != 0)
             return rc;
         if (!found)
-            return query_fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", (long long)f->object);
+            return cvre_fail(err, errlen, -ENOENT, "no object with id %lld", (long long)f->object);
     }
-    return QUERY_OK;
+    return 0;
 }
 
 /* Starts the read transaction a query runs in, so that its statements see
@@ -162,8 +171,8 @@ static int resolve(sqlite3 *s, const query_filter *f, int64_t *user_id, char *er
 static int begin_snapshot(sqlite3 *s, char *err, size_t errlen)
 {
     if (sqlite3_exec(s, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot start a read transaction: %s", sqlite3_errmsg(s));
-    return QUERY_OK;
+        return cvre_fail(err, errlen, -EIO, "cannot start a read transaction: %s", sqlite3_errmsg(s));
+    return 0;
 }
 
 /* Ends it and passes rc through. */
@@ -294,13 +303,13 @@ static int64_t seek(struct probe *p, int64_t lo, int64_t hi, const int64_t key[3
  * selects (columns: bucket, object_id, ecm_version, g; ordered by bucket),
  * bound with f. In each segment of a group's bucket its rows are one id
  * range, found by binary search. n: how many key parts to match (1: the
- * whole object, 3: the group). Returns QUERY_OK or QUERY_ERROR. */
+ * whole object, 3: the group). Returns 0 or -EIO. */
 static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f, int64_t user_id, int n, ranges *r,
                        char *err, size_t errlen)
 {
     sqlite3_stmt *gq = NULL, *sq = NULL;
     struct probe p = {0};
-    int rc = QUERY_OK, step;
+    int rc = 0, step;
     int64_t (*seg)[2] = NULL;
     size_t nseg = 0, capseg = 0;
     int64_t seg_bucket = 0, last_key[3] = {0, 0, 0};
@@ -310,7 +319,7 @@ static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f
                            -1, &sq, NULL) != SQLITE_OK ||
         sqlite3_prepare_v2(s, "SELECT id, object_id, ecm_version, g FROM collisions WHERE id >= ?1 ORDER BY id LIMIT 1",
                            -1, &p.st, NULL) != SQLITE_OK) {
-        rc = query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        rc = cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
         goto cleanup;
     }
     bind_filter(gq, f, user_id, NULL);
@@ -327,7 +336,7 @@ static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f
                     size_t cap = capseg ? capseg * 2 : 64;
                     void *t = realloc(seg, cap * sizeof *seg);
                     if (!t) {
-                        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
+                        rc = cvre_fail(err, errlen, -EIO, "out of memory");
                         goto cleanup;
                     }
                     seg = t, capseg = cap;
@@ -351,7 +360,7 @@ static int find_ranges(sqlite3 *s, const char *groups_sql, const query_filter *f
         }
     }
     if (step != SQLITE_DONE || p.rc)
-        rc = query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        rc = cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
 cleanup:
     free(seg);
     sqlite3_finalize(gq);
@@ -370,7 +379,7 @@ static int segment_ranges(sqlite3 *s, const query_filter *f, int64_t stop_at, ra
     if (sqlite3_prepare_v2(s, "SELECT first_id, last_id, bucket FROM collision_segments "
                               "WHERE bucket BETWEEN :b0 AND :b1 ORDER BY bucket DESC, first_id DESC",
                            -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     bind_filter(st, f, 0, NULL);
     int64_t b0 = f->has_since ? dblog_bucket(f->since) : -DBLOG_BUCKET_MAX;
     int64_t b1 = f->has_until ? dblog_bucket(f->until) : DBLOG_BUCKET_MAX;
@@ -388,9 +397,9 @@ static int segment_ranges(sqlite3 *s, const query_filter *f, int64_t stop_at, ra
     }
     int ok = step == SQLITE_DONE || step == SQLITE_ROW;
     if (!ok)
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_finalize(st);
-    return ok ? QUERY_OK : QUERY_ERROR;
+    return ok ? 0 : -EIO;
 }
 
 /* The rows read through ranges: SQL for "FROM ..." with c the collision. */
@@ -402,10 +411,10 @@ int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, s
         {"id", OUT_INT, 0},          {"time", OUT_TIME, 0},        {"user", OUT_TEXT, 0},
         {"session", OUT_INT, 1},     {"avatar", OUT_INT, 1},       {"object", OUT_INT, 0},
         {"version", OUT_INT, 0},     {"box", OUT_INT, 0},          {"inside", OUT_BOOL, 0},
-        {"world_x", OUT_REAL, 0},    {"world_y", OUT_REAL, 0},     {"world_z", OUT_REAL, 0},
-        {"local_x", OUT_REAL, 1},    {"local_y", OUT_REAL, 1},     {"local_z", OUT_REAL, 1},
-        {"normal_x", OUT_REAL, 1},   {"normal_y", OUT_REAL, 1},    {"normal_z", OUT_REAL, 1},
-        {"velocity_x", OUT_REAL, 1}, {"velocity_y", OUT_REAL, 1},  {"velocity_z", OUT_REAL, 1},
+        {"world_x", OUT_FLOAT, 0},    {"world_y", OUT_FLOAT, 0},     {"world_z", OUT_FLOAT, 0},
+        {"local_x", OUT_FLOAT, 1},    {"local_y", OUT_FLOAT, 1},     {"local_z", OUT_FLOAT, 1},
+        {"normal_x", OUT_FLOAT, 1},   {"normal_y", OUT_FLOAT, 1},    {"normal_z", OUT_FLOAT, 1},
+        {"velocity_x", OUT_FLOAT, 1}, {"velocity_y", OUT_FLOAT, 1},  {"velocity_z", OUT_FLOAT, 1},
     };
     /* Candidate groups: through the rtree for a region, collision_users
      * for a user, the by-object index for an object, buckets for time. */
@@ -447,22 +456,22 @@ int query_collisions(sqlite3 *s, const query_filter *f, int format, char *err, s
     cat(sql, "ORDER BY c.at DESC, c.id DESC LIMIT :limit");
 
     int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
     int64_t user_id;
     rc = resolve(s, f, &user_id, err, errlen);
     ranges r;
     ranges_init(&r);
-    if (rc == QUERY_OK && !whole) {
+    if (rc == 0 && !whole) {
         if (f->has_region || f->user || f->has_object)
             rc = find_ranges(s, groups, f, user_id, 3, &r, err, errlen);
         else
-            rc = segment_ranges(s, f, f->limit, &r, err, errlen);
+            rc = segment_ranges(s, f, f->limit > 0 ? f->limit + 1 : 0, &r, err, errlen);
     }
     const char *text = ranges_end(&r);
-    if (rc == QUERY_OK && !text)
-        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
-    if (rc == QUERY_OK)
+    if (rc == 0 && !text)
+        rc = cvre_fail(err, errlen, -EIO, "out of memory");
+    if (rc == 0)
         rc = run(s, sql, f, user_id, text, cols, LEN(cols), 0, format, err, errlen);
     free(r.text);
     return end_snapshot(s, rc);
@@ -492,16 +501,16 @@ int query_top_objects(sqlite3 *s, const query_filter *f, int format, char *err, 
              "LEFT JOIN objects o ON o.id = t.object_id LEFT JOIN users u ON u.id = o.owner_id "
              "ORDER BY t.n DESC, t.object_id");
     int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
     ranges r;
     ranges_init(&r);
     if (!whole)
         rc = segment_ranges(s, f, 0, &r, err, errlen);
     const char *text = ranges_end(&r);
-    if (rc == QUERY_OK && !text)
-        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
-    if (rc == QUERY_OK)
+    if (rc == 0 && !text)
+        rc = cvre_fail(err, errlen, -EIO, "out of memory");
+    if (rc == 0)
         rc = run(s, sql, f, 0, text, cols, LEN(cols), 0, format, err, errlen);
     free(r.text);
     return end_snapshot(s, rc);
@@ -517,25 +526,25 @@ static int object_ranges(sqlite3 *s, const query_filter *f, ranges *r, char *err
 }
 
 /* Runs sql, a query about one object that reads its collisions through the
- * id ranges of its groups, in one read snapshot; QUERY_NOT_FOUND if there is
+ * id ranges of its groups, in one read snapshot; -ENOENT if there is
  * no such object. */
 static int per_object(sqlite3 *s, int64_t id, const char *sql, const out_column *cols, int ncols, int vertical,
                       int format, char *err, size_t errlen)
 {
     query_filter f = {.has_object = 1, .object = id};
     int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
     int64_t unused;
     rc = resolve(s, &f, &unused, err, errlen);
     ranges r;
     ranges_init(&r);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = object_ranges(s, &f, &r, err, errlen);
     const char *text = ranges_end(&r);
-    if (rc == QUERY_OK && !text)
-        rc = query_fail(err, errlen, QUERY_ERROR, "out of memory");
-    if (rc == QUERY_OK)
+    if (rc == 0 && !text)
+        rc = cvre_fail(err, errlen, -EIO, "out of memory");
+    if (rc == 0)
         rc = run(s, sql, &f, 0, text, cols, ncols, vertical, format, err, errlen);
     free(r.text);
     return end_snapshot(s, rc);
@@ -547,12 +556,12 @@ int query_object(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
         {"object", OUT_INT, 0},         {"name", OUT_TEXT, 0},
         {"format", OUT_TEXT, 0},        {"owner", OUT_TEXT, 0},
         {"created", OUT_TIME, 0},       {"removed", OUT_TIME, 0},
-        {"pos_x", OUT_REAL, 0},         {"pos_y", OUT_REAL, 0},
-        {"pos_z", OUT_REAL, 0},         {"yaw", OUT_REAL, 0},
-        {"scale", OUT_REAL, 0},         {"triangles", OUT_INT, 0},
-        {"mbr_min_x", OUT_REAL, 0},     {"mbr_min_y", OUT_REAL, 0},
-        {"mbr_min_z", OUT_REAL, 0},     {"mbr_max_x", OUT_REAL, 0},
-        {"mbr_max_y", OUT_REAL, 0},     {"mbr_max_z", OUT_REAL, 0},
+        {"pos_x", OUT_FLOAT, 0},         {"pos_y", OUT_FLOAT, 0},
+        {"pos_z", OUT_FLOAT, 0},         {"yaw", OUT_FLOAT, 0},
+        {"scale", OUT_FLOAT, 0},         {"triangles", OUT_INT, 0},
+        {"mbr_min_x", OUT_FLOAT, 0},     {"mbr_min_y", OUT_FLOAT, 0},
+        {"mbr_min_z", OUT_FLOAT, 0},     {"mbr_max_x", OUT_FLOAT, 0},
+        {"mbr_max_y", OUT_FLOAT, 0},     {"mbr_max_z", OUT_FLOAT, 0},
         {"ecm_version", OUT_INT, 0},    {"ecm_versions", OUT_INT, 0},
         {"boxes", OUT_INT, 0},          {"collisions", OUT_INT, 0},
         {"collisions_current", OUT_INT, 0}, {"users", OUT_INT, 0},
@@ -600,11 +609,11 @@ static int run_ids(sqlite3 *s, const char *sql, int64_t object, int64_t a, int64
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     bind_int(st, ":object", object);
     bind_int(st, ":a", a);
     bind_int(st, ":b", b);
-    return print_rows(s, st, cols, ncols, vertical, format, err, errlen);
+    return print_rows(s, st, cols, ncols, vertical, format, 0, err, errlen);
 }
 
 /* One integer (NULL as 0) from sql, which has parameter ?1 and maybe ?2
@@ -613,32 +622,32 @@ static int scalar2(sqlite3 *s, const char *sql, int64_t p1, int64_t p2, int64_t 
 {
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, sql, -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_int64(st, 1, p1);
     if (sqlite3_bind_parameter_count(st) >= 2)
         sqlite3_bind_int64(st, 2, p2);
     int rc = sqlite3_step(st);
     *v = rc == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
     if (rc != SQLITE_ROW)
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", rc == SQLITE_DONE ? "no row" : sqlite3_errmsg(s));
+        cvre_fail(err, errlen, -EIO, "query failed: %s", rc == SQLITE_DONE ? "no row" : sqlite3_errmsg(s));
     sqlite3_finalize(st);
-    return rc == SQLITE_ROW ? QUERY_OK : QUERY_ERROR;
+    return rc == SQLITE_ROW ? 0 : -EIO;
 }
 
-/* QUERY_NOT_FOUND (with a message listing the versions there are) if the
+/* -ENOENT (with a message listing the versions there are) if the
  * object has no version v. */
 static int has_version(sqlite3 *s, int64_t id, uint32_t v, char *err, size_t errlen)
 {
     int64_t n, last;
     int rc = scalar2(s, "SELECT count(*) FROM ecm_versions WHERE object_id = ?1 AND version = ?2", id, v, &n, err,
                      errlen);
-    if (rc != QUERY_OK || n)
+    if (rc != 0 || n)
         return rc;
     rc = scalar2(s, "SELECT coalesce(max(version), 0) FROM ecm_versions WHERE object_id = ?1", id, 0, &last, err,
                  errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
-    return query_fail(err, errlen, QUERY_NOT_FOUND, "object %lld has no version %u (its versions: 1 to %lld)",
+    return cvre_fail(err, errlen, -ENOENT, "object %lld has no version %u (its versions: 1 to %lld)",
                 (long long)id, v, (long long)last);
 }
 
@@ -673,8 +682,8 @@ int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char 
     };
     static const out_column boxes[] = {
         {"change", OUT_TEXT, 0}, {"box_a", OUT_INT, 0}, {"box_b", OUT_INT, 0},
-        {"min_x", OUT_REAL, 0},  {"min_y", OUT_REAL, 0}, {"min_z", OUT_REAL, 0},
-        {"max_x", OUT_REAL, 0},  {"max_y", OUT_REAL, 0}, {"max_z", OUT_REAL, 0},
+        {"min_x", OUT_FLOAT, 0},  {"min_y", OUT_FLOAT, 0}, {"min_z", OUT_FLOAT, 0},
+        {"max_x", OUT_FLOAT, 0},  {"max_y", OUT_FLOAT, 0}, {"max_z", OUT_FLOAT, 0},
         {"volume", OUT_REAL, 0},
     };
     /* Volumes are sums over boxes: where boxes overlap, counted twice. */
@@ -689,13 +698,13 @@ int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char 
     query_filter f = {.has_object = 1, .object = id};
     int64_t unused;
     int rc = begin_snapshot(s, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = resolve(s, &f, &unused, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = has_version(s, id, a, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = has_version(s, id, b, err, errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return end_snapshot(s, rc);
     /* JSON: one document, {"summary": {...}, "boxes": [...]}; CSV: the boxes
      * only (one table; the summary adds them up); table: both, a blank line
@@ -704,12 +713,12 @@ int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char 
         fputs("{\"summary\": ", stdout);
     if (format != OUT_CSV)
         rc = run_ids(s, summary_sql, id, a, b, summary, LEN(summary), OUT_RECORD_BARE, format, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         fputs(format == OUT_JSON ? ",\n\"boxes\": " : format == OUT_TABLE ? "\n" : "", stdout);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = run_ids(s, boxes_sql, id, a, b, boxes, LEN(boxes), OUT_ROWS, format, err, errlen);
-    if (rc == QUERY_OK && format == OUT_JSON && (fputs("}\n", stdout) < 0 || fflush(stdout) != 0))
-        rc = query_fail(err, errlen, QUERY_ERROR, "cannot write the output");
+    if (rc == 0 && format == OUT_JSON && (fputs("}\n", stdout) < 0 || fflush(stdout) != 0))
+        rc = cvre_fail(err, errlen, -EIO, "cannot write the output");
     return end_snapshot(s, rc);
 }
 
@@ -718,26 +727,26 @@ int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force,
     long long oid = (long long)id;
     int64_t v, removed, same;
     int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
     /* -1: no such object; 0: in the world; 1: removed. */
     rc = scalar2(s, "SELECT coalesce((SELECT removed_at IS NOT NULL FROM objects WHERE id = ?1), -1)", id, 0, &removed,
                  err, errlen);
-    if (rc == QUERY_OK && removed < 0)
-        rc = query_fail(err, errlen, QUERY_NOT_FOUND, "no object with id %lld", oid);
-    if (rc == QUERY_OK && removed > 0)
-        rc = query_fail(err, errlen, QUERY_REFUSED, "object %lld was removed from the world: its collision map is not in use",
+    if (rc == 0 && removed < 0)
+        rc = cvre_fail(err, errlen, -ENOENT, "no object with id %lld", oid);
+    if (rc == 0 && removed > 0)
+        rc = cvre_fail(err, errlen, -EPERM, "object %lld was removed from the world: its collision map is not in use",
                   oid);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = has_version(s, id, k, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = scalar2(s, "SELECT ecm_version FROM objects WHERE id = ?1", id, 0, &v, err, errlen);
-    if (rc == QUERY_OK && (v < 1 || v > UINT32_MAX))
-        rc = query_fail(err, errlen, QUERY_ERROR, "object %lld: version in force %lld out of range", oid, (long long)v);
-    if (rc == QUERY_OK && v == k)
-        rc = query_fail(err, errlen, QUERY_REFUSED, "version %u is already in force for object %lld: nothing to do", k, oid);
+    if (rc == 0 && (v < 1 || v > UINT32_MAX))
+        rc = cvre_fail(err, errlen, -EIO, "object %lld: version in force %lld out of range", oid, (long long)v);
+    if (rc == 0 && v == k)
+        rc = cvre_fail(err, errlen, -EPERM, "version %u is already in force for object %lld: nothing to do", k, oid);
     /* The same boxes in the same order (a rollback to k is in force, say). */
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = scalar2(s,
                      "SELECT (SELECT box_count FROM ecm_versions WHERE object_id = ?1 AND version = ?2) = "
                      "(SELECT box_count FROM ecm_versions WHERE object_id = ?1 "
@@ -748,11 +757,11 @@ int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force,
                      "OR y.min_y != x.min_y OR y.min_z != x.min_z OR y.max_x != x.max_x OR y.max_y != x.max_y "
                      "OR y.max_z != x.max_z))",
                      id, k, &same, err, errlen);
-    if (rc == QUERY_OK && same)
-        rc = query_fail(err, errlen, QUERY_REFUSED,
+    if (rc == 0 && same)
+        rc = cvre_fail(err, errlen, -EPERM,
                   "version %lld in force for object %lld already has version %u's boxes: nothing to do", (long long)v,
                   oid, k);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         *in_force = (uint32_t)v;
     return end_snapshot(s, rc);
 }
@@ -766,16 +775,16 @@ int query_rollback(db *d, int64_t id, uint32_t k, uint32_t in_force, int format,
     float(*boxes)[6];
     uint32_t n, version;
     if (db_ecm_boxes(d, id, k, &boxes, &n) < 0)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot read version %u: %s", k, db_error(d));
+        return cvre_fail(err, errlen, -EIO, "cannot read version %u: %s", k, db_error(d));
     db_ecm_change c = {.object_id = id, .parent_version = in_force, .reason = "rollback", .restores = k,
                        .detail = "cvre-admin rollback", .box_count = n, .boxes = (const float(*)[6])boxes};
     int rc = db_ecm_write(d, &c, db_now(), &version);
     free(boxes);
     if (rc == -ESTALE)
-        return query_fail(err, errlen, QUERY_REFUSED, "object %lld changed meanwhile (%s); nothing written: look again",
+        return cvre_fail(err, errlen, -EPERM, "object %lld changed meanwhile (%s); nothing written: look again",
                     (long long)id, db_error(d));
     if (rc < 0)
-        return query_fail(err, errlen, QUERY_ERROR, "rollback failed, nothing written: %s%s", db_error(d),
+        return cvre_fail(err, errlen, -EIO, "rollback failed, nothing written: %s%s", db_error(d),
                     db_busy(d) ? " (another process held the write lock)" : "");
     return run_ids(db_sqlite(d),
                    "SELECT object_id, version, parent_version, restores, reason, box_count, created_at, detail "
@@ -805,7 +814,7 @@ int query_totals(sqlite3 *s, int format, char *err, size_t errlen)
         "ON c.id BETWEEN g.first_id AND g.last_id WHERE g.bucket = (SELECT max(bucket) FROM collision_segments)))";
     query_filter f = {0};
     int rc = begin_snapshot(s, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = run(s, sql, &f, 0, NULL, cols, LEN(cols), 1, format, err, errlen);
     return end_snapshot(s, rc);
 }
@@ -815,8 +824,8 @@ int query_clusters(sqlite3 *s, const query_filter *f, int format, char *err, siz
     static const out_column cols[] = {
         {"run", OUT_INT, 0},        {"finished", OUT_TIME, 0}, {"object", OUT_INT, 0},
         {"version", OUT_INT, 0},    {"cluster", OUT_INT, 0},   {"points", OUT_INT, 0},
-        {"users", OUT_INT, 0},      {"box", OUT_INT, 0},       {"centroid_x", OUT_REAL, 0},
-        {"centroid_y", OUT_REAL, 0}, {"centroid_z", OUT_REAL, 0},
+        {"users", OUT_INT, 0},      {"box", OUT_INT, 0},       {"centroid_x", OUT_FLOAT, 0},
+        {"centroid_y", OUT_FLOAT, 0}, {"centroid_z", OUT_FLOAT, 0},
     };
     static const char sql[] =
         "SELECT c.run_id, r.finished_at, c.object_id, c.ecm_version, c.cluster_id, c.points, c.users, c.box_index, "
@@ -824,7 +833,7 @@ int query_clusters(sqlite3 *s, const query_filter *f, int format, char *err, siz
         "WHERE c.run_id = (SELECT max(id) FROM cluster_runs) AND (:object IS NULL OR c.object_id = :object) "
         "ORDER BY c.points DESC, c.object_id, c.cluster_id LIMIT :limit";
     int rc = begin_snapshot(s, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = run(s, sql, f, 0, NULL, cols, LEN(cols), 0, format, err, errlen);
     return end_snapshot(s, rc);
 }
@@ -849,11 +858,11 @@ int query_sessions(sqlite3 *s, const query_filter *f, int format, char *err, siz
         cat(sql, "AND s.started_at < :until ");
     cat(sql, "ORDER BY s.started_at DESC, s.id DESC LIMIT :limit");
     int rc = begin_snapshot(s, err, errlen);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
     int64_t user_id;
     rc = resolve(s, f, &user_id, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = run(s, sql, f, user_id, NULL, cols, LEN(cols), 0, format, err, errlen);
     return end_snapshot(s, rc);
 }

@@ -6,10 +6,18 @@
  * Every SQL text is assembled from constant fragments only; user values
  * (ids, names, times, regions, limits) are always bound as parameters.
  *
- * Return value: QUERY_OK; QUERY_NOT_FOUND when the object, version or user
- * asked about does not exist; QUERY_REFUSED when a rollback has nothing to
- * do or may not be done; QUERY_ERROR when the database failed or the output
- * could not be written. Every failure leaves a message in err.
+ * Results, in every file of cvre-admin (query, map, user, moderate,
+ * maintain): 0, or a negative errno with a message in err (cvre_fail):
+ *   -ENOENT  the object, version, user, account or session asked about does
+ *            not exist (or the name to unban is not banned);
+ *   -EPERM   refused, nothing written: a rollback with nothing to do or
+ *            that may not be done, a name taken, the world account, a
+ *            backup file that exists;
+ *   -EINVAL  input that is not an argument but is as bad: an empty, too
+ *            long or mistyped password;
+ *   -EIO     the database failed, or the output or the picture could not be
+ *            written (any other negative errno is taken as this).
+ * main.c's exit_status is the one place that turns them into exit codes.
  *
  * Only query_rollback writes, through db_ecm_write (db/ecm.h) on a handle
  * the caller opened read-write for it.
@@ -22,15 +30,6 @@
 #include <stdint.h>
 
 #include "db.h"
-
-enum { QUERY_OK = 0, QUERY_NOT_FOUND = 1, QUERY_REFUSED = 2, QUERY_ERROR = -1 };
-/* user.c's answer for input that is not an argument: an empty, too long or
- * mistyped password (cvre-admin's bad-arguments exit status). */
-enum { QUERY_USAGE = 3 };
-
-/* Writes the message into err (errlen bytes) and returns code: how query.c
- * and map.c fail. */
-int query_fail(char *err, size_t errlen, int code, const char *fmt, ...) __attribute__((format(printf, 4, 5)));
 
 /* Prints the rows of the prepared statement st as cols (out.h; vertical:
  * enum out_shape) in format, then finalizes st. */
@@ -47,7 +46,9 @@ typedef struct query_filter {
     double since, until; /* Unix seconds: since <= t < until */
     int has_region;
     double region[6]; /* x0, y0, z0, x1, y1, z1 with x0 <= x1 and so on; closed box */
-    int64_t limit;    /* most rows; 0: no limit */
+    int64_t limit;    /* most rows; 0: no limit. When more rows match than
+                       * are printed, a line on stderr says so (stdout
+                       * holds the rows alone, in every format). */
 } query_filter;
 
 /* Collisions matching f, newest first. */
@@ -64,13 +65,13 @@ int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
  * that occurs twice must occur twice in the other version to be in both). */
 int query_diff(sqlite3 *s, int64_t id, uint32_t a, uint32_t b, int format, char *err, size_t errlen);
 /* Whether object id can be rolled back to version k, on a read-only
- * snapshot: QUERY_NOT_FOUND (no such object or version), QUERY_REFUSED (the
+ * snapshot: -ENOENT (no such object or version), -EPERM (the
  * object was removed, or the version in force is k or has k's boxes), or
- * QUERY_OK with the version in force in *in_force. Prints nothing. */
+ * 0 with the version in force in *in_force. Prints nothing. */
 int query_rollback_check(sqlite3 *s, int64_t id, uint32_t k, uint32_t *in_force, char *err, size_t errlen);
 /* Writes version k's boxes as a new version of object id whose parent is
  * in_force (reason "rollback", restores k) and prints that version.
- * QUERY_REFUSED if in_force is no longer in force (another writer came
+ * -EPERM if in_force is no longer in force (another writer came
  * first: nothing written). */
 int query_rollback(db *d, int64_t id, uint32_t k, uint32_t in_force, int format, char *err, size_t errlen);
 /* Counts of everything, and the time span the store covers. */

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "account.h"
+#include "err.h"
 #include "out.h"
 #include "query.h"
 
@@ -46,10 +47,10 @@ static int print_accounts(sqlite3 *s, const char *name, int format, char *err, s
 {
     sqlite3_stmt *st;
     if (sqlite3_exec(s, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot start a read transaction: %s", sqlite3_errmsg(s));
-    int rc = QUERY_ERROR;
+        return cvre_fail(err, errlen, -EIO, "cannot start a read transaction: %s", sqlite3_errmsg(s));
+    int rc = -EIO;
     if (sqlite3_prepare_v2(s, account_sql, -1, &st, NULL) != SQLITE_OK) {
-        query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     } else {
         sqlite3_bind_double(st, sqlite3_bind_parameter_index(st, ":now"), db_now());
         if (name)
@@ -67,7 +68,7 @@ static int print_deleted(sqlite3 *s, const db_account *a, int64_t objects, int f
     static const out_column cols[] = {{"id", OUT_INT, 0}, {"name", OUT_TEXT, 0}, {"objects_to_world", OUT_INT, 0}};
     sqlite3_stmt *st;
     if (sqlite3_prepare_v2(s, "SELECT ?1, ?2, ?3", -1, &st, NULL) != SQLITE_OK)
-        return query_fail(err, errlen, QUERY_ERROR, "query failed: %s", sqlite3_errmsg(s));
+        return cvre_fail(err, errlen, -EIO, "query failed: %s", sqlite3_errmsg(s));
     sqlite3_bind_int64(st, 1, a->id);
     sqlite3_bind_text(st, 2, a->name, -1, SQLITE_STATIC);
     sqlite3_bind_int64(st, 3, objects);
@@ -138,14 +139,14 @@ static long read_line(char *buf, size_t cap)
 }
 
 /* One password line, prompted for on a terminal with echo off (prompt
- * NULL: from a pipe, no prompt). Returns QUERY_OK and *len. */
+ * NULL: from a pipe, no prompt). Returns 0 and *len. */
 static int read_password(const char *prompt, char *buf, size_t *len, char *err, size_t errlen)
 {
     if (prompt) {
         /* Echo off first: it discards what was typed ahead, so the prompt
          * comes after, when an answer is read. */
         if (tty_echo_off(1) != 0)
-            return query_fail(err, errlen, QUERY_ERROR, "cannot turn the terminal's echo off: %s", strerror(errno));
+            return cvre_fail(err, errlen, -EIO, "cannot turn the terminal's echo off: %s", strerror(errno));
         fputs(prompt, stderr);
         fflush(stderr);
     }
@@ -156,14 +157,14 @@ static int read_password(const char *prompt, char *buf, size_t *len, char *err, 
         fputc('\n', stderr); /* the Enter that was not echoed */
     }
     if (n == -1)
-        return query_fail(err, errlen, QUERY_ERROR, "cannot read the password: %s", strerror(saved));
+        return cvre_fail(err, errlen, -EIO, "cannot read the password: %s", strerror(saved));
     if (n == -2)
-        return query_fail(err, errlen, QUERY_USAGE, "the password is longer than %u bytes; nothing written",
+        return cvre_fail(err, errlen, -EINVAL, "the password is longer than %u bytes; nothing written",
                           DB_ACCOUNT_PASSWORD_MAX);
     if (n == 0)
-        return query_fail(err, errlen, QUERY_USAGE, "empty password refused; nothing written");
+        return cvre_fail(err, errlen, -EINVAL, "empty password refused; nothing written");
     *len = (size_t)n;
-    return QUERY_OK;
+    return 0;
 }
 
 /* The new password of the account named name: asked twice on the terminal,
@@ -177,10 +178,10 @@ static int new_password(const user_request *r, const char *name, char *pw, size_
     size_t again_len = 0;
     snprintf(prompt, sizeof prompt, "New password for %s: ", name);
     int rc = read_password(prompt, pw, len, err, errlen);
-    if (rc == QUERY_OK)
+    if (rc == 0)
         rc = read_password("Again: ", again, &again_len, err, errlen);
-    if (rc == QUERY_OK && (again_len != *len || sodium_memcmp(again, pw, *len) != 0))
-        rc = query_fail(err, errlen, QUERY_USAGE, "the two passwords differ; nothing written");
+    if (rc == 0 && (again_len != *len || sodium_memcmp(again, pw, *len) != 0))
+        rc = cvre_fail(err, errlen, -EINVAL, "the two passwords differ; nothing written");
     sodium_memzero(again, sizeof again);
     return rc;
 }
@@ -194,18 +195,18 @@ static int check(db *ro, const user_request *r, db_account *a, char *err, size_t
 {
     int rc = db_account_find(ro, r->name, a);
     if (rc != 0 && rc != -ENOENT)
-        return query_fail(err, errlen, QUERY_ERROR, "%s", db_error(ro));
+        return cvre_fail(err, errlen, -EIO, "%s", db_error(ro));
     if (r->verb == USER_ADD)
-        return rc == 0 ? query_fail(err, errlen, QUERY_REFUSED, "an account named \"%s\" exists already; nothing written",
+        return rc == 0 ? cvre_fail(err, errlen, -EPERM, "an account named \"%s\" exists already; nothing written",
                                     a->name)
-                       : QUERY_OK;
+                       : 0;
     if (rc == -ENOENT)
-        return query_fail(err, errlen, QUERY_NOT_FOUND, "no account named \"%s\"", r->name);
+        return cvre_fail(err, errlen, -ENOENT, "no account named \"%s\"", r->name);
     if (a->id == DB_ACCOUNT_WORLD)
-        return query_fail(err, errlen, QUERY_REFUSED,
+        return cvre_fail(err, errlen, -EPERM,
                           "\"%s\" is the reserved account of the world's objects: it %s; nothing written", a->name,
                           r->verb == USER_DEL ? "cannot be deleted" : "cannot log in, so it has no password");
-    return QUERY_OK;
+    return 0;
 }
 
 /* The write, on a handle opened read-write for it, and what it prints. */
@@ -218,12 +219,12 @@ static int write_account(db *d, const user_request *r, const db_account *a, cons
                                       : db_account_delete(d, a->name, &objects);
     /* Another writer may have come between the check and this write. */
     if (rc == -EEXIST || rc == -EPERM)
-        return query_fail(err, errlen, QUERY_REFUSED, "%s; nothing written", db_error(d));
+        return cvre_fail(err, errlen, -EPERM, "%s; nothing written", db_error(d));
     if (rc == -ENOENT)
-        return query_fail(err, errlen, QUERY_NOT_FOUND, "no account named \"%s\" (any more); nothing written",
+        return cvre_fail(err, errlen, -ENOENT, "no account named \"%s\" (any more); nothing written",
                           r->name);
     if (rc != 0)
-        return query_fail(err, errlen, QUERY_ERROR, "nothing written: %s%s", db_error(d),
+        return cvre_fail(err, errlen, -EIO, "nothing written: %s%s", db_error(d),
                           db_busy(d) ? " (another process held the write lock)" : "");
     if (r->verb == USER_DEL)
         return print_deleted(db_sqlite(d), a, objects, format, err, errlen);
@@ -240,17 +241,17 @@ int user_run(db *ro, const char *path, const user_request *r, int format, char *
     db_account a = {0};
     int rc = check(ro, r, &a, err, errlen);
     db_close(ro);
-    if (rc != QUERY_OK)
+    if (rc != 0)
         return rc;
     char pw[DB_ACCOUNT_PASSWORD_MAX];
     size_t len = 0;
     if (r->verb != USER_DEL)
         rc = new_password(r, r->verb == USER_ADD ? r->name : a.name, pw, &len, err, errlen);
-    if (rc == QUERY_OK) {
+    if (rc == 0) {
         char why[512];
         db *d = db_open(path, DB_READWRITE, why, sizeof why);
         if (!d) {
-            rc = query_fail(err, errlen, QUERY_ERROR, "cannot open for writing: %s", why);
+            rc = cvre_fail(err, errlen, -EIO, "cannot open for writing: %s", why);
         } else {
             rc = write_account(d, r, &a, pw, len, format, err, errlen);
             db_close(d);

@@ -5,8 +5,8 @@
  * writes on a refusal: check on the read-only handle, read the password,
  * then open the file read-write for the one write.
  *
- * Return values are query.h's (QUERY_OK, QUERY_NOT_FOUND, QUERY_REFUSED,
- * QUERY_USAGE, QUERY_ERROR) with a message in err.
+ * Return values are query.h's (0, -ENOENT, -EPERM, -EINVAL, -EIO) with a
+ * message in err.
  */
 #ifndef CVRE_ADMIN_USER_H
 #define CVRE_ADMIN_USER_H

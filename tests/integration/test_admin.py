@@ -13,6 +13,7 @@ import os
 import random
 import shutil
 import sqlite3
+import struct
 import tempfile
 import threading
 import time
@@ -613,7 +614,85 @@ def test_random_log_against_brute_force():
     assert got["last"] == iso(max(T0 + 7500, max(c["at"] for c in rows))), got
 
 
-run([test_collisions_every_form, test_collisions_filters, test_unknown_object_and_user, test_top_objects,
+def test_limit_is_said():
+    """A --limit that cuts the answer short says so on stderr, in every
+    form; stdout holds the rows alone. An answer that fits says nothing."""
+    for form in ([], ["--csv"], ["--json"]):
+        rc, out, err = admin("collisions", "--limit", "7", *form, db=DB)
+        assert err == "cvre-admin: showing the first 7 rows; more match (--limit N for more, --limit 0 for all)\n", \
+            (form, err)
+        if form == ["--json"]:
+            assert len(json.loads(out)) == 7
+        for limit in ("60", "0", "100"):  # 60 rows match: all of them fit
+            _, _, err = admin("collisions", "--limit", limit, *form, db=DB)
+            assert err == "", (form, limit, err)
+    _, out, err = admin("collisions", "--limit", "59", "--json", db=DB)
+    assert len(json.loads(out)) == 59 and "showing the first 59 rows; more match" in err, err
+    # The default limit, 100, on 180 rows: said.
+    d = tempfile.mkdtemp(prefix="cvre-admin-limit-")
+    TEMP_DIRS.append(d)
+    db = os.path.join(d, "many.db")
+    shutil.copy(DB, db)
+    more = [dict(c, at=c["at"] + shift) for shift in (100000, 200000) for c in COLLISIONS]
+    c = sqlite3.connect(db)
+    insert_collisions(c, more)
+    c.commit()
+    c.close()
+    _, out, err = admin("collisions", db=db)
+    assert len(table(out)[1]) == 100 and "showing the first 100 rows; more match" in err, err
+    _, out, err = admin("collisions", "--limit", "0", "--csv", db=db)
+    assert out.count("\r\n") == 181 and err == "", (out.count("\r\n"), err)
+    for argv in (["top-objects", "--limit", "1"], ["sessions", "--limit", "2"]):
+        _, _, err = admin(*argv, db=DB)
+        assert f"showing the first {argv[-1]} rows; more match" in err, (argv, err)
+
+
+def f32(v):
+    return struct.unpack("<f", struct.pack("<f", v))[0]
+
+
+def test_float32_values_print_short():
+    """Coordinates, normals and velocities were floats before they were
+    stored: CSV and JSON print the shortest decimal that reads back as the
+    same float (0.9, not 0.8999999761581421). A value that is no float
+    (computed in double) keeps every digit."""
+    d = tempfile.mkdtemp(prefix="cvre-admin-f32-")
+    TEMP_DIRS.append(d)
+    db = os.path.join(d, "f32.db")
+    shutil.copy(DB, db)
+    typed = (0.9, -7.3, 1e-3, 123456.7, 0.1, 1.0 / 3, 3.4e38, 65504.0, 2.5, 16777217.0, 1e-40, 0.7)
+    row = dict(COLLISIONS[0], at=T0 + 99999, world=typed[0:3], local=typed[3:6], normal=typed[6:9],
+               vel=typed[9:12])
+    for k in ("world", "local", "normal", "vel"):
+        row[k] = tuple(f32(v) for v in row[k])
+    c = sqlite3.connect(db)
+    insert_collisions(c, [row])
+    c.execute("UPDATE objects SET pos_x = ?, yaw = ? WHERE id = 1", (0.123456789012, f32(0.9)))  # a double, a float
+    c.commit()
+    c.close()
+    keys = ["world_x", "world_y", "world_z", "local_x", "local_y", "local_z", "normal_x", "normal_y", "normal_z",
+            "velocity_x", "velocity_y", "velocity_z"]
+    want = ["0.9", "-7.3", "0.001", "123456.7", "0.1", "0.33333334", "3.4e+38", "65504", "2.5", "16777216",
+            "9.99995e-41", "0.7"]
+    _, out, _ = admin("collisions", "--limit", "1", "--csv", db=db)
+    head, vals = list(csv.reader(io.StringIO(out, newline="")))
+    got = [vals[head.index(k)] for k in keys]
+    assert got == want, got
+    _, out, _ = admin("collisions", "--limit", "1", "--json", db=db)
+    raw = out.split("\n")[1]
+    for k, w in zip(keys, want):
+        assert f'"{k}": {w},' in raw or f'"{k}": {w}}}' in raw, (k, w, raw)
+    obj = json.loads(out)[0]
+    for k in keys:  # each reads back as the float stored
+        key = k.replace("velocity", "vel").split("_")[0]
+        assert f32(obj[k]) == row[key]["xyz".index(k[-1])], (k, obj[k])
+    _, out, _ = admin("object", "1", "--json", db=db)
+    assert '"pos_x": 0.123456789012,' in out and '"yaw": 0.9,' in out, out
+    _, out, _ = admin("object", "1", "--csv", db=db)
+    assert ",0.123456789012," in out and ",0.9," in out, out
+
+
+run([test_collisions_every_form, test_limit_is_said, test_float32_values_print_short, test_collisions_filters, test_unknown_object_and_user, test_top_objects,
      test_object_summary, test_versions, test_totals, test_sessions, test_help_and_bad_arguments,
      test_unusable_databases, test_read_only, test_while_a_writer_commits,
      test_random_log_against_brute_force])
