@@ -67,9 +67,9 @@ int metrics__start(server *s, char *err, size_t errlen)
         return 0;
     http_server_config hc = {.name = "metrics", .host = s->cfg.metrics_host, .port = s->cfg.metrics_port,
                              .max_conns = HTTP_CONNS_DEFAULT};
-    s->metrics = http_server_start(s->loop, &hc, on_request, s, err, errlen);
-    if (!s->metrics)
-        return -1;
+    int rc = http_server_start(s->loop, &hc, on_request, s, &s->metrics, err, errlen);
+    if (rc < 0)
+        return rc;
     log_info("metrics on http://%s" METRICS_PATH, http_server_address(s->metrics));
     return 0;
 }

@@ -10,7 +10,7 @@
 
 #include "serverInt.h"
 
-/* Starts the endpoint if cfg.metrics_host is set. Returns 0, or -1 with a
+/* Starts the endpoint if cfg.metrics_host is set. Returns 0, or -errno with a
  * message in err. */
 int metrics__start(server *s, char *err, size_t errlen);
 /* Stops it; no-op when it is off. */

@@ -21,6 +21,7 @@
 
 #include "alloc.h"
 #include "ecm.h"
+#include "err.h"
 #include "log.h"
 #include "import_proc.h"
 #include "clients.h"
@@ -37,12 +38,14 @@ static scene_limits world_limits(const server *s)
 /* ---- telling clients: each one the objects near it ------------------- */
 
 /* Appends an OBJECT_INFO for o to c's output; upload_id is non-zero only for
- * the uploader's copy. Returns 0, or -1 when c is being disconnected. */
+ * the uploader's copy. Returns 0, or clients__out_begin's -errno when c is
+ * being disconnected. */
 static int send_info(server *s, client *c, const scene_object *o, uint32_t upload_id)
 {
     proto_writer w;
-    if (clients__out_begin(s, c, PROTO_SIZE_OBJECT_INFO(o->box_count), &w) < 0)
-        return -1;
+    int rc = clients__out_begin(s, c, PROTO_SIZE_OBJECT_INFO(o->box_count), &w);
+    if (rc < 0)
+        return rc;
     float(*lo)[3] = cvre_xmalloc(o->box_count * sizeof *lo), (*hi)[3] = cvre_xmalloc(o->box_count * sizeof *hi);
     for (uint32_t i = 0; i < o->box_count; i++) {
         memcpy(lo[i], o->world[i].min, sizeof lo[i]);
@@ -641,14 +644,14 @@ static void world_load_free(world_load *wl)
     free(wl->models);
 }
 
-/* Reads a whole file into a new buffer (at most max bytes). */
-static uint8_t *slurp(const char *path, size_t max, size_t *len, char *err, size_t errlen)
+/* Reads a whole file into a new buffer *out (at most max bytes; the
+ * caller frees it) of *len bytes. Returns 0, or -errno with a message in
+ * err (-EFBIG: over max). */
+static int slurp(const char *path, size_t max, uint8_t **out, size_t *len, char *err, size_t errlen)
 {
     FILE *f = fopen(path, "rb");
-    if (!f) {
-        snprintf(err, errlen, "%s: %s", path, strerror(errno));
-        return NULL;
-    }
+    if (!f)
+        return cvre_fail(err, errlen, -errno, "%s: %s", path, strerror(errno));
     uint8_t *buf = NULL;
     size_t n = 0, cap = 0;
     for (;;) {
@@ -661,58 +664,64 @@ static uint8_t *slurp(const char *path, size_t max, size_t *len, char *err, size
         if (k == 0)
             break;
         if (n > max) {
-            snprintf(err, errlen, "%s: over the upload limit of %zu bytes", path, max);
             free(buf);
             fclose(f);
-            return NULL;
+            return cvre_fail(err, errlen, -EFBIG, "%s: over the upload limit of %zu bytes", path, max);
         }
     }
     fclose(f);
+    *out = buf;
     *len = n;
-    return buf;
+    return 0;
 }
 
-/* The mesh of a model file as opt imports it: from the isolated importer
- * the first time, from wl after. NULL with a message in err. */
-static const import_mesh *world_model_mesh(server *s, world_load *wl, const char *path, const import_options *opt,
-                                           char *err, size_t errlen)
+/* The mesh of a model file as opt imports it, in *out: from the isolated
+ * importer the first time, from wl after (wl owns it). Returns 0, or
+ * -errno with a message in err. */
+static int world_model_mesh(server *s, world_load *wl, const char *path, const import_options *opt,
+                            const import_mesh **out, char *err, size_t errlen)
 {
     for (uint32_t i = 0; i < wl->nmodels; i++) {
         world_model *m = &wl->models[i];
-        if (strcmp(m->path, path) == 0 && m->z_up == opt->z_up && m->unit_scale == opt->unit_scale)
-            return &m->mesh;
+        if (strcmp(m->path, path) == 0 && m->z_up == opt->z_up && m->unit_scale == opt->unit_scale) {
+            *out = &m->mesh;
+            return 0;
+        }
     }
-    size_t len;
-    uint8_t *data = slurp(path, s->cfg.max_upload, &len, err, errlen);
-    if (!data)
-        return NULL;
+    size_t len = 0;
+    uint8_t *data = NULL;
+    int rc = slurp(path, s->cfg.max_upload, &data, &len, err, errlen);
+    if (rc < 0)
+        return rc;
     const char *dot = strrchr(path, '.');
     import_mesh mesh = {0};
-    int rc = import_isolated(&s->cfg.importer, data, len, dot ? dot + 1 : NULL, opt, &mesh, err, errlen);
+    rc = import_isolated(&s->cfg.importer, data, len, dot ? dot + 1 : NULL, opt, &mesh, err, errlen);
     free(data);
     if (rc < 0)
-        return NULL;
+        return rc;
     wl->models = cvre_xrealloc(wl->models, (wl->nmodels + 1) * sizeof *wl->models);
     wl->models[wl->nmodels] = (world_model){cvre_xstrdup(path), opt->z_up, opt->unit_scale, mesh};
-    return &wl->models[wl->nmodels++].mesh;
+    *out = &wl->models[wl->nmodels++].mesh;
+    return 0;
 }
 
-/* Puts one model file into the world now (start-up, before serving). */
+/* Puts one model file into the world now (start-up, before serving).
+ * Returns 0, or -errno with a message in err. */
 static int preload(server *s, world_load *wl, const char *path, const char *name, const import_options *opt,
                    const proto_transform *at, char *err, size_t errlen)
 {
-    const import_mesh *mesh = world_model_mesh(s, wl, path, opt, err, errlen);
-    if (!mesh)
-        return -1;
+    const import_mesh *mesh;
+    int rc = world_model_mesh(s, wl, path, opt, &mesh, err, errlen);
+    if (rc < 0)
+        return rc;
     scene_box mbr;
     memcpy(mbr.min, mesh->min, sizeof mbr.min);
     memcpy(mbr.max, mesh->max, sizeof mbr.max);
     char why[160];
     scene_limits lim = world_limits(s);
-    if (scene_check_fit(&mbr, 1, at, &lim, why, sizeof why) < 0) {
-        snprintf(err, errlen, "%s cannot go there: %s", path, why);
-        return -1;
-    }
+    rc = scene_check_fit(&mbr, 1, at, &lim, why, sizeof why);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "%s cannot go there: %s", path, why);
     const char *dot = strrchr(path, '.');
     float box[1][6] = {{mbr.min[0], mbr.min[1], mbr.min[2], mbr.max[0], mbr.max[1], mbr.max[2]}};
     db_object o = {.owner = WORLD_OWNER, .name = name, .format = dot ? dot + 1 : "detected", .yaw = at->yaw,
@@ -721,15 +730,12 @@ static int preload(server *s, world_load *wl, const char *path, const char *name
     memcpy(o.pos, at->pos, sizeof o.pos);
     memcpy(o.min, mbr.min, sizeof o.min);
     memcpy(o.max, mbr.max, sizeof o.max);
-    if (db_object_create(s->db, &o, db_now()) < 0) {
-        snprintf(err, errlen, "%s: %s", path, db_error(s->db));
-        return -1;
-    }
-    int rc = add_stored(s, &o);
-    if (rc < 0) {
-        snprintf(err, errlen, "%s: %s", path, strerror(-rc));
-        return -1;
-    }
+    rc = db_object_create(s->db, &o, db_now());
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "%s: %s", path, db_error(s->db));
+    rc = add_stored(s, &o);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "%s: %s", path, strerror(-rc));
     log_debug("world: object %lld \"%s\" loaded from %s (%u triangles)", (long long)o.id, name, path, o.tri_count);
     wl->loaded++;
     return 0;
@@ -801,24 +807,21 @@ static int world_line(server *s, world_load *wl, const char *dir, char *line, in
         return 0;
     }
     char msg[sizeof path + 1024];
-    if (preload(s, wl, path, name, &opt, &at, msg, sizeof msg) < 0) {
-        snprintf(err, errlen, "line %d: %s", lineno, msg);
-        return -1;
-    }
+    int rc = preload(s, wl, path, name, &opt, &at, msg, sizeof msg);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "line %d: %s", lineno, msg);
     return 0;
 bad:
-    snprintf(err, errlen, "line %d: expected: object PATH [name NAME] [up y|z] [units S] at X Y Z [yaw DEG] [scale S]",
-             lineno);
-    return -1;
+    return cvre_fail(err, errlen, -EINVAL,
+                     "line %d: expected: object PATH [name NAME] [up y|z] [units S] at X Y Z [yaw DEG] [scale S]",
+                     lineno);
 }
 
 static int load_world_file(server *s, const char *file, char *err, size_t errlen)
 {
     FILE *f = fopen(file, "r");
-    if (!f) {
-        snprintf(err, errlen, "world file %s: %s", file, strerror(errno));
-        return -1;
-    }
+    if (!f)
+        return cvre_fail(err, errlen, -errno, "world file %s: %s", file, strerror(errno));
     world_load wl = {0};
     for (uint32_t i = 0; i < scene_count(s->scene); i++) {
         const scene_object *o = scene_at(s->scene, i);
@@ -834,7 +837,7 @@ static int load_world_file(server *s, const char *file, char *err, size_t errlen
         lineno++;
         rc = world_line(s, &wl, dir, line, lineno, msg, sizeof msg);
         if (rc < 0)
-            snprintf(err, errlen, "world file %s: %s", file, msg);
+            cvre_fail(err, errlen, rc, "world file %s: %s", file, msg);
     }
     fclose(f);
     if (rc == 0)
@@ -849,28 +852,26 @@ int objects__start(server *s, char *err, size_t errlen)
     float half = s->cfg.world_size * 0.5f;
     float lo[3] = {-half, 0, -half}, hi[3] = {half, SRV_WORLD_HEIGHT, half};
     s->scene = scene_create(lo, hi);
-    if (!s->scene) {
-        snprintf(err, errlen, "out of memory");
-        return -1;
-    }
+    if (!s->scene)
+        return cvre_fail(err, errlen, -ENOMEM, "out of memory");
     /* Changes after this point reach the scene through the refiner. */
     int64_t feed_head;
-    if (db_ecm_events_head(s->db, &feed_head) < 0 || restore_all(s) < 0) {
-        snprintf(err, errlen, "database %s: %s", s->cfg.db_path, db_error(s->db));
-        return -1;
-    }
+    int rc = db_ecm_events_head(s->db, &feed_head);
+    if (rc == 0)
+        rc = restore_all(s);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "database %s: %s", s->cfg.db_path, db_error(s->db));
     if (scene_count(s->scene))
         log_info("restored %u objects from %s", scene_count(s->scene), s->cfg.db_path);
-    if (s->cfg.world_file && load_world_file(s, s->cfg.world_file, err, errlen) < 0)
-        return -1;
+    if (s->cfg.world_file && (rc = load_world_file(s, s->cfg.world_file, err, errlen)) < 0)
+        return rc;
     importer_limits lim = {s->cfg.max_triangles, s->cfg.quota_objects, s->cfg.quota_bytes, world_limits(s)};
     s->importer = importer_start(s->cfg.db_path, &s->cfg.importer, &lim, err, errlen);
     if (!s->importer)
-        return -1;
-    if (ev_io_add(s->loop, importer_fd(s->importer), EV_READ, on_import_results, s) < 0) {
-        snprintf(err, errlen, "event loop setup failed");
-        return -1;
-    }
+        return -EIO; /* importer_start said why in err */
+    rc = ev_io_add(s->loop, importer_fd(s->importer), EV_READ, on_import_results, s);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "event loop: %s", strerror(-rc));
     const server_config *c = &s->cfg;
     refiner_config rcfg = {.db_path = c->db_path, .feed_after = feed_head, .interval_s = c->refine_interval_s,
                          .cluster = {.eps = c->refine_eps, .min_points = c->refine_min_points,
@@ -881,11 +882,10 @@ int objects__start(server *s, char *err, size_t errlen)
     rcfg.ecm.max_empty = c->refine_max_empty;
     s->refiner = refiner_start(&rcfg, err, errlen);
     if (!s->refiner)
-        return -1;
-    if (ev_io_add(s->loop, refiner_fd(s->refiner), EV_READ, on_refiner_updates, s) < 0) {
-        snprintf(err, errlen, "event loop setup failed");
-        return -1;
-    }
+        return -EIO; /* refiner_start said why in err */
+    rc = ev_io_add(s->loop, refiner_fd(s->refiner), EV_READ, on_refiner_updates, s);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "event loop: %s", strerror(-rc));
     if (c->refine_interval_s > 0)
         log_info("collision maps: looking for clusters every %g s (eps %g m, %u collisions, %u users; grid 2^%u, "
                  "at most %u boxes)",

@@ -16,10 +16,11 @@
 #include <sys/signalfd.h>
 #include <unistd.h>
 
+#include "admission.h"
 #include "alloc.h"
 #include "clients.h"
+#include "err.h"
 #include "handlers.h"
-#include "listener.h"
 #include "log.h"
 #include "metrics_endpoint.h"
 #include "moderation.h"
@@ -112,7 +113,7 @@ static void begin_shutdown(server *s, const char *why)
     log_info("%s: shutting down, saying bye to %u clients", why, s->nclients);
     s->stopping = 1;
     s->stop_deadline_ns = server__now(s) + SHUTDOWN_GRACE_MS * NS_PER_MS;
-    listener__stop(s);
+    admission__stop(s);
     for (uint32_t i = 0; i < s->nclients; i++)
         say_bye(s, s->clients[i], PROTO_BYE_SHUTDOWN, "shutdown");
 }
@@ -219,10 +220,8 @@ static int setup_signals(server *s, char *err, size_t errlen)
     sigaddset(&set, SIGINT);
     sigaddset(&set, SIGTERM);
     signal(SIGPIPE, SIG_IGN);
-    if (sigprocmask(SIG_BLOCK, &set, NULL) < 0 || (s->signal_fd = signalfd(-1, &set, SFD_NONBLOCK | SFD_CLOEXEC)) < 0) {
-        snprintf(err, errlen, "signalfd: %s", strerror(errno));
-        return -1;
-    }
+    if (sigprocmask(SIG_BLOCK, &set, NULL) < 0 || (s->signal_fd = signalfd(-1, &set, SFD_NONBLOCK | SFD_CLOEXEC)) < 0)
+        return cvre_fail(err, errlen, -errno, "signalfd: %s", strerror(errno));
     return 0;
 }
 
@@ -230,7 +229,7 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
 {
     server *s = cvre_xcalloc(1, sizeof *s);
     s->cfg = *cfg;
-    s->listen_fd = s->signal_fd = -1;
+    s->signal_fd = -1;
     /* fds are handed out lowest first, so this bounds every client fd. */
     s->max_fd = (int)cfg->max_clients + 64;
     float half = cfg->world_size * 0.5f;
@@ -280,7 +279,7 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     s->log = dblog_open(cfg->db_path, &lc, err, errlen);
     if (!s->log || objects__start(s, err, errlen) < 0)
         goto fail;
-    if (listener__start(s, err, errlen) < 0)
+    if (admission__start(s, err, errlen) < 0)
         goto fail;
     s->logins = ratelimit_create(SRV_LOGIN_SLOTS, SRV_LOGIN_PER_SECOND, cfg->login_burst);
     s->per_address = addrcount_create(SRV_LOGIN_SLOTS);
@@ -335,7 +334,7 @@ int server_run(server *s)
     log_info("stopped: %llu connections served; collision log: %llu rows written, %llu dropped, %llu lost",
              (unsigned long long)s->st.accepted, (unsigned long long)ls.written, (unsigned long long)ls.dropped,
              (unsigned long long)ls.lost);
-    return rc < 0 ? -1 : 0;
+    return rc < 0 ? rc : 0;
 }
 
 void server_destroy(server *s)
@@ -352,7 +351,7 @@ void server_destroy(server *s)
     if (s->log)
         dblog_stop(s->log, NULL);
     metrics__stop(s);
-    listener__stop(s);
+    admission__stop(s);
     if (s->loop)
         ev_destroy(s->loop);
     if (s->signal_fd >= 0)

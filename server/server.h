@@ -59,7 +59,7 @@ server *server_create(const server_config *cfg, char *err, size_t errlen);
 /* "HOST:PORT" as bound (IPv6 in brackets). */
 const char *server_address(const server *s);
 /* Serves until SIGINT or SIGTERM, then says bye to every client, records
- * the end of their sessions and returns 0; -1 on a fatal loop error. */
+ * the end of their sessions and returns 0; the loop's -errno if it failed. */
 int server_run(server *s);
 void server_destroy(server *s);
 

@@ -4,7 +4,7 @@
  * declares its functions in its own header:
  *
  *   server.c       lifecycle: create, run, shutdown, housekeeping, reaping
- *   listener.c     the protocol's listening socket: accept and admission
+ *   admission.c    who may connect, and the client a connection becomes
  *   handlers.c     a client's frames in, and what each message does
  *   tick.c         the fixed-rate step and its collisions
  *   avatar_view.c  what each client is told of the avatars near it
@@ -13,7 +13,7 @@
  *   session_log.c  sessions and object changes queued for the store
  *   clients.c      one client's connection: output, close, linger
  *
- * Calls go down this list, never up: server.c drives everything; listener.c
+ * Calls go down this list, never up: server.c drives everything; admission.c
  * hands a new connection to handlers.c; handlers.c and tick.c call objects.c
  * and avatar_view.c; those call clients.c and session_log.c. objects.c knows
  * nothing of the files above it: it is called, and answers through
@@ -31,6 +31,7 @@
 #include "http_server.h"
 #include "auth.h"
 #include "importer.h"
+#include "listener.h"
 #include "metrics.h"
 #include "proto.h"
 #include "ratelimit.h"
@@ -143,7 +144,8 @@ typedef struct stats {
 struct server {
     server_config cfg;
     ev_loop *loop;
-    int listen_fd, signal_fd, max_fd;
+    net_listener *listener; /* the protocol's (admission.c); NULL once shut down */
+    int signal_fd, max_fd;
     db *db;
     world *world;
     client **clients;

@@ -1,5 +1,6 @@
 #include "world.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -140,7 +141,7 @@ static int find_free_spot(world *w, const scene *sc, const float box[3], float p
             return 0;
         }
     }
-    return -1;
+    return -ENOSPC;
 }
 
 const world_avatar *world_add(world *w, const scene *sc, const char *name, uint32_t name_len, const float box[3],

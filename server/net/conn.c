@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "alloc.h"
+#include "err.h"
 #include "srv_limits.h"
 
 int conn_init(conn *c, int fd)
@@ -146,11 +147,10 @@ int conn_listen(const char *host, uint16_t port, int backlog, char *address, siz
     char service[8];
     snprintf(service, sizeof service, "%u", port);
     int rc = getaddrinfo(host, service, &hints, &res);
-    if (rc != 0) {
-        snprintf(err, errlen, "cannot resolve %s: %s", host, gai_strerror(rc));
-        return -1;
-    }
-    int fd = -1, saved = 0;
+    if (rc != 0)
+        return cvre_fail(err, errlen, rc == EAI_SYSTEM ? -errno : rc == EAI_MEMORY ? -ENOMEM : -EADDRNOTAVAIL,
+                         "cannot resolve %s: %s", host, gai_strerror(rc));
+    int fd = -1, saved = EADDRNOTAVAIL; /* if no address came back */
     for (struct addrinfo *ai = res; ai; ai = ai->ai_next) {
         fd = socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC, ai->ai_protocol);
         if (fd < 0) {
@@ -166,10 +166,8 @@ int conn_listen(const char *host, uint16_t port, int backlog, char *address, siz
         fd = -1;
     }
     freeaddrinfo(res);
-    if (fd < 0) {
-        snprintf(err, errlen, "cannot listen on %s:%u: %s", host, port, strerror(saved));
-        return -1;
-    }
+    if (fd < 0)
+        return cvre_fail(err, errlen, -saved, "cannot listen on %s:%u: %s", host, port, strerror(saved));
     struct sockaddr_storage sa;
     socklen_t len = sizeof sa;
     getsockname(fd, (struct sockaddr *)&sa, &len);

@@ -52,8 +52,8 @@ ssize_t conn_flush(conn *c);
 
 /* Listens on host:port (port 0: any free one) with a non-blocking,
  * close-on-exec socket; writes the bound address to address as
- * conn_peer_name does. Returns the socket, or -1 with a message in err.
- * Every endpoint (the protocol's, the metrics one) listens through here. */
+ * conn_peer_name does. Returns the socket, or -errno with a message in
+ * err. Endpoints listen through listener.h, which calls this. */
 int conn_listen(const char *host, uint16_t port, int backlog, char *address, size_t addrlen, char *err,
                 size_t errlen);
 /* Accepts a connection waiting on listen_fd, non-blocking and

@@ -39,13 +39,14 @@ struct http_request {
     char text[HTTP_HEAD_MAX + HTTP_URL_MAX + 2];
 };
 
-/* Makes status the request's result (the first one set stands) and stops
- * the parser: a callback's non-zero return is an error for it. */
-static int fail(http_request *r, int status)
+/* Makes status the request's result (the first one set stands) and
+ * returns -EPROTO, which a callback returns to stop the parser (any
+ * non-zero return is an error for it). */
+static int request_reject(http_request *r, int status)
 {
     if (r->result == HTTP_INCOMPLETE)
         r->result = status;
-    return -1;
+    return -EPROTO;
 }
 
 /* Adds n bytes to the string being built, keeping a byte for its NUL.
@@ -55,9 +56,9 @@ static int fail(http_request *r, int status)
 static int append(http_request *r, const char *at, size_t n)
 {
     if (memchr(at, 0, n))
-        return fail(r, 400);
+        return request_reject(r, 400);
     if (n + 1 > sizeof r->text - r->len)
-        return fail(r, 431); /* GCOVR_EXCL_LINE: no request reaches it (above) */
+        return request_reject(r, 431); /* GCOVR_EXCL_LINE: no request reaches it (above) */
     memcpy(r->text + r->len, at, n);
     r->len += n;
     return 0;
@@ -88,7 +89,7 @@ static int on_url(http_parser *p, const char *at, size_t n)
         r->in = IN_URL;
     }
     if (r->len - r->url + n > HTTP_URL_MAX)
-        return fail(r, 414);
+        return request_reject(r, 414);
     return append(r, at, n);
 }
 
@@ -98,7 +99,7 @@ static int on_header_field(http_parser *p, const char *at, size_t n)
     if (r->in != IN_FIELD) {
         end_piece(r);
         if (r->nheaders == HTTP_HEADERS_MAX)
-            return fail(r, 431);
+            return request_reject(r, 431);
         r->headers[r->nheaders++] = (header){.name = (uint16_t)r->len, .value = NO_VALUE};
         r->in = IN_FIELD;
     }
@@ -119,7 +120,7 @@ static int on_header_value(http_parser *p, const char *at, size_t n)
 /* The path of the target, copied after the head's strings: the path of
  * origin form (/a/b?c) or absolute form (http://h/a/b), "/" for an
  * absolute form without one, "*" for OPTIONS *, the authority for
- * CONNECT. 0, or -1 if the target is not a URL. */
+ * CONNECT. 0, or -EPROTO if the target is not a URL (the result: 400). */
 static int copy_path(http_request *r, int is_connect)
 {
     const char *url = r->text + r->url;
@@ -127,7 +128,7 @@ static int copy_path(http_request *r, int is_connect)
     struct http_parser_url u;
     http_parser_url_init(&u);
     if (http_parser_parse_url(url, url_len, is_connect, &u) != 0)
-        return fail(r, 400);
+        return request_reject(r, 400);
     const char *path = "/";
     size_t len = 1;
     if (is_connect) {
@@ -139,8 +140,9 @@ static int copy_path(http_request *r, int is_connect)
     }
     r->path = (uint16_t)r->len;
     r->in = IN_URL; /* for end_piece's NUL */
-    if (append(r, path, len) < 0) /* a part of the target, taken already: no NUL, and room kept */
-        return -1;                /* GCOVR_EXCL_LINE */
+    int rc = append(r, path, len);
+    if (rc < 0) /* a part of the target, taken already: no NUL, and room kept */
+        return rc; /* GCOVR_EXCL_LINE */
     end_piece(r);
     return 0;
 }
@@ -151,11 +153,11 @@ static int on_headers_complete(http_parser *p)
     http_request *r = p->data;
     end_piece(r);
     if (p->http_major != 1)
-        return fail(r, 505);
+        return request_reject(r, 505);
     if (p->http_minor >= 1 && !http_request_header(r, "host"))
-        return fail(r, 400); /* RFC 9112 3.2: a 1.1 request without Host is refused */
+        return request_reject(r, 400); /* RFC 9112 3.2: a 1.1 request without Host is refused */
     if ((p->flags & F_CHUNKED) || p->uses_transfer_encoding || ((p->flags & F_CONTENTLENGTH) && p->content_length))
-        return fail(r, 413);
+        return request_reject(r, 413);
     snprintf(r->method, sizeof r->method, "%s", http_method_str((enum http_method)p->method));
     return copy_path(r, p->method == HTTP_CONNECT);
 }

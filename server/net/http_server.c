@@ -10,6 +10,8 @@
 
 #include "alloc.h"
 #include "conn.h"
+#include "err.h"
+#include "listener.h"
 #include "log.h"
 #include "srv_limits.h"
 
@@ -54,15 +56,14 @@ struct http_server {
     uint32_t max_conns;
     http_handler_fn *fn;
     void *data;
-    int listen_fd;
+    net_listener *listener;
     int sweep_timer;
     int reap_timer; /* a pending zero-delay timer, or -1 */
-    char address[80];
     http_conn **conns;
     uint32_t nconns;
 };
 
-const char *http_server_address(const http_server *h) { return h->address; }
+const char *http_server_address(const http_server *h) { return net_listener_address(h->listener); }
 
 static void reap_dead(http_server *h)
 {
@@ -253,93 +254,80 @@ static void refuse(int fd, int status)
     close(fd);
 }
 
-static void on_accept(ev_loop *loop, int fd, unsigned events, void *data)
+/* A connection from the listener: served, or refused past the cap. */
+static void on_accepted(void *data, int cfd, const char *peer)
 {
-    (void)events;
     http_server *h = data;
-    for (int k = 0; k < ACCEPT_BUDGET; k++) {
-        char peer[80];
-        int cfd = conn_accept(fd, peer, sizeof peer);
-        if (cfd < 0) {
-            if (cfd != -EAGAIN)
-                log_warn("%s: accept: %s", h->name, strerror(-cfd));
-            return;
-        }
-        if (h->nconns >= h->max_conns) {
-            log_debug("%s: %s refused: %u connections open", h->name, peer, h->nconns);
-            refuse(cfd, 503);
-            continue;
-        }
-        http_conn *hc = cvre_calloc(1, sizeof *hc);
-        if (!hc) {
-            refuse(cfd, 503);
-            continue;
-        }
-        if (conn_init(&hc->c, cfd) < 0 || !(hc->req = http_request_new()) ||
-            ev_io_add(loop, cfd, EV_READ, on_conn_io, hc) < 0) {
-            log_warn("%s: %s refused: cannot register the connection", h->name, peer);
-            http_request_free(hc->req);
-            conn_free(&hc->c); /* closes cfd */
-            free(hc);
-            continue;
-        }
-        int sndbuf = SOCKET_SNDBUF;
-        setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
-        hc->h = h;
-        memcpy(hc->peer, peer, sizeof hc->peer);
-        hc->deadline_ns = ev_now(loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;
-        h->conns[h->nconns++] = hc;
+    if (h->nconns >= h->max_conns) {
+        log_debug("%s: %s refused: %u connections open", h->name, peer, h->nconns);
+        refuse(cfd, 503);
+        return;
     }
+    http_conn *hc = cvre_calloc(1, sizeof *hc);
+    if (!hc) {
+        refuse(cfd, 503);
+        return;
+    }
+    if (conn_init(&hc->c, cfd) < 0 || !(hc->req = http_request_new()) ||
+        ev_io_add(h->loop, cfd, EV_READ, on_conn_io, hc) < 0) {
+        log_warn("%s: %s refused: cannot register the connection", h->name, peer);
+        http_request_free(hc->req);
+        conn_free(&hc->c); /* closes cfd */
+        free(hc);
+        return;
+    }
+    int sndbuf = SOCKET_SNDBUF;
+    setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
+    hc->h = h;
+    snprintf(hc->peer, sizeof hc->peer, "%s", peer);
+    hc->deadline_ns = ev_now(h->loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;
+    h->conns[h->nconns++] = hc;
 }
 
-http_server *http_server_start(ev_loop *loop, const http_server_config *cfg, http_handler_fn *fn, void *data,
-                               char *err, size_t errlen)
+int http_server_start(ev_loop *loop, const http_server_config *cfg, http_handler_fn *fn, void *data,
+                      http_server **out, char *err, size_t errlen)
 {
+    *out = NULL;
     http_server *h = cvre_calloc(1, sizeof *h);
-    if (!h) {
-        snprintf(err, errlen, "%s: out of memory", cfg->name);
-        return NULL;
-    }
+    if (!h)
+        return cvre_fail(err, errlen, -ENOMEM, "%s: out of memory", cfg->name);
     h->loop = loop;
     snprintf(h->name, sizeof h->name, "%s", cfg->name);
     h->max_conns = cfg->max_conns;
     h->fn = fn;
     h->data = data;
-    h->listen_fd = h->sweep_timer = h->reap_timer = -1;
+    h->sweep_timer = h->reap_timer = -1;
+    int rc = -ENOMEM;
+    char msg[256];
+    net_listener_config lc = {.name = cfg->name, .host = cfg->host, .port = cfg->port, .backlog = LISTEN_BACKLOG,
+                              .budget = ACCEPT_BUDGET};
     h->conns = cvre_calloc(cfg->max_conns, sizeof *h->conns);
     if (!h->conns) {
-        snprintf(err, errlen, "%s: out of memory", cfg->name);
+        cvre_fail(err, errlen, rc, "%s: out of memory", cfg->name);
         goto fail;
     }
-    char msg[256];
-    h->listen_fd = conn_listen(cfg->host, cfg->port, LISTEN_BACKLOG, h->address, sizeof h->address, msg, sizeof msg);
-    if (h->listen_fd < 0) {
-        snprintf(err, errlen, "%s: %s", cfg->name, msg);
-        goto fail;
-    }
-    int rc = ev_io_add(loop, h->listen_fd, EV_READ, on_accept, h);
-    if (rc == 0) {
-        h->sweep_timer = ev_timer_start(loop, SWEEP_MS * NS_PER_MS, SWEEP_MS * NS_PER_MS, on_sweep, h);
-        rc = h->sweep_timer < 0 ? h->sweep_timer : 0;
-    }
+    rc = net_listener_start(loop, &lc, on_accepted, h, &h->listener, msg, sizeof msg);
     if (rc < 0) {
-        snprintf(err, errlen, "%s: event loop: %s", cfg->name, strerror(-rc));
+        cvre_fail(err, errlen, rc, "%s: %s", cfg->name, msg);
         goto fail;
     }
-    return h;
+    h->sweep_timer = rc = ev_timer_start(loop, SWEEP_MS * NS_PER_MS, SWEEP_MS * NS_PER_MS, on_sweep, h);
+    if (rc < 0) {
+        cvre_fail(err, errlen, rc, "%s: event loop: %s", cfg->name, strerror(-rc));
+        goto fail;
+    }
+    *out = h;
+    return 0;
 fail:
     http_server_stop(h);
-    return NULL;
+    return rc;
 }
 
 void http_server_stop(http_server *h)
 {
     if (!h)
         return;
-    if (h->listen_fd >= 0) {
-        ev_io_del(h->loop, h->listen_fd);
-        close(h->listen_fd);
-    }
+    net_listener_stop(h->listener);
     if (h->sweep_timer >= 0)
         ev_timer_stop(h->loop, h->sweep_timer);
     if (h->reap_timer >= 0)

@@ -68,11 +68,13 @@ typedef struct http_server_config {
 
 typedef struct http_server http_server;
 
-/* Listens and starts serving on loop. The loop must be able to watch the
- * connections' fds (ev_create's max_fd; past it a connection is refused
- * like one past the cap). NULL with a message in err on failure. */
-http_server *http_server_start(ev_loop *loop, const http_server_config *cfg, http_handler_fn *fn, void *data,
-                               char *err, size_t errlen);
+/* Listens (through listener.h, which accepts within a budget and pauses
+ * while the process is out of file descriptors) and starts serving on
+ * loop, with *out set. The loop must be able to watch the connections' fds
+ * (ev_create's max_fd; past it a connection is refused like one past the
+ * cap). Returns 0, or -errno with a message in err. */
+int http_server_start(ev_loop *loop, const http_server_config *cfg, http_handler_fn *fn, void *data,
+                      http_server **out, char *err, size_t errlen);
 /* "HOST:PORT" as bound. */
 const char *http_server_address(const http_server *h);
 /* Closes the listener and every connection, stops its timers, frees h.

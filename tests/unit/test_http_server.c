@@ -175,7 +175,8 @@ static void serve(uint32_t max_conns, long fail_after, void (*fn)(void))
     assert_non_null(loop);
     http_server_config cfg = {"test", "127.0.0.1", 0, max_conns};
     char err[256];
-    http_server *h = http_server_start(loop, &cfg, handler, NULL, err, sizeof err);
+    http_server *h;
+    assert_int_equal(http_server_start(loop, &cfg, handler, NULL, &h, err, sizeof err), 0);
     assert_non_null(h);
     port = atoi(strrchr(http_server_address(h), ':') + 1);
     int done[2];
@@ -315,7 +316,9 @@ static void test_out_of_memory(void **state)
     char err[256];
     for (long k = 0; k < 2; k++) {
         cvre_alloc_fail_after(k);
-        assert_null(http_server_start(loop, &cfg, handler, NULL, err, sizeof err));
+        http_server *h = NULL;
+        assert_int_equal(http_server_start(loop, &cfg, handler, NULL, &h, err, sizeof err), -ENOMEM);
+        assert_null(h);
         cvre_alloc_fail_after(-1);
         assert_string_equal(err, "test: out of memory");
     }
@@ -329,14 +332,17 @@ static void test_start_failures(void **state)
     http_server_config cfg = {"test", "256.0.0.1", 0, 4};
     ev_loop *loop = ev_create(1024);
     assert_non_null(loop);
-    assert_null(http_server_start(loop, &cfg, handler, NULL, err, sizeof err));
+    http_server *h = NULL;
+    assert_true(http_server_start(loop, &cfg, handler, NULL, &h, err, sizeof err) < 0);
+    assert_null(h);
     assert_non_null(strstr(err, "test: cannot resolve 256.0.0.1"));
     ev_destroy(loop);
     /* A loop that cannot watch the listening socket's fd. */
     loop = ev_create(3);
     assert_non_null(loop);
     cfg.host = "127.0.0.1";
-    assert_null(http_server_start(loop, &cfg, handler, NULL, err, sizeof err));
+    assert_int_equal(http_server_start(loop, &cfg, handler, NULL, &h, err, sizeof err), -EINVAL);
+    assert_null(h);
     assert_string_equal(err, "test: event loop: Invalid argument");
     ev_destroy(loop);
 }
