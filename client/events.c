@@ -100,11 +100,6 @@ void events_error(int bot, unsigned code, const char *text, size_t len)
     finish();
 }
 
-const char *events_bye_reason(unsigned reason)
-{
-    return reason == PROTO_BYE_SHUTDOWN ? "shutdown" : reason == PROTO_BYE_KICKED ? "kicked" : "quit";
-}
-
 void events_bye(int bot, unsigned reason)
 {
     if (to_terminal && bot < 0) {
@@ -112,7 +107,7 @@ void events_bye(int bot, unsigned reason)
         return;
     }
     begin("bye", bot);
-    sb_printf(&line, ",\"reason\":\"%s\"", events_bye_reason(reason));
+    sb_printf(&line, ",\"reason\":\"%s\"", proto_bye_name(reason));
     finish();
 }
 
@@ -123,7 +118,7 @@ void events_bye_sent(unsigned reason)
         return;
     }
     begin("bye", -1);
-    sb_printf(&line, ",\"reason\":\"%s\",\"from\":\"client\"", events_bye_reason(reason));
+    sb_printf(&line, ",\"reason\":\"%s\",\"from\":\"client\"", proto_bye_name(reason));
     finish();
 }
 

@@ -32,8 +32,6 @@ void events_message(const proto_msg *m, uint64_t now_us);
 
 void events_error(int bot, unsigned code, const char *text, size_t len);
 void events_bye(int bot, unsigned reason);
-/* "quit", "shutdown" or "kicked" for a bye's reason (enum proto_bye_reason). */
-const char *events_bye_reason(unsigned reason);
 /* Our own bye, so a reader sees why the session ends: marked "from":"client". */
 void events_bye_sent(unsigned reason);
 void events_closed(int bot);

@@ -6,7 +6,6 @@
 #include <string.h>
 
 #include "alloc.h"
-#include "events.h"
 #include "known.h"
 #include "sbuf.h"
 #include "utf8.h"
@@ -276,7 +275,7 @@ void terminal_bye(unsigned reason, int from_client)
     if (from_client)
         sb_puts(&t.line, "bye");
     else
-        sb_printf(&t.line, "the server says bye (%s)", events_bye_reason(reason));
+        sb_printf(&t.line, "the server says bye (%s)", proto_bye_name(reason));
     finish();
 }
 

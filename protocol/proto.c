@@ -572,6 +572,11 @@ const char *proto_strerror(int status)
     }
 }
 
+const char *proto_bye_name(unsigned reason)
+{
+    return reason == PROTO_BYE_SHUTDOWN ? "shutdown" : reason == PROTO_BYE_KICKED ? "kicked" : "quit";
+}
+
 const char *proto_type_name(uint16_t type)
 {
     switch (type) {

@@ -355,6 +355,9 @@ void proto_object_box(const proto_object_info *o, uint16_t i, float min[3], floa
 /* Short English description of a status code; never NULL. */
 const char *proto_strerror(int status);
 
+/* Name of a BYE reason as the client's events show it ("shutdown",
+ * "kicked"; "quit" for any other value). */
+const char *proto_bye_name(unsigned reason);
 
 /* Name of a message type for logs ("hello", "move"...), or "unknown". */
 const char *proto_type_name(uint16_t type);

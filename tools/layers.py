@@ -7,10 +7,12 @@ things:
 
   - direction: a file includes only headers of its own layer or of the
     layers below it (the table USES below, the one in CONTRIBUTING.md);
-  - no cycles between modules: a module is foo.c with foo.h (and a private
-    fooInt.h); module A depends on module B when one of A's files includes
-    B's header. Two modules that depend on each other, directly or round a
-    longer loop, are reported.
+  - no cycles between modules: a module is foo.c with foo.h; module A
+    depends on module B when one of A's files includes B's header. A private
+    fooInt.h (what several files of one part share) counts as a module of
+    its own that may build on foo.h, so that it holds only what is below
+    the files that share it. Two modules that
+    depend on each other, directly or round a longer loop, are reported.
 
 Prints the module graph's size and each problem; exit status 0 when there
 is none, 1 when there is one, 2 on bad input (a header it cannot find, or
@@ -50,8 +52,7 @@ def layer_of(path):
 
 
 def module_of(path):
-    stem = os.path.splitext(path)[0]
-    return stem[:-3] if stem.endswith("Int") else stem
+    return os.path.splitext(path)[0]
 
 
 def sccs(graph):
@@ -134,8 +135,9 @@ def main():
             mine, theirs = layer_of(f), layer_of(target)
             if theirs != mine and theirs not in USES[mine]:
                 problems.append(f"{f} includes {target}: {mine} may not use {theirs}")
-            if module_of(target) != mod:
-                graph[mod].add(module_of(target))
+            dep = module_of(target)
+            if dep != mod and mod != dep + "Int":  # fooInt.h may build on foo.h
+                graph[mod].add(dep)
 
     for comp in sccs(graph):
         problems.append("modules that depend on each other: " + " <-> ".join(comp))
