@@ -1,5 +1,6 @@
 #include "log.h"
 
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
@@ -18,7 +19,7 @@ int log_parse_level(const char *name)
     for (int i = 0; i < 5; i++)
         if (strcmp(name, names[i]) == 0)
             return i;
-    return -1;
+    return -EINVAL;
 }
 
 void log_msg(int level, const char *fmt, ...)

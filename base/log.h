@@ -11,7 +11,7 @@ enum log_level { LOG_DEBUG = 0, LOG_INFO = 1, LOG_WARN = 2, LOG_ERROR = 3, LOG_O
 /* Lines below level are dropped. Default LOG_INFO. */
 void log_set_level(int level);
 int log_level(void);
-/* Parses "debug", "info", "warn", "error" or "off"; -1 if unknown. */
+/* Parses "debug", "info", "warn", "error" or "off"; -EINVAL if unknown. */
 int log_parse_level(const char *name);
 
 void log_msg(int level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));

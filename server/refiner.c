@@ -166,7 +166,7 @@ static void add_point(tracked *t, const float xyz[3], uint32_t user)
 }
 
 /* Reads the collisions logged since the last look into the tracked objects.
- * Returns 0 or -1. */
+ * Returns 0 or -EIO. */
 static int read_collisions(refiner *r)
 {
     sqlite3 *sql = db_sqlite(r->db);
@@ -202,7 +202,7 @@ static int read_collisions(refiner *r)
 fail:
     log_error("refiner: reading collisions: %s", sqlite3_errmsg(sql));
     sqlite3_finalize(st);
-    return -1;
+    return -EIO;
 }
 
 static int cmp_sig(const void *a, const void *b)
@@ -211,7 +211,8 @@ static int cmp_sig(const void *a, const void *b)
 }
 
 /* Clusters t's points; appends what it finds to *found (problem boxes
- * resolved against the version's boxes). Returns the clusters found, or -1. */
+ * resolved against the version's boxes). Returns the clusters found, or
+ * -errno. */
 static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nfound)
 {
     int32_t *labels = cvre_xmalloc((t->n ? t->n : 1) * sizeof *labels);
@@ -222,13 +223,13 @@ static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nf
     free(labels);
     if (rc < 0) {
         log_error("refiner: object %lld: clustering failed: %s", (long long)t->id, strerror(-rc));
-        return -1;
+        return rc;
     }
     size_t k = dbscan_result_count(res);
-    if (k && db_ecm_boxes(r->db, t->id, t->version, &boxes, &nboxes) < 0) {
+    if (k && (rc = db_ecm_boxes(r->db, t->id, t->version, &boxes, &nboxes)) < 0) {
         log_error("refiner: object %lld: %s", (long long)t->id, db_error(r->db));
         dbscan_result_free(res);
-        return -1;
+        return rc;
     }
     *found = cvre_xrealloc(*found, (*nfound + k + 1) * sizeof **found);
     for (size_t i = 0; i < k; i++) {

@@ -368,7 +368,7 @@ static int parse_int(const char *text, long long lo, long long hi, long long *va
     errno = 0;
     long long v = strtoll(text, &end, 10);
     if (errno || end == text || *end || v < lo || v > hi)
-        return -1;
+        return -EINVAL;
     *value = v;
     return 0;
 }
@@ -379,7 +379,7 @@ static int parse_real(const char *text, double *value)
     errno = 0;
     double v = strtod(text, &end);
     if (errno || end == text || *end || !isfinite(v))
-        return -1;
+        return -EINVAL;
     *value = v;
     return 0;
 }
@@ -392,14 +392,14 @@ static int parse_region(const char *text, double box[6])
         char buf[64];
         size_t n = strcspn(p, ",");
         if (n == 0 || n >= sizeof buf || (i < 5 && p[n] != ',') || (i == 5 && p[n]))
-            return -1;
+            return -EINVAL;
         memcpy(buf, p, n);
         buf[n] = 0;
         if (parse_real(buf, &box[i]) < 0)
-            return -1;
+            return -EINVAL;
         p += n + (i < 5);
     }
-    return box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5] ? 0 : -1;
+    return box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5] ? 0 : -EINVAL;
 }
 
 static const struct command *find_command(const char *name)

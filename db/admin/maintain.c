@@ -76,7 +76,7 @@ int maintain_verb(const char *command)
     for (int i = 0; i < LEN(verbs); i++)
         if (strcmp(command, verbs[i]) == 0)
             return i;
-    return -1;
+    return -ENOENT;
 }
 
 static double mono_s(void)

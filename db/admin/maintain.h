@@ -27,7 +27,7 @@ typedef struct maintain_request {
     long long days;   /* retention --older-than; 0: not given */
 } maintain_request;
 
-/* The verb a command name names (backup, retention), or -1. */
+/* The verb a command name names (backup, retention), or -ENOENT. */
 int maintain_verb(const char *command);
 
 /* The commands' help texts (cvre-admin COMMAND --help). */

@@ -20,21 +20,17 @@ int moderate_verb(const char *command)
     for (int i = 0; i < LEN(verbs); i++)
         if (strcmp(command, verbs[i]) == 0)
             return i;
-    return -1;
+    return -ENOENT;
 }
 
 int moderate_name_check(const char *name, char *why, size_t whylen)
 {
     size_t n = strlen(name);
-    if (n < 1 || n > DB_ACCOUNT_NAME_MAX) {
-        snprintf(why, whylen, "a name is 1 to %u bytes, not %zu", DB_ACCOUNT_NAME_MAX, n);
-        return -1;
-    }
+    if (n < 1 || n > DB_ACCOUNT_NAME_MAX)
+        return cvre_fail(why, whylen, -EINVAL, "a name is 1 to %u bytes, not %zu", DB_ACCOUNT_NAME_MAX, n);
     for (size_t i = 0; i < n; i++)
-        if ((unsigned char)name[i] < 0x20 || name[i] == 0x7f) {
-            snprintf(why, whylen, "a control character at byte %zu: no client can join under it", i);
-            return -1;
-        }
+        if ((unsigned char)name[i] < 0x20 || name[i] == 0x7f)
+            return cvre_fail(why, whylen, -EINVAL, "a control character at byte %zu: no client can join under it", i);
     return 0;
 }
 

@@ -39,11 +39,11 @@ typedef struct moderate_request {
     long long minutes; /* ban --minutes; 0: until unbanned */
 } moderate_request;
 
-/* The verb a command name names (kick, ban, unban, bans), or -1. */
+/* The verb a command name names (kick, ban, unban, bans), or -ENOENT. */
 int moderate_verb(const char *command);
 
 /* Whether name may be banned: 1 to 32 bytes (the wire's longest name)
- * without control characters. 0, or -1 with the reason in why. Guests may
+ * without control characters. 0, or -EINVAL with the reason in why. Guests may
  * use names that are no account's (spaces, for one), so nothing stricter. */
 int moderate_name_check(const char *name, char *why, size_t whylen);
 

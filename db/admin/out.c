@@ -1,5 +1,6 @@
 #include "out.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -266,6 +267,6 @@ long out_end(out *o)
     sb_free(&o->line);
     free(o);
     if (fflush(f) != 0 || ferror(f))
-        return -1;
+        return -EIO;
     return rows;
 }

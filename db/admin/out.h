@@ -60,7 +60,7 @@ out *out_begin(int format, FILE *f, const out_column *cols, int ncols, int verti
 /* Adds the current row of st: column i of st is cols[i]. */
 void out_row(out *o, sqlite3_stmt *st);
 
-/* Prints what is held, frees o. Returns the number of rows, or -1 if
+/* Prints what is held, frees o. Returns the number of rows, or -EIO if
  * writing failed (stdout closed, disk full). */
 long out_end(out *o);
 

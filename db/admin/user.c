@@ -22,7 +22,7 @@ int user_verb(const char *word)
     for (int i = 0; i < LEN(verbs); i++)
         if (strcmp(word, verbs[i]) == 0)
             return i;
-    return -1;
+    return -ENOENT;
 }
 
 /* ---- output ---- */
@@ -94,16 +94,16 @@ static int tty_echo_off(int on)
 {
     if (on) {
         if (tcgetattr(STDIN_FILENO, &saved_tty) != 0)
-            return -1;
+            return -errno;
         struct sigaction sa = {.sa_handler = restore_tty_and_die};
         sigemptyset(&sa.sa_mask);
         for (int i = 0; i < LEN(tty_signals); i++)
             sigaction(tty_signals[i], &sa, NULL);
         struct termios quiet = saved_tty;
         quiet.c_lflag &= ~(tcflag_t)(ECHO | ECHOE | ECHOK | ECHONL);
-        return tcsetattr(STDIN_FILENO, TCSAFLUSH, &quiet);
+        return tcsetattr(STDIN_FILENO, TCSAFLUSH, &quiet) == 0 ? 0 : -errno;
     }
-    int rc = tcsetattr(STDIN_FILENO, TCSAFLUSH, &saved_tty);
+    int rc = tcsetattr(STDIN_FILENO, TCSAFLUSH, &saved_tty) == 0 ? 0 : -errno;
     for (int i = 0; i < LEN(tty_signals); i++)
         signal(tty_signals[i], SIG_DFL);
     return rc;
@@ -111,8 +111,9 @@ static int tty_echo_off(int on)
 
 /* Reads one line from standard input into buf (cap bytes), without its
  * newline and a carriage return before it, byte by byte so that no copy is
- * left in a stdio buffer. Returns its length, -1 on a read error, -2 if it
- * is longer than cap (the rest of the line is read and dropped). */
+ * left in a stdio buffer. Returns its length, -errno on a read error,
+ * -E2BIG if it is longer than cap (the rest of the line is read and
+ * dropped). */
 static long read_line(char *buf, size_t cap)
 {
     size_t n = 0;
@@ -123,7 +124,7 @@ static long read_line(char *buf, size_t cap)
         if (k < 0 && errno == EINTR)
             continue;
         if (k < 0)
-            return -1;
+            return -errno;
         if (k == 0 || c == '\n')
             break;
         if (n < cap)
@@ -132,7 +133,7 @@ static long read_line(char *buf, size_t cap)
             too_long = 1;
     }
     if (too_long)
-        return -2;
+        return -E2BIG;
     if (n && buf[n - 1] == '\r')
         n--;
     return (long)n;
@@ -145,22 +146,22 @@ static int read_password(const char *prompt, char *buf, size_t *len, char *err, 
     if (prompt) {
         /* Echo off first: it discards what was typed ahead, so the prompt
          * comes after, when an answer is read. */
-        if (tty_echo_off(1) != 0)
-            return cvre_fail(err, errlen, -EIO, "cannot turn the terminal's echo off: %s", strerror(errno));
+        int rc = tty_echo_off(1);
+        if (rc < 0)
+            return cvre_fail(err, errlen, rc, "cannot turn the terminal's echo off: %s", strerror(-rc));
         fputs(prompt, stderr);
         fflush(stderr);
     }
     long n = read_line(buf, DB_ACCOUNT_PASSWORD_MAX);
-    int saved = errno;
     if (prompt) {
         tty_echo_off(0);
         fputc('\n', stderr); /* the Enter that was not echoed */
     }
-    if (n == -1)
-        return cvre_fail(err, errlen, -EIO, "cannot read the password: %s", strerror(saved));
-    if (n == -2)
+    if (n == -E2BIG)
         return cvre_fail(err, errlen, -EINVAL, "the password is longer than %u bytes; nothing written",
                           DB_ACCOUNT_PASSWORD_MAX);
+    if (n < 0)
+        return cvre_fail(err, errlen, (int)n, "cannot read the password: %s", strerror((int)-n));
     if (n == 0)
         return cvre_fail(err, errlen, -EINVAL, "empty password refused; nothing written");
     *len = (size_t)n;

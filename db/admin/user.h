@@ -24,7 +24,7 @@ typedef struct user_request {
     int password_stdin;     /* add, passwd: one line from standard input, not a terminal prompt */
 } user_request;
 
-/* The verb a word names (add, del, list, passwd), or -1. */
+/* The verb a word names (add, del, list, passwd), or -ENOENT. */
 int user_verb(const char *word);
 
 /* Runs r on the database at path, whose read-only handle ro (schema version

@@ -25,6 +25,7 @@
 #include <sys/stat.h>
 
 #include "fz.h"
+#include "le.h"
 #include "proto.h"
 
 #define CHECK FZ_CHECK
@@ -822,7 +823,7 @@ static size_t frame_starts(const uint8_t *data, size_t size, size_t *starts, siz
 
     while (n < max_starts && at + PROTO_HEADER_SIZE <= size) {
         starts[n++] = at;
-        at += 4 + (size_t)fz_get_u32le(data + at);
+        at += 4 + (size_t)le_get_u32(data + at);
     }
     return n;
 }

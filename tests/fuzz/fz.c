@@ -200,11 +200,6 @@ void fz_put_f32(fz_buf *b, float v)
     fz_put_le(b, u, 4);
 }
 
-uint32_t fz_get_u32le(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 void fz_splice(uint8_t *data, size_t *size, size_t max, size_t at, size_t end,
                    const uint8_t *ins, size_t n)
 {

@@ -115,7 +115,6 @@ void fz_puts(fz_buf *b, const char *s);
 __attribute__((format(printf, 2, 3))) void fz_printf(fz_buf *b, const char *fmt, ...);
 void fz_put_le(fz_buf *b, uint64_t v, unsigned bytes); /* little-endian */
 void fz_put_f32(fz_buf *b, float v);                   /* little-endian IEEE 754 */
-uint32_t fz_get_u32le(const uint8_t *p);
 void fz_set_le(uint8_t *p, uint64_t v, unsigned bytes); /* overwrites bytes at p */
 
 /* Replaces data[at..end) of data[0..*size) with ins[0..n) (ins may be NULL
