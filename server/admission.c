@@ -47,9 +47,8 @@ static void on_accepted(void *data, int cfd, const char *peer)
         refuse(cfd, "too many connections from your address");
         return;
     }
-    int one = 1, sndbuf = SRV_SOCKET_SNDBUF;
+    int one = 1;
     setsockopt(cfd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-    setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
     if (clients__add(s, cfd, peer, addr, handlers__on_io) < 0) {
         log_error("%s refused: cannot register the connection", peer);
         if (s->cfg.max_per_address)

@@ -1,10 +1,10 @@
 /*
- * clients.c: one client's connection to the game protocol (clients.h):
- * adding and freeing it, output reserved under the hard limit and queued
- * for the write before the loop sleeps, the flush that arms EV_WRITE only
- * while bytes remain, the close with its linger and the kill. It knows the
- * protocol only to send an error frame; it calls no other file of the
- * server.
+ * clients.c: one client's connection to the game protocol (clients.h),
+ * on the network layer's conn (net/conn.h) with the game's limits: adding
+ * and freeing it, frames written through a proto_writer over the output's
+ * room and queued for the flush before the loop sleeps, the close and the
+ * kill. It knows the protocol only to send an error frame; it calls no
+ * other file of the server.
  */
 #include "clients.h"
 
@@ -13,18 +13,21 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/socket.h>
 
 #include "alloc.h"
 #include "log.h"
 #include "srv_limits.h"
 
+/* The game's limits on each connection: the linger is fixed (a client
+ * has SRV_CLOSE_LINGER_MS to take its bye or error, however it reads). */
+static const conn_config game_conn = {.out_hard = SRV_OUTBUF_HARD, .out_soft = SRV_OUTBUF_SOFT,
+                                      .out_soft_ms = SRV_OUTBUF_SOFT_MS, .linger_ms = SRV_CLOSE_LINGER_MS,
+                                      .linger_extends = 0, .sndbuf = SRV_SOCKET_SNDBUF};
+
 int clients__add(server *s, int fd, const char *peer, const char *addr, ev_io_fn *io)
 {
     client *c = cvre_xcalloc(1, sizeof *c);
-    int rc = conn_init(&c->c, fd);
-    if (rc == 0)
-        rc = ev_io_add(s->loop, fd, EV_READ, io, c);
+    int rc = conn_open(&c->c, s->loop, fd, &game_conn, io, c);
     if (rc < 0) {
         conn_free(&c->c);
         free(c);
@@ -43,7 +46,6 @@ int clients__add(server *s, int fd, const char *peer, const char *addr, ev_io_fn
 
 void clients__free(server *s, client *c)
 {
-    ev_io_del(s->loop, c->c.fd);
     conn_free(&c->c);
     if (s->cfg.max_per_address)
         addrcount_add(s->per_address, c->addr, -1);
@@ -76,17 +78,21 @@ int clients__out_begin(server *s, client *c, size_t need, proto_writer *w)
 {
     if (c->dead)
         return -ENOTCONN;
-    int rc = conn_out_begin(&c->c, need, w);
+    uint8_t *room;
+    size_t len;
+    int rc = conn_out_reserve(&c->c, need, &room, &len);
     if (rc < 0) {
         s->st.slow_readers++;
         clients__kill(s, c, "output backlog over the hard limit (%zu bytes pending)", conn_out_pending(&c->c));
+        return rc;
     }
-    return rc;
+    proto_writer_init(w, room, len);
+    return 0;
 }
 
 void clients__out_end(server *s, client *c, const proto_writer *w)
 {
-    conn_out_end(&c->c, w);
+    conn_out_commit(&c->c, w->len);
     want_write(s, c);
 }
 
@@ -96,7 +102,7 @@ void clients__begin_close(server *s, client *c, const char *reason)
         return;
     c->closing = 1;
     snprintf(c->end_reason, sizeof c->end_reason, "%s", reason);
-    c->close_deadline_ns = server__now(s) + SRV_CLOSE_LINGER_MS * NS_PER_MS;
+    conn_begin_close(&c->c);
     want_write(s, c);
 }
 
@@ -144,20 +150,13 @@ void clients__protocol_error(server *s, client *c, int code, const char *fmt, ..
 /* Frames behind a join wait in the socket until the join is settled. */
 void clients__watch(server *s, client *c)
 {
-    ev_io_mod(s->loop, c->c.fd, (c->state == ST_AUTH ? 0u : (unsigned)EV_READ) | (c->writing ? (unsigned)EV_WRITE : 0u));
+    (void)s;
+    conn_set_reading(&c->c, c->state != ST_AUTH);
 }
 
-static void set_writing(server *s, client *c, int on)
-{
-    if (c->writing == on)
-        return;
-    c->writing = on;
-    clients__watch(s, c);
-}
-
-/* Writes what c has pending. Arms EV_WRITE only when bytes remain; once a
- * closing client's output is out, shuts down the write side so the peer
- * reads the error before the close. */
+/* Writes what c has pending (conn_flush: EV_WRITE stays armed only while
+ * bytes remain, and a closing client's write side is shut once its output
+ * is out, so that it reads the error before the close). */
 void clients__flush(server *s, client *c)
 {
     if (c->dead)
@@ -170,15 +169,4 @@ void clients__flush(server *s, client *c)
         return;
     }
     s->st.bytes_out += before - (size_t)left;
-    set_writing(s, c, left > 0);
-    if ((size_t)left > SRV_OUTBUF_SOFT) {
-        if (!c->soft_since_ns)
-            c->soft_since_ns = server__now(s);
-    } else {
-        c->soft_since_ns = 0;
-    }
-    if (left == 0 && c->closing && !c->shut_wr) {
-        shutdown(c->c.fd, SHUT_WR);
-        c->shut_wr = 1;
-    }
 }

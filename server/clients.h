@@ -1,7 +1,8 @@
 /*
  * clients.h: one client's connection to the game protocol, below the
- * protocol's meaning: output reserved under the hard limit and queued for
- * the next write, the close with its linger, the kill, and the client table.
+ * protocol's meaning, on net/conn.h with the game's limits: frames written
+ * under the hard limit and queued for the next write, the close with its
+ * linger, the kill, and the client table.
  * Every other file of the server writes to a client through here; this one
  * calls no other file of the server (serverInt.h has the map).
  */
@@ -27,7 +28,7 @@ void clients__free(server *s, client *c);
 client *clients__by_session(server *s, int64_t session);
 
 /* Reserves need bytes of c's output and points w at them. Returns 0;
- * -ENOTCONN if c is being dropped already; or the conn_out_begin error
+ * -ENOTCONN if c is being dropped already; or the conn_out_reserve error
  * (-ENOBUFS: past SRV_OUTBUF_HARD), after which c is disconnected as a slow
  * reader. Nothing may be put in w then. */
 int clients__out_begin(server *s, client *c, size_t need, proto_writer *w);

@@ -163,15 +163,16 @@ static void on_housekeeping(ev_loop *loop, void *data)
         client *c = s->clients[i];
         if (c->dead)
             continue;
+        int overdue = conn_overdue(&c->c); /* the linger, or the soft output limit */
         if (c->closing) {
-            if (now > c->close_deadline_ns)
+            if (overdue == -ETIMEDOUT)
                 c->dead = 1;
         } else if (c->state != ST_JOINED && now - c->connected_ns > s->cfg.handshake_timeout_ms * NS_PER_MS) {
             clients__protocol_error(s, c, PROTO_ERR_TIMEOUT, "handshake not completed within %u ms",
                            s->cfg.handshake_timeout_ms);
         } else if (now - c->last_frame_ns > s->cfg.idle_timeout_ms * NS_PER_MS) {
             clients__protocol_error(s, c, PROTO_ERR_TIMEOUT, "no complete frame for %u ms", s->cfg.idle_timeout_ms);
-        } else if (c->soft_since_ns && now - c->soft_since_ns > SRV_OUTBUF_SOFT_MS * NS_PER_MS) {
+        } else if (overdue == -ENOBUFS) {
             s->st.slow_readers++;
             clients__kill(s, c, "output backlog over %u bytes for %u ms", SRV_OUTBUF_SOFT, SRV_OUTBUF_SOFT_MS);
         }

@@ -74,10 +74,8 @@ typedef struct client {
     conn c;
     server *srv;
     client_state state;
-    int closing;  /* no more input is handled; output is flushed, then closed */
-    int shut_wr;  /* output flushed and write side shut down */
+    int closing;  /* no more input is handled; output is flushed, then closed (conn_begin_close) */
     int dead;     /* reaped at the next safe point */
-    int writing;  /* EV_WRITE armed */
     int in_write_list;
     uint32_t index; /* in server.clients */
     int64_t session_id; /* 0 before hello */
@@ -98,7 +96,7 @@ typedef struct client {
     uint32_t last_sent_tick;
     uint32_t *known; /* ids of the avatars this client has been told of, in no order */
     uint32_t nknown, known_cap;
-    uint64_t connected_ns, last_frame_ns, close_deadline_ns, soft_since_ns;
+    uint64_t connected_ns, last_frame_ns;
     char end_reason[PROTO_MESSAGE_MAX + 16];
     client_upload upload;
     /* The objects it knows (objects__view). */

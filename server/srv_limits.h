@@ -9,6 +9,7 @@
 #include "proto.h"
 #include "import.h"
 #include "move.h"
+#include "net_limits.h"
 
 /* Avatar ids are slot | generation << 16 (world.c), so slots fit in 16 bits. */
 #ifndef SRV_MAX_CLIENTS_LIMIT
@@ -19,11 +20,12 @@
 #define SRV_MAX_CLIENTS_DEFAULT 10000
 #endif
 
+/* The game's limits on its connections (clients.c passes them to
+ * net/conn.h; the network layer's own are in net/net_limits.h). */
+
 /* Input buffer: a client never needs more than one whole frame buffered, so
  * the cap is one maximal frame; before join the frame cap is tiny. It starts
- * at SRV_INBUF_INITIAL and doubles on demand, because real traffic (moves,
- * pings) is a few dozen bytes and 10,000 clients x 64 KiB would be 640 MiB. */
-#define SRV_INBUF_INITIAL 128u
+ * at NET_INBUF_INITIAL and doubles on demand. */
 #define SRV_INBUF_CAP (PROTO_HEADER_SIZE + PROTO_MAX_LEN)
 #define SRV_INBUF_CAP_PREJOIN (PROTO_HEADER_SIZE + PROTO_MAX_LEN_PREJOIN)
 
@@ -38,10 +40,6 @@
 #define SRV_OUTBUF_HARD (2u * 1024u * 1024u)
 #endif
 #define SRV_OUTBUF_SOFT_MS 5000u
-/* An output buffer that grew past this for a burst (a join in a world of
- * many objects) is freed once drained: 10,000 clients keeping 256 KiB each
- * would hold 2.5 GiB for nothing. A tick's snapshot stays below it. */
-#define SRV_OUTBUF_KEEP (16u * 1024u)
 /* Kernel send buffer per client socket. Left to autotuning, Linux lets each
  * grow to 4 MiB (tcp_wmem), 40 GiB for 10,000 stalled clients, and a stalled
  * reader would hide behind it for a long time before the soft limit sees it.
@@ -173,7 +171,7 @@ _Static_assert(SRV_MAX_CLIENTS_DEFAULT <= SRV_MAX_CLIENTS_LIMIT, "default within
 _Static_assert(SRV_MAX_CLIENTS_LIMIT <= 65535, "avatar ids keep the slot in 16 bits");
 _Static_assert(SRV_OUTBUF_SOFT < SRV_OUTBUF_HARD, "soft below hard");
 _Static_assert(SRV_OUTBUF_HARD >= 4u * PROTO_SIZE_SNAPSHOT(PROTO_SNAPSHOT_MAX_ENTRIES), "a tick must fit");
-_Static_assert(SRV_INBUF_INITIAL <= SRV_INBUF_CAP_PREJOIN, "initial within prejoin cap");
+_Static_assert(NET_INBUF_INITIAL <= SRV_INBUF_CAP_PREJOIN, "initial within prejoin cap");
 _Static_assert(SRV_WORLD_SIZE_DEFAULT_M <= SRV_WORLD_SIZE_MAX_M, "the default world fits the movement range");
 _Static_assert(SRV_WORLD_HEIGHT_M <= MOVE_MAX_COORD_M, "the world's top fits the movement range");
 _Static_assert(SRV_MAX_SPEED_LIMIT_M * SRV_MOVE_MAX_DT_MS <= MOVE_MAX_COORD_M * 1000, "one move fits the movement range");

@@ -10,27 +10,50 @@
 
 #include "alloc.h"
 #include "err.h"
-#include "srv_limits.h"
 
-int conn_init(conn *c, int fd)
+#define NS_PER_MS ((uint64_t)1000000)
+
+int conn_open(conn *c, ev_loop *loop, int fd, const conn_config *cfg, ev_io_fn *fn, void *data)
 {
     memset(c, 0, sizeof *c);
     c->fd = fd; /* even on failure: conn_free closes it */
-    c->in = cvre_malloc(SRV_INBUF_INITIAL);
+    c->loop = loop;
+    c->cfg = *cfg;
+    c->in = cvre_malloc(NET_INBUF_INITIAL);
     if (!c->in)
         return -ENOMEM;
-    c->in_cap = SRV_INBUF_INITIAL;
+    c->in_cap = NET_INBUF_INITIAL;
+    int rc = ev_io_add(loop, fd, EV_READ, fn, data);
+    if (rc < 0)
+        return rc;
+    c->reading = 1;
+    if (cfg->sndbuf > 0)
+        setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &cfg->sndbuf, sizeof cfg->sndbuf);
     return 0;
 }
 
 void conn_free(conn *c)
 {
-    if (c->fd >= 0)
+    if (c->fd >= 0) {
+        if (c->loop)
+            ev_io_del(c->loop, c->fd); /* -EINVAL if conn_open could not watch it */
         close(c->fd);
+    }
     free(c->in);
     free(c->out);
     memset(c, 0, sizeof *c);
     c->fd = -1;
+}
+
+static void watch(conn *c)
+{
+    ev_io_mod(c->loop, c->fd, (c->reading ? (unsigned)EV_READ : 0u) | (c->writing ? (unsigned)EV_WRITE : 0u));
+}
+
+void conn_set_reading(conn *c, int on)
+{
+    c->reading = on != 0;
+    watch(c);
 }
 
 ssize_t conn_read(conn *c, size_t cap, size_t budget)
@@ -61,10 +84,10 @@ void conn_consume(conn *c, size_t n)
 
 size_t conn_out_pending(const conn *c) { return c->out_tail - c->out_head; }
 
-int conn_out_begin(conn *c, size_t need, proto_writer *w)
+int conn_out_reserve(conn *c, size_t need, uint8_t **room, size_t *len)
 {
     size_t pending = conn_out_pending(c);
-    if (pending + need > SRV_OUTBUF_HARD)
+    if (pending + need > c->cfg.out_hard)
         return -ENOBUFS;
     if (c->out_cap - c->out_tail < need) {
         if (c->out_head) { /* slide pending bytes to the front first */
@@ -73,11 +96,11 @@ int conn_out_begin(conn *c, size_t need, proto_writer *w)
             c->out_tail = pending;
         }
         if (c->out_cap - c->out_tail < need) {
-            size_t ncap = c->out_cap ? c->out_cap : 4096;
+            size_t ncap = c->out_cap ? c->out_cap : NET_OUTBUF_INITIAL;
             while (ncap < pending + need)
                 ncap *= 2;
-            if (ncap > SRV_OUTBUF_HARD)
-                ncap = SRV_OUTBUF_HARD;
+            if (ncap > c->cfg.out_hard)
+                ncap = c->cfg.out_hard;
             uint8_t *out = cvre_realloc(c->out, ncap);
             if (!out)
                 return -ENOMEM;
@@ -85,14 +108,16 @@ int conn_out_begin(conn *c, size_t need, proto_writer *w)
             c->out_cap = ncap;
         }
     }
-    proto_writer_init(w, c->out + c->out_tail, c->out_cap - c->out_tail);
+    *room = c->out + c->out_tail;
+    *len = c->out_cap - c->out_tail;
     return 0;
 }
 
-void conn_out_end(conn *c, const proto_writer *w) { c->out_tail += w->len; }
+void conn_out_commit(conn *c, size_t n) { c->out_tail += n; }
 
 ssize_t conn_flush(conn *c)
 {
+    size_t before = conn_out_pending(c);
     while (c->out_head < c->out_tail) {
         ssize_t n = write(c->fd, c->out + c->out_head, c->out_tail - c->out_head);
         if (n < 0) {
@@ -104,15 +129,53 @@ ssize_t conn_flush(conn *c)
         }
         c->out_head += (size_t)n;
     }
-    if (c->out_head == c->out_tail) {
+    size_t left = conn_out_pending(c);
+    if (left == 0) {
         c->out_head = c->out_tail = 0;
-        if (c->out_cap > SRV_OUTBUF_KEEP) { /* a burst (a join's objects) is over */
+        if (c->out_cap > NET_OUTBUF_KEEP) { /* a burst is over */
             free(c->out);
             c->out = NULL;
             c->out_cap = 0;
         }
     }
-    return (ssize_t)conn_out_pending(c);
+    uint64_t now = ev_now(c->loop);
+    if (c->writing != (left > 0)) {
+        c->writing = left > 0;
+        watch(c);
+    }
+    if (c->cfg.out_soft && left > c->cfg.out_soft) {
+        if (!c->soft_since_ns)
+            c->soft_since_ns = now;
+    } else {
+        c->soft_since_ns = 0;
+    }
+    if (c->closing) {
+        if (c->cfg.linger_extends && left < before) /* it takes its answer, if slowly */
+            c->linger_until_ns = now + c->cfg.linger_ms * NS_PER_MS;
+        if (left == 0 && !c->shut_wr) { /* the peer reads all of it before the close */
+            shutdown(c->fd, SHUT_WR);
+            c->shut_wr = 1;
+        }
+    }
+    return (ssize_t)left;
+}
+
+void conn_begin_close(conn *c)
+{
+    if (c->closing)
+        return;
+    c->closing = 1;
+    c->linger_until_ns = ev_now(c->loop) + c->cfg.linger_ms * NS_PER_MS;
+}
+
+int conn_overdue(const conn *c)
+{
+    uint64_t now = ev_now(c->loop);
+    if (c->closing)
+        return now > c->linger_until_ns ? -ETIMEDOUT : 0;
+    if (c->soft_since_ns && now - c->soft_since_ns > c->cfg.out_soft_ms * NS_PER_MS)
+        return -ENOBUFS;
+    return 0;
 }
 
 void conn_peer_name(const struct sockaddr_storage *sa, socklen_t len, char *out, size_t outlen)

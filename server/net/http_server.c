@@ -5,7 +5,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include "alloc.h"
@@ -13,7 +12,6 @@
 #include "err.h"
 #include "listener.h"
 #include "log.h"
-#include "srv_limits.h"
 
 #define NS_PER_MS ((uint64_t)1000000)
 /* Connections accepted per wakeup of the listening socket: a burst past
@@ -31,11 +29,17 @@
 /* Room for a response head: a status line and five short headers. */
 #define HEAD_ROOM 512u
 
-_Static_assert(HTTP_BODY_MAX + HEAD_ROOM <= SRV_OUTBUF_HARD, "a response fits in a connection's output");
+/* The endpoint's limits on each connection: its output holds one response
+ * at most; the linger starts with the response and starts again with
+ * each write the peer takes, so a slow reader of a large body is not cut
+ * off while it reads. */
+static const conn_config http_conn_config = {.out_hard = HTTP_BODY_MAX + HEAD_ROOM, .linger_ms = HTTP_LINGER_MS,
+                                             .linger_extends = 1, .sndbuf = SOCKET_SNDBUF};
 
-/* READING the request head; WRITING the response; DRAINING: the response
- * is out and the write side shut, reading (and dropping) until the peer
- * closes, so that the close does not reset a response it has not read. */
+/* READING the request head; WRITING the response (the conn is closing:
+ * its linger runs); DRAINING: the response is out and the write side
+ * shut, reading (and dropping) until the peer closes, so that the close
+ * does not reset a response it has not read. */
 typedef enum { HC_READING, HC_WRITING, HC_DRAINING } hc_state;
 
 typedef struct http_conn {
@@ -43,10 +47,9 @@ typedef struct http_conn {
     http_server *h;
     http_request *req;
     hc_state state;
-    int dead;    /* reaped at the next safe point */
-    int eof;     /* the peer shut its write side */
-    int writing; /* EV_WRITE armed */
-    uint64_t deadline_ns;
+    int dead; /* reaped at the next safe point */
+    int eof;  /* the peer shut its write side */
+    uint64_t request_deadline_ns;
     char peer[80];
 } http_conn;
 
@@ -73,7 +76,6 @@ static void reap_dead(http_server *h)
             i++;
             continue;
         }
-        ev_io_del(h->loop, hc->c.fd);
         conn_free(&hc->c);
         http_request_free(hc->req);
         free(hc);
@@ -99,34 +101,15 @@ static void kill_conn(http_conn *hc)
         h->reap_timer = ev_timer_start(h->loop, 0, 0, on_reap, h);
 }
 
-static void watch(http_conn *hc)
-{
-    unsigned events = (hc->eof ? 0u : (unsigned)EV_READ) | (hc->writing ? (unsigned)EV_WRITE : 0u);
-    ev_io_mod(hc->h->loop, hc->c.fd, events);
-}
-
-/* Writes what is pending; once all of it is out, shuts the write side and
- * drains, or closes if the peer has shut its side already. */
+/* Writes what is pending (conn_flush shuts the write side once all of it
+ * is out); then drains, or closes if the peer has shut its side already. */
 static void flush(http_conn *hc)
 {
-    size_t before = conn_out_pending(&hc->c);
     ssize_t left = conn_flush(&hc->c);
-    if (left < 0) {
+    if (left < 0 || (left == 0 && hc->eof))
         kill_conn(hc);
-        return;
-    }
-    if ((size_t)left < before) /* it takes its answer, if slowly: it has the linger time again */
-        hc->deadline_ns = ev_now(hc->h->loop) + HTTP_LINGER_MS * NS_PER_MS;
-    hc->writing = left > 0;
-    watch(hc);
-    if (left > 0)
-        return;
-    if (hc->eof) {
-        kill_conn(hc);
-        return;
-    }
-    shutdown(hc->c.fd, SHUT_WR);
-    hc->state = HC_DRAINING;
+    else if (left == 0)
+        hc->state = HC_DRAINING;
 }
 
 /* The one-line body of a reply that has none: "404 Not Found\n". */
@@ -154,17 +137,17 @@ static void respond(http_conn *hc, http_reply *rep, int complete)
         rep->content_type = "text/plain; charset=utf-8";
     }
     int n = http_response_head(head, sizeof head, rep->status, rep->content_type, body_len, rep->extra);
-    proto_writer w;
-    if (n < 0 || conn_out_begin(&hc->c, (size_t)n + body_len, &w) < 0) {
+    uint8_t *room;
+    size_t room_len;
+    if (n < 0 || conn_out_reserve(&hc->c, (size_t)n + body_len, &room, &room_len) < 0) {
         log_error("%s: cannot queue a response of %zu bytes", hc->h->name, body_len);
         free(rep->body);
         kill_conn(hc);
         return;
     }
-    memcpy(w.buf, head, (size_t)n);
-    memcpy(w.buf + n, body, body_len);
-    w.len = (size_t)n + body_len;
-    conn_out_end(&hc->c, &w);
+    memcpy(room, head, (size_t)n);
+    memcpy(room + n, body, body_len);
+    conn_out_commit(&hc->c, (size_t)n + body_len);
     free(rep->body);
     if (complete)
         log_debug("%s: %s: %s %s: %d", hc->h->name, hc->peer, http_request_method(hc->req),
@@ -172,7 +155,7 @@ static void respond(http_conn *hc, http_reply *rep, int complete)
     else
         log_debug("%s: %s: %d", hc->h->name, hc->peer, rep->status);
     hc->state = HC_WRITING;
-    hc->deadline_ns = ev_now(hc->h->loop) + HTTP_LINGER_MS * NS_PER_MS;
+    conn_begin_close(&hc->c);
     flush(hc);
 }
 
@@ -198,7 +181,7 @@ static void on_conn_io(ev_loop *loop, int fd, unsigned events, void *data)
         return;
     if (n == 0 && hc->state == HC_WRITING) { /* half-closed: it may still read */
         hc->eof = 1;
-        watch(hc);
+        conn_set_reading(&hc->c, 0);
         return;
     }
     if (n <= 0) { /* gone before asking, done after the answer, or broken */
@@ -228,12 +211,14 @@ static void on_sweep(ev_loop *loop, void *data)
     uint64_t now = ev_now(loop);
     for (uint32_t i = 0; i < h->nconns; i++) {
         http_conn *hc = h->conns[i];
-        if (hc->dead || now <= hc->deadline_ns)
+        if (hc->dead)
             continue;
         if (hc->state == HC_READING) {
-            http_reply rep = {.status = 408};
-            respond(hc, &rep, 0);
-        } else {
+            if (now > hc->request_deadline_ns) {
+                http_reply rep = {.status = 408};
+                respond(hc, &rep, 0);
+            }
+        } else if (conn_overdue(&hc->c) == -ETIMEDOUT) {
             kill_conn(hc);
         }
     }
@@ -268,19 +253,16 @@ static void on_accepted(void *data, int cfd, const char *peer)
         refuse(cfd, 503);
         return;
     }
-    if (conn_init(&hc->c, cfd) < 0 || !(hc->req = http_request_new()) ||
-        ev_io_add(h->loop, cfd, EV_READ, on_conn_io, hc) < 0) {
+    if (conn_open(&hc->c, h->loop, cfd, &http_conn_config, on_conn_io, hc) < 0 || !(hc->req = http_request_new())) {
         log_warn("%s: %s refused: cannot register the connection", h->name, peer);
         http_request_free(hc->req);
         conn_free(&hc->c); /* closes cfd */
         free(hc);
         return;
     }
-    int sndbuf = SOCKET_SNDBUF;
-    setsockopt(cfd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
     hc->h = h;
     snprintf(hc->peer, sizeof hc->peer, "%s", peer);
-    hc->deadline_ns = ev_now(h->loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;
+    hc->request_deadline_ns = ev_now(h->loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;
     h->conns[h->nconns++] = hc;
 }
 

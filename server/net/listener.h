@@ -7,8 +7,8 @@
  * spinning on a socket that stays readable. What a connection becomes is
  * the endpoint's: each accepted socket goes to its callback.
  *
- * The rest of the layer is conn.h: one connection's buffers, its read
- * budget and input cap, its output cap, its flush.
+ * The rest of the layer is conn.h: one connection's input, output, flush
+ * and close; its limits are in net_limits.h.
  */
 #ifndef CVRE_NET_LISTENER_H
 #define CVRE_NET_LISTENER_H
@@ -17,16 +17,8 @@
 #include <stdint.h>
 
 #include "ev.h"
+#include "net_limits.h" /* NET_ACCEPT_PAUSE_MS */
 
-/* How long the listening socket is left alone once the process is out of
- * file descriptors: the connection accept could not take stays waiting,
- * so the socket stays readable, and watching it would spin the loop (and
- * log a line a turn). Descriptors come back as connections close; nginx
- * waits half a second too. */
-#ifndef NET_ACCEPT_PAUSE_MS
-#define NET_ACCEPT_PAUSE_MS 500u
-#endif
-_Static_assert(NET_ACCEPT_PAUSE_MS >= 10 && NET_ACCEPT_PAUSE_MS <= 10000, "short enough to miss few clients");
 
 /* A new connection: fd is non-blocking and close-on-exec, and the
  * callback's to keep or close; peer names it ("HOST:PORT"). */

@@ -14,7 +14,7 @@ import time
 from harness import E, TEMP_DIRS, T, Raw, Server, args, frame, run, still_moving
 
 A = args()
-PAUSE_S = 0.5  # ACCEPT_PAUSE_MS in server.c
+PAUSE_S = 0.5  # NET_ACCEPT_PAUSE_MS in server/net/net_limits.h
 
 
 def test_out_of_descriptors():
