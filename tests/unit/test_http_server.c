@@ -4,7 +4,8 @@
  * responses to slow and half-closed readers, a body past the cap, the
  * request deadline, the linger deadline freeing a slot, a reset peer,
  * running out of memory at each allocation of a connection and of the
- * endpoint, and a loop that cannot watch the socket. */
+ * endpoint, running out of file descriptors, and a loop that cannot
+ * watch the socket. */
 #define _GNU_SOURCE /* pipe2 */
 #include <stdarg.h>
 #include <stddef.h>
@@ -18,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <time.h>
@@ -25,6 +27,7 @@
 
 #include "alloc.h"
 #include "http_server.h"
+#include "net_limits.h"
 
 _Static_assert(HTTP_REQUEST_TIMEOUT_MS == 300 && HTTP_LINGER_MS == 300, "the test's deadlines (tests/CMakeLists.txt)");
 
@@ -165,20 +168,11 @@ static void *client_thread(void *arg)
     return NULL;
 }
 
-/* Starts an endpoint of max_conns, runs the loop while fn runs as the
- * client, then stops the endpoint (with whatever is still open). If
- * fail_after >= 0, the endpoint's allocations fail from the
- * (fail_after + 1)th one made after it started. */
-static void serve(uint32_t max_conns, long fail_after, void (*fn)(void))
+/* Runs loop while fn runs as the client, until it is done. If
+ * fail_after >= 0, the loop's allocations fail from the (fail_after + 1)th
+ * one on. */
+static void run_client(ev_loop *loop, long fail_after, void (*fn)(void))
 {
-    ev_loop *loop = ev_create(1024);
-    assert_non_null(loop);
-    http_server_config cfg = {"test", "127.0.0.1", 0, max_conns};
-    char err[256];
-    http_server *h;
-    assert_int_equal(http_server_start(loop, &cfg, handler, NULL, &h, err, sizeof err), 0);
-    assert_non_null(h);
-    port = atoi(strrchr(http_server_address(h), ':') + 1);
     int done[2];
     assert_int_equal(pipe2(done, O_CLOEXEC | O_NONBLOCK), 0);
     assert_int_equal(ev_io_add(loop, done[0], EV_READ, on_done, NULL), 0);
@@ -189,10 +183,34 @@ static void serve(uint32_t max_conns, long fail_after, void (*fn)(void))
     assert_int_equal(ev_run(loop), 0);
     pthread_join(t, NULL);
     cvre_alloc_fail_after(-1);
-    http_server_stop(h);
     ev_io_del(loop, done[0]);
     close(done[0]);
     close(done[1]);
+}
+
+/* Starts an endpoint of max_conns on loop (its port in port). */
+static http_server *start(ev_loop *loop, uint32_t max_conns)
+{
+    http_server_config cfg = {"test", "127.0.0.1", 0, max_conns};
+    char err[256];
+    http_server *h;
+    assert_int_equal(http_server_start(loop, &cfg, handler, NULL, &h, err, sizeof err), 0);
+    assert_non_null(h);
+    port = atoi(strrchr(http_server_address(h), ':') + 1);
+    return h;
+}
+
+/* Starts an endpoint of max_conns, runs the loop while fn runs as the
+ * client, then stops the endpoint (with whatever is still open). If
+ * fail_after >= 0, the endpoint's allocations fail from the
+ * (fail_after + 1)th one made after it started. */
+static void serve(uint32_t max_conns, long fail_after, void (*fn)(void))
+{
+    ev_loop *loop = ev_create(1024);
+    assert_non_null(loop);
+    http_server *h = start(loop, max_conns);
+    run_client(loop, fail_after, fn);
+    http_server_stop(h);
     ev_destroy(loop);
 }
 
@@ -325,6 +343,68 @@ static void test_out_of_memory(void **state)
     ev_destroy(loop);
 }
 
+/* Out of file descriptors (EMFILE) with a connection waiting: the
+ * endpoint says so once and leaves its socket alone for
+ * NET_ACCEPT_PAUSE_MS instead of spinning on it (a timer well inside the
+ * pause stops the loop: one warning by then, where a spinning loop logs
+ * one a turn); once descriptors are back and the pause is over, the
+ * waiting connection is answered. */
+static int waiting;
+static void waiting_get(void)
+{
+    send_text(waiting, GET);
+    check_eq(response(waiting, NULL), 200);
+}
+
+static void on_stop(ev_loop *loop, void *data)
+{
+    (void)data;
+    ev_stop(loop);
+}
+
+static void test_out_of_descriptors(void **state)
+{
+    (void)state;
+    body_size = 10;
+    ev_loop *loop = ev_create(1024);
+    assert_non_null(loop);
+    http_server *h = start(loop, 4);
+    char path[] = "/tmp/cvre-test-http-XXXXXX";
+    int logfd = mkstemp(path);
+    assert_true(logfd >= 0);
+    unlink(path);
+    int saved_stderr = dup(2);
+    assert_true(saved_stderr >= 0);
+    waiting = connect_to(0); /* in the listening socket's backlog */
+    int lowest = dup(0);     /* the next descriptor: none is left from it on */
+    assert_true(lowest >= 0);
+    close(lowest);
+    struct rlimit saved, none;
+    assert_int_equal(getrlimit(RLIMIT_NOFILE, &saved), 0);
+    none = saved;
+    none.rlim_cur = (rlim_t)lowest;
+    fflush(stderr);
+    assert_int_equal(dup2(logfd, 2), 2);
+    assert_int_equal(setrlimit(RLIMIT_NOFILE, &none), 0);
+    assert_true(ev_timer_start(loop, NET_ACCEPT_PAUSE_MS / 10 * 1000000ull, 0, on_stop, NULL) >= 0);
+    assert_int_equal(ev_run(loop), 0);
+    assert_int_equal(setrlimit(RLIMIT_NOFILE, &saved), 0);
+    assert_int_equal(dup2(saved_stderr, 2), 2);
+    close(saved_stderr);
+    char text[4096];
+    ssize_t n = pread(logfd, text, sizeof text - 1, 0);
+    close(logfd);
+    assert_true(n > 0);
+    text[n] = 0;
+    int lines = 0;
+    for (const char *p = text; (p = strstr(p, "test: accept: Too many open files; raise the file limit")); p++)
+        lines++;
+    assert_int_equal(lines, 1);
+    run_client(loop, -1, waiting_get);
+    http_server_stop(h);
+    ev_destroy(loop);
+}
+
 static void test_start_failures(void **state)
 {
     (void)state;
@@ -352,7 +432,8 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_large_bodies),  cmocka_unit_test(test_body_past_cap),
         cmocka_unit_test(test_deadlines),     cmocka_unit_test(test_reset_peer),
-        cmocka_unit_test(test_out_of_memory), cmocka_unit_test(test_start_failures),
+        cmocka_unit_test(test_out_of_memory), cmocka_unit_test(test_out_of_descriptors),
+        cmocka_unit_test(test_start_failures),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
