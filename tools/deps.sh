@@ -11,7 +11,7 @@
 # --coverage installs gcovr, which tools/coverage.sh reads gcc's counts with.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
-          libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev libhttp-parser-dev chromium)
+          libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev libhttp-parser-dev libssl-dev chromium)
 for arg in "$@"; do
   case "$arg" in
     --bench) packages+=(libopenvdb-dev libclang-rt-14-dev) ;;

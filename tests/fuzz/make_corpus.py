@@ -8,7 +8,8 @@ inputs known: type confusion in a GLB's JSON, deep nesting, node cycles and
 shared children, 2^31-1 STL triangles, 4e9 PLY vertices, 1e39 and 1e38
 coordinates, indices out of range... For fuzz_proto, the seeds that
 `fuzz_proto --write-seeds` writes plus hostile frames; for fuzz_http,
-requests as clients send them and one of each class refused. Files named known-*
+requests as clients send them and one of each class refused; for fuzz_ws,
+client frames as browsers send them and one of each class refused. Files named known-*
 trigger bugs reported and not yet fixed (each target's known() skips them).
 
 Deterministic: the same models make the same files. Existing files of the
@@ -510,6 +511,66 @@ def http_corpus(out):
         write(out, 'fuzz_http', name, text)
 
 
+WS_CAP = 3000  # tests/fuzz/fuzz_ws.c's FUZZ_WS_CAP
+
+
+def ws_frame(b0, payload=b'', form=None, masked=True, length=None):
+    """A client frame: first byte b0, the payload masked with a fixed key,
+    its length (or `length`) in form bytes (1, 2 or 8; None: the shortest)."""
+    n = len(payload) if length is None else length
+    form = form or (1 if n < 126 else 2 if n <= 0xFFFF else 8)
+    m = 0x80 if masked else 0
+    head = bytes([b0])
+    if form == 1:
+        head += bytes([m | n])
+    elif form == 2:
+        head += bytes([m | 126]) + struct.pack('>H', n)
+    else:
+        head += bytes([m | 127]) + struct.pack('>Q', n)
+    if not masked:
+        return head + payload
+    key = b'\x37\xfa\x21\x3d'
+    return head + key + bytes(c ^ key[i % 4] for i, c in enumerate(payload))
+
+
+def ws_corpus(out):
+    """WebSocket client frames (fuzz_ws): what browsers send, and one of
+    each class server/net/ws.c refuses."""
+    FIN, BIN, CONT, TEXT, CLOSE, PING, PONG = 0x80, 0x2, 0x0, 0x1, 0x8, 0x9, 0xA
+    proto = frame(3, bytes([4]) + b'anna' + struct.pack('<3f', 1, 1, 1))  # a JOIN, as one message
+    seeds = {
+        'binary-proto-frame': ws_frame(FIN | BIN, proto),
+        'binary-empty': ws_frame(FIN | BIN),
+        'binary-16bit': ws_frame(FIN | BIN, bytes(range(256)) * 2),
+        'binary-at-cap': ws_frame(FIN | BIN, b'\x01' * WS_CAP),
+        'fragments-with-controls': ws_frame(BIN, b'a' * 100) + ws_frame(FIN | PING, b'p') +
+        ws_frame(CONT, b'b' * 100) + ws_frame(FIN | PONG) + ws_frame(FIN | CONT, b'c' * 100),
+        'ping-pong': ws_frame(FIN | PING, b'x' * 125) + ws_frame(FIN | PONG, b'y'),
+        'close-empty': ws_frame(FIN | CLOSE),
+        'close-reason': ws_frame(FIN | CLOSE, struct.pack('>H', 1000) + 'fin \u00e9'.encode()),
+        'close-4999': ws_frame(FIN | CLOSE, struct.pack('>H', 4999)),
+        'bad-close-1005': ws_frame(FIN | CLOSE, struct.pack('>H', 1005)),
+        'bad-close-one-byte': ws_frame(FIN | CLOSE, b'\x03'),
+        'bad-close-utf8': ws_frame(FIN | CLOSE, struct.pack('>H', 1000) + b'\xc3'),
+        'bad-unmasked': ws_frame(FIN | BIN, proto, masked=False),
+        'bad-rsv1': ws_frame(FIN | 0x40 | BIN, proto),
+        'bad-opcode-3': ws_frame(FIN | 0x3, b'x'),
+        'bad-opcode-b': ws_frame(FIN | 0xB, b'x'),
+        'bad-text': ws_frame(FIN | TEXT, b'hello'),
+        'bad-length-top-bit': ws_frame(FIN | BIN, form=8, length=1 << 63),
+        'bad-length-not-shortest': ws_frame(FIN | BIN, b'abc', form=2),
+        'bad-ping-fragmented': ws_frame(PING, b'x'),
+        'bad-ping-126': ws_frame(FIN | PING, b'x' * 126),
+        'bad-continuation-alone': ws_frame(FIN | CONT, b'x'),
+        'bad-message-in-message': ws_frame(BIN, b'x') + ws_frame(FIN | BIN, b'y'),
+        'too-big': ws_frame(FIN | BIN, form=8, length=1 << 40),
+        'too-big-fragments': ws_frame(BIN, b'a' * 2000) + ws_frame(FIN | CONT, b'b' * 1001),
+        'unfinished': ws_frame(FIN | BIN, proto)[:-3],
+    }
+    for name, data in seeds.items():
+        write(out, 'fuzz_ws', name, data)
+
+
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
     p = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -523,6 +584,7 @@ def main():
     stl_corpus(a.models, a.out)
     proto_corpus(a.out, a.fuzz_proto)
     http_corpus(a.out)
+    ws_corpus(a.out)
     total = 0
     for t in sorted(os.listdir(a.out)):
         files = os.listdir(os.path.join(a.out, t))

@@ -1,0 +1,307 @@
+/* ws.c: RFC 6455's handshake and frames as bytes (see ws.h). */
+#include "ws.h"
+
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include <openssl/evp.h>
+#include <openssl/sha.h>
+
+#include "alloc.h"
+#include "err.h"
+#include "utf8.h"
+
+/* ---- handshake ------------------------------------------------------------- */
+
+/* 4.2.2: appended to the key before hashing. */
+static const char ws_guid[] = "258EAFA5-E914-47DA-95CA-C5AB0DC85B11";
+
+int ws_accept_key(const char *key, size_t len, char accept[WS_ACCEPT_SIZE])
+{
+    unsigned char digest[SHA_DIGEST_LENGTH];
+    EVP_MD_CTX *md = EVP_MD_CTX_new();
+    unsigned dlen = 0;
+    int ok = md && EVP_DigestInit_ex(md, EVP_sha1(), NULL) && EVP_DigestUpdate(md, key, len) &&
+             EVP_DigestUpdate(md, ws_guid, sizeof ws_guid - 1) && EVP_DigestFinal_ex(md, digest, &dlen) &&
+             dlen == sizeof digest;
+    EVP_MD_CTX_free(md);
+    if (!ok)
+        return -EIO; /* GCOVR_EXCL_LINE: libcrypto out of memory */
+    /* 20 bytes are 28 characters of base64, and EVP_EncodeBlock adds the NUL. */
+    _Static_assert(4 * ((SHA_DIGEST_LENGTH + 2) / 3) + 1 == WS_ACCEPT_SIZE, "the accept's size");
+    EVP_EncodeBlock((unsigned char *)accept, digest, sizeof digest);
+    return 0;
+}
+
+/* The value of a base64 digit, or -1. */
+static int b64_digit(char c)
+{
+    static const char digits[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    const char *p = c ? strchr(digits, c) : NULL;
+    return p ? (int)(p - digits) : -1;
+}
+
+/* 16 bytes in base64: 22 digits, the last of which carries 2 bits of
+ * data and 4 zero bits, then "==". */
+static int key_valid(const char *key)
+{
+    if (strlen(key) != 24 || strcmp(key + 22, "==") != 0)
+        return 0;
+    for (int i = 0; i < 22; i++)
+        if (b64_digit(key[i]) < 0)
+            return 0;
+    return (b64_digit(key[21]) & 0xF) == 0;
+}
+
+/* True if the comma-separated list holds token (any case), blanks around
+ * the items allowed. */
+static int has_token(const char *list, const char *token)
+{
+    size_t tlen = strlen(token);
+    for (const char *p = list; *p;) {
+        p += strspn(p, " \t,");
+        size_t n = strcspn(p, ",");
+        size_t m = n;
+        while (m > 0 && (p[m - 1] == ' ' || p[m - 1] == '\t'))
+            m--;
+        if (m == tlen && strncasecmp(p, token, tlen) == 0)
+            return 1;
+        p += n;
+    }
+    return 0;
+}
+
+int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, size_t errlen)
+{
+    if (!u->method || strcmp(u->method, "GET") != 0)
+        return cvre_fail(err, errlen, -EINVAL, "a WebSocket opens with GET, not %s", u->method ? u->method : "?");
+    if (u->http_minor < 1)
+        return cvre_fail(err, errlen, -EINVAL, "a WebSocket needs HTTP/1.1, not HTTP/1.%d", u->http_minor);
+    if (!u->upgrade || !has_token(u->upgrade, "websocket"))
+        return cvre_fail(err, errlen, -EINVAL, "no \"Upgrade: websocket\"");
+    if (!u->connection || !has_token(u->connection, "upgrade"))
+        return cvre_fail(err, errlen, -EINVAL, "no \"Connection: Upgrade\"");
+    if (!u->version)
+        return cvre_fail(err, errlen, -EPROTONOSUPPORT, "no Sec-WebSocket-Version");
+    if (strcmp(u->version, "13") != 0)
+        return cvre_fail(err, errlen, -EPROTONOSUPPORT, "Sec-WebSocket-Version %.16s, not 13", u->version);
+    if (!u->key)
+        return cvre_fail(err, errlen, -EINVAL, "no Sec-WebSocket-Key");
+    if (!key_valid(u->key))
+        return cvre_fail(err, errlen, -EINVAL, "a Sec-WebSocket-Key that is not 16 bytes of base64");
+    if (ws_accept_key(u->key, strlen(u->key), accept) < 0)
+        return cvre_fail(err, errlen, -EIO, "libcrypto could not hash the key"); /* GCOVR_EXCL_LINE */
+    return 0;
+}
+
+/* ---- client frames --------------------------------------------------------- */
+
+void ws_reader_init(ws_reader *r, size_t cap) { *r = (ws_reader){.cap = cap}; }
+
+void ws_reader_free(ws_reader *r)
+{
+    free(r->msg);
+    *r = (ws_reader){.cap = r->cap};
+}
+
+static ssize_t refuse(ws_reader *r, uint16_t code, int rc, char *err, size_t errlen, const char *what)
+{
+    r->close_code = code;
+    return cvre_fail(err, errlen, rc, "%s", what);
+}
+
+int ws_close_code_valid(unsigned code)
+{
+    return (code >= 1000 && code <= 1003) || (code >= 1007 && code <= 1011) || (code >= 3000 && code <= 4999);
+}
+
+static int utf8_valid(const uint8_t *s, size_t n)
+{
+    uint32_t cp;
+    for (size_t k; n > 0; s += k, n -= k)
+        if ((k = utf8_next(s, n, &cp)) == 0)
+            return 0;
+    return 1;
+}
+
+/* A close frame's payload: empty, or a code the wire may carry and a
+ * UTF-8 reason (5.5.1, 7.4). */
+static ssize_t read_close(ws_reader *r, const uint8_t *p, size_t n, ws_event *ev, char *err, size_t errlen)
+{
+    *ev = (ws_event){.type = WS_EV_CLOSE};
+    if (n == 0)
+        return 0;
+    if (n == 1)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a close frame of one byte");
+    unsigned code = (unsigned)p[0] << 8 | p[1];
+    if (!ws_close_code_valid(code)) {
+        r->close_code = WS_CLOSE_PROTOCOL;
+        return cvre_fail(err, errlen, -EPROTO, "close code %u is never sent", code);
+    }
+    if (!utf8_valid(p + 2, n - 2))
+        return refuse(r, WS_CLOSE_BAD_DATA, -EILSEQ, err, errlen, "a close reason that is not UTF-8");
+    *ev = (ws_event){.type = WS_EV_CLOSE, .code = (uint16_t)code, .data = p + 2, .len = n - 2};
+    return 0;
+}
+
+/* Appends a fragment to the message under way; the cap was checked. */
+static int keep_fragment(ws_reader *r, const uint8_t *p, size_t n)
+{
+    if (r->msg_len + n > r->msg_alloc) {
+        size_t want = r->msg_alloc ? r->msg_alloc : 1024;
+        while (want < r->msg_len + n)
+            want *= 2;
+        if (want > r->cap)
+            want = r->cap;
+        uint8_t *m = cvre_realloc(r->msg, want);
+        if (!m)
+            return -ENOMEM;
+        r->msg = m;
+        r->msg_alloc = want;
+    }
+    if (n)
+        memcpy(r->msg + r->msg_len, p, n);
+    r->msg_len += n;
+    return 0;
+}
+
+ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err, size_t errlen)
+{
+    *ev = (ws_event){.type = WS_EV_NONE};
+    if (len < 2)
+        return 0;
+    unsigned fin = data[0] >> 7, rsv = (data[0] >> 4) & 7, op = data[0] & 0xF;
+    unsigned masked = data[1] >> 7;
+    uint64_t plen = data[1] & 0x7F;
+    if (rsv)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "reserved bits set (no extension was agreed)");
+    int control = op >= 0x8;
+    if (op != WS_OP_CONTINUATION && op != WS_OP_TEXT && op != WS_OP_BINARY && op != WS_OP_CLOSE &&
+        op != WS_OP_PING && op != WS_OP_PONG) {
+        r->close_code = WS_CLOSE_PROTOCOL;
+        return cvre_fail(err, errlen, -EPROTO, "unknown opcode %#x", op);
+    }
+    if (!masked)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a client frame that is not masked");
+    if (control && !fin)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a fragmented control frame");
+    if (control && plen > WS_CONTROL_MAX)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a control frame over 125 bytes");
+    if (op == WS_OP_TEXT)
+        return refuse(r, WS_CLOSE_UNSUPPORTED, -EOPNOTSUPP, err, errlen, "a text message (binary only)");
+    if (op == WS_OP_CONTINUATION && !r->fragmented)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a continuation with no message under way");
+    if (op == WS_OP_BINARY && r->fragmented)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a new message inside a fragmented one");
+    size_t at = 2;
+    if (plen == 126) {
+        if (len < 4)
+            return 0;
+        plen = (uint64_t)data[2] << 8 | data[3];
+        if (plen < 126)
+            return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 16-bit length under 126");
+        at = 4;
+    } else if (plen == 127) {
+        if (len < 10)
+            return 0;
+        if (data[2] & 0x80)
+            return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 64-bit length with its top bit set");
+        plen = 0;
+        for (int i = 2; i < 10; i++)
+            plen = plen << 8 | data[i];
+        if (plen <= 0xFFFF)
+            return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 64-bit length under 65536");
+        at = 10;
+    }
+    /* The cap, from the header alone: nothing waits for or keeps more. */
+    size_t so_far = r->fragmented ? r->msg_len : 0;
+    if (!control && plen > r->cap - so_far) {
+        r->close_code = WS_CLOSE_TOO_BIG;
+        return cvre_fail(err, errlen, -EMSGSIZE, "a message of at least %llu bytes, at most %zu",
+                         (unsigned long long)(so_far + plen), r->cap);
+    }
+    if (len - at < 4 || len - at - 4 < plen)
+        return 0;
+    const uint8_t *mask = data + at;
+    uint8_t *p = data + at + 4;
+    for (size_t i = 0; i < plen; i++)
+        p[i] ^= mask[i & 3];
+    size_t n = (size_t)plen, took = at + 4 + n;
+    switch (op) {
+    case WS_OP_CLOSE: {
+        ssize_t rc = read_close(r, p, n, ev, err, errlen);
+        return rc < 0 ? rc : (ssize_t)took;
+    }
+    case WS_OP_PING:
+    case WS_OP_PONG:
+        *ev = (ws_event){.type = op == WS_OP_PING ? WS_EV_PING : WS_EV_PONG, .data = p, .len = n};
+        return (ssize_t)took;
+    default: /* binary, or a continuation of binary */
+        if (fin && !r->fragmented) {
+            *ev = (ws_event){.type = WS_EV_MESSAGE, .data = p, .len = n};
+            return (ssize_t)took;
+        }
+        if (keep_fragment(r, p, n) < 0)
+            return refuse(r, WS_CLOSE_INTERNAL, -ENOMEM, err, errlen, "no memory for a fragmented message");
+        r->fragmented = !fin;
+        if (fin) {
+            *ev = (ws_event){.type = WS_EV_MESSAGE, .data = r->msg, .len = r->msg_len};
+            r->msg_len = 0;
+        }
+        return (ssize_t)took;
+    }
+}
+
+/* ---- server frames --------------------------------------------------------- */
+
+size_t ws_header(uint8_t out[WS_SERVER_HEADER_MAX], unsigned opcode, uint64_t len)
+{
+    out[0] = (uint8_t)(0x80 | (opcode & 0xF));
+    if (len < 126) {
+        out[1] = (uint8_t)len;
+        return 2;
+    }
+    if (len <= 0xFFFF) {
+        out[1] = 126;
+        out[2] = (uint8_t)(len >> 8);
+        out[3] = (uint8_t)len;
+        return 4;
+    }
+    out[1] = 127;
+    for (int i = 0; i < 8; i++)
+        out[2 + i] = (uint8_t)(len >> (56 - 8 * i));
+    return 10;
+}
+
+int ws_control(uint8_t *out, size_t cap, unsigned opcode, const uint8_t *payload, size_t len)
+{
+    if (len > WS_CONTROL_MAX)
+        return -EINVAL;
+    if (cap < 2 + len)
+        return -ENOSPC;
+    size_t h = ws_header(out, opcode, len);
+    if (len)
+        memcpy(out + h, payload, len);
+    return (int)(h + len);
+}
+
+int ws_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason)
+{
+    uint8_t body[WS_CONTROL_MAX];
+    size_t n = 0;
+    if (code) {
+        body[n++] = (uint8_t)(code >> 8);
+        body[n++] = (uint8_t)code;
+        /* The reason, whole characters only, as long as it fits. */
+        const uint8_t *s = (const uint8_t *)(reason ? reason : "");
+        size_t left = strlen((const char *)s);
+        uint32_t cp;
+        for (size_t k; left > 0 && (k = utf8_next(s, left, &cp)) > 0 && n + k <= sizeof body; s += k, left -= k) {
+            memcpy(body + n, s, k);
+            n += k;
+        }
+    }
+    return ws_control(out, cap, WS_OP_CLOSE, body, n);
+}
