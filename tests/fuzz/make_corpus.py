@@ -571,6 +571,61 @@ def ws_corpus(out):
         write(out, 'fuzz_ws', name, data)
 
 
+# ---- web root request targets ----------------------------------------------
+
+WEB_FILES_PATH_MAX = 1024  # server/net/web_files.h
+
+
+def web_files_corpus(out):
+    """Request targets (fuzz_web_files) against the root of tests/webroot.h:
+    what the browser client asks for, and each way server/net/web_files.c
+    refuses to leave the root, at and past the path limit."""
+    seeds = {
+        'index': '/',
+        'index-with-query': '/?name=ann',
+        'script': '/app.js?v=3',
+        'module': '/mod.mjs#top',
+        'deep': '/sub/deeper/model.glb',
+        'sub-index': '/sub/',
+        'escaped-space': '/with%20space.txt',
+        'escaped-percent': '/100%25.txt',
+        'escaped-utf8': '/%C3%A9t%c3%a9.txt',
+        'decoded-once': '/%2561pp.js',
+        'directory': '/sub',
+        'missing': '/sub/missing.js',
+        'fifo': '/fifo',
+        'hidden': '/.git/config',
+        'dotdot': '/../outside.txt',
+        'dotdot-inside': '/sub/../app.js',
+        'dotdot-encoded': '/%2e%2e/outside.txt',
+        'dotdot-mixed-case': '/%2E%2e/outside-dir/secret.txt',
+        'dotdot-half-encoded': '/.%2E/outside.txt',
+        'dot': '/./app.js',
+        'empty-segment': '//etc/passwd',
+        'backslash': '/..\\outside.txt',
+        'backslash-encoded': '/%5c..%5coutside.txt',
+        'slash-encoded': '/sub%2findex.html',
+        'nul-encoded': '/app.js%00.png',
+        'nul-raw': '/app.js\0.png',
+        'newline-encoded': '/a%0d%0ab',
+        'bad-escape': '/%zz',
+        'cut-escape': '/app.js%2',
+        'symlink-in': '/link-in',
+        'symlink-dir-in': '/link-dir-in/index.html',
+        'symlink-out': '/link-out',
+        'symlink-dir-out': '/link-dir-out/secret.txt',
+        'symlink-absolute': '/link-abs',
+        'symlink-up': '/sub/link-up/outside.txt',
+        'absolute-form': 'http://h/app.js',
+        'asterisk': '*',
+        'path-at-cap': '/' + 'p' * (WEB_FILES_PATH_MAX - 1),
+        'path-past-cap': '/' + 'p' * WEB_FILES_PATH_MAX,
+        'long-query': '/app.js?' + 'q' * 1500,
+    }
+    for name, text in seeds.items():
+        write(out, 'fuzz_web_files', name, text)
+
+
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
     p = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -585,6 +640,7 @@ def main():
     proto_corpus(a.out, a.fuzz_proto)
     http_corpus(a.out)
     ws_corpus(a.out)
+    web_files_corpus(a.out)
     total = 0
     for t in sorted(os.listdir(a.out)):
         files = os.listdir(os.path.join(a.out, t))
