@@ -15,12 +15,12 @@ TREES = ("base/", "protocol/", "algo/", "server/", "db/")
 TREE_MIN = 90.0
 # The parsers the network reaches: the wire codec, the importer's format
 # pre-checks (which see every uploaded byte before Assimp does), the
-# checked form of what cvre-import answers, and the HTTP request head of
-# the metrics endpoint.
+# checked form of what cvre-import answers, the HTTP request head of the
+# HTTP endpoints, and the request target the web endpoint turns into a file.
 PARSERS = ("protocol/proto.c", "server/import/import.c", "server/import/import_text.c",
            "server/import/import_obj.c", "server/import/import_stl.c", "server/import/import_ply.c",
            "server/import/import_glb.c", "server/import/import_json.c", "server/import/import_pipe.c",
-           "server/net/http.c")
+           "server/net/http.c", "server/net/web_files.c")
 
 
 def pct(covered, total):
