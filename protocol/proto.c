@@ -364,6 +364,9 @@ static void decode_object_info(reader *r, proto_object_info *m)
     get_transform(r, &m->at);
     m->ecm_version = get_id(r);
     m->tri_count = get_u32(r);
+    const uint8_t *hash = take(r, PROTO_MESH_HASH_SIZE);
+    if (hash)
+        memcpy(m->mesh_hash, hash, PROTO_MESH_HASH_SIZE);
     m->box_count = get_u16(r);
     if (m->box_count > PROTO_OBJECT_BOXES_MAX)
         reader_reject(r, PROTO_ERR_BAD_VALUE);
@@ -380,6 +383,32 @@ static void decode_object_info(reader *r, proto_object_info *m)
                 reader_reject(r, PROTO_ERR_BAD_VALUE);
         }
     }
+}
+
+static void decode_mesh_request(reader *r, proto_mesh_request *m)
+{
+    m->object_id = get_id(r);
+    const uint8_t *hash = take(r, PROTO_MESH_HASH_SIZE);
+    if (hash)
+        memcpy(m->mesh_hash, hash, PROTO_MESH_HASH_SIZE);
+}
+
+/* Like an upload chunk, the data runs to the end of the frame; it must lie
+ * within the mesh's total, so a receiver can size its buffer from total
+ * once and never grow it. */
+static void decode_mesh_chunk(reader *r, proto_mesh_chunk *m)
+{
+    m->object_id = get_id(r);
+    m->total = get_u32(r);
+    if (m->total == 0)
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
+    m->offset = get_u32(r);
+    if (m->offset >= m->total)
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
+    m->len = (uint32_t)r->left;
+    if (r->err == PROTO_OK && (m->len == 0 || m->len > PROTO_MESH_CHUNK_MAX || m->len > m->total - m->offset))
+        reader_reject(r, m->len ? PROTO_ERR_BAD_VALUE : PROTO_ERR_SHORT);
+    m->data = take(r, m->len);
 }
 
 static void decode_collision(reader *r, proto_collision *m)
@@ -508,6 +537,12 @@ int proto_decode(const proto_frame *f, proto_msg *m)
     case PROTO_COLLISION:
         decode_collision(r, &m->u.collision);
         break;
+    case PROTO_MESH_REQUEST:
+        decode_mesh_request(r, &m->u.mesh_request);
+        break;
+    case PROTO_MESH_CHUNK:
+        decode_mesh_chunk(r, &m->u.mesh_chunk);
+        break;
     default:
         return PROTO_ERR_UNKNOWN_TYPE;
     }
@@ -568,6 +603,7 @@ const char *proto_strerror(int status)
     case PROTO_ERR_AUTH_REQUIRED: return "login required";
     case PROTO_ERR_RATE_LIMITED: return "rate limited";
     case PROTO_ERR_PLACEMENT: return "placement refused";
+    case PROTO_ERR_STALE_MESH: return "mesh hash does not match";
     default: return "unknown status";
     }
 }
@@ -604,6 +640,8 @@ const char *proto_type_name(uint16_t type)
     case PROTO_OBJECT_INFO: return "object_info";
     case PROTO_OBJECT_REMOVED: return "object_removed";
     case PROTO_OBJECT_REJECTED: return "object_rejected";
+    case PROTO_MESH_REQUEST: return "mesh_request";
+    case PROTO_MESH_CHUNK: return "mesh_chunk";
     case PROTO_COLLISION: return "collision";
     case PROTO_ECM_UPDATE: return "ecm_update";
     case PROTO_ADMIN_REQUEST: return "admin_request";
@@ -961,6 +999,34 @@ void proto_put_object_rejected(proto_writer *w, uint32_t request_id, uint16_t co
     st_bytes(p, text, n);
 }
 
+void proto_put_mesh_request(proto_writer *w, const proto_mesh_request *m)
+{
+    uint8_t *p = frame_open(w, PROTO_MESH_REQUEST, PROTO_SIZE_MESH_REQUEST - PROTO_HEADER_SIZE);
+
+    if (!p)
+        return;
+    p = st_u32(p, m->object_id);
+    st_bytes(p, m->mesh_hash, PROTO_MESH_HASH_SIZE);
+}
+
+void proto_put_mesh_chunk(proto_writer *w, const proto_mesh_chunk *m)
+{
+    uint8_t *p;
+
+    if (m->len > PROTO_MESH_CHUNK_MAX) {
+        if (w->err == PROTO_OK)
+            w->err = PROTO_ERR_FRAME_TOO_LONG;
+        return;
+    }
+    p = frame_open(w, PROTO_MESH_CHUNK, PROTO_SIZE_MESH_CHUNK(m->len) - PROTO_HEADER_SIZE);
+    if (!p)
+        return;
+    p = st_u32(p, m->object_id);
+    p = st_u32(p, m->total);
+    p = st_u32(p, m->offset);
+    st_bytes(p, m->data, m->len);
+}
+
 void proto_put_collision(proto_writer *w, const proto_collision *m)
 {
     uint8_t *p = frame_open(w, PROTO_COLLISION, PROTO_SIZE_COLLISION - PROTO_HEADER_SIZE);
@@ -986,7 +1052,8 @@ void proto_put_object_info(proto_writer *w, const proto_object_info *m, const fl
         return;
     }
     p = frame_open(w, PROTO_OBJECT_INFO,
-                   8u + 1u + no + 1u + nn + PROTO_SIZE_TRANSFORM + 10u + (size_t)m->box_count * PROTO_BOX_ENTRY_SIZE);
+                   8u + 1u + no + 1u + nn + PROTO_SIZE_TRANSFORM + 10u + PROTO_MESH_HASH_SIZE +
+                       (size_t)m->box_count * PROTO_BOX_ENTRY_SIZE);
     if (!p)
         return;
     p = st_u32(p, m->object_id);
@@ -996,6 +1063,7 @@ void proto_put_object_info(proto_writer *w, const proto_object_info *m, const fl
     p = st_transform(p, &m->at);
     p = st_u32(p, m->ecm_version);
     p = st_u32(p, m->tri_count);
+    p = st_bytes(p, m->mesh_hash, PROTO_MESH_HASH_SIZE);
     p = st_u16(p, m->box_count);
     for (uint16_t i = 0; i < m->box_count; i++) {
         p = st_vec3(p, min[i]);

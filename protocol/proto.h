@@ -14,7 +14,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define PROTO_VERSION 1
+#define PROTO_VERSION 2
 #define PROTO_MAGIC 0x45525643u /* "CVRE" read as a little-endian u32 */
 
 /* Frame header: u32 length (bytes after the length field, i.e. the u16
@@ -56,6 +56,13 @@
 #define PROTO_SCALE_MIN 0.001f     /* uniform object scale */
 #define PROTO_SCALE_MAX 1000.0f
 #define PROTO_BOX_ENTRY_SIZE 24u   /* 2 x vec3 */
+/* Meshes. An object's mesh is named by a BLAKE2b-256 hash of its stored
+ * triangles (OBJECT_INFO), asked for by object id and that hash
+ * (MESH_REQUEST) and sent as one encoded mesh (proto_mesh.h) cut into
+ * MESH_CHUNKs of at most PROTO_MESH_CHUNK_MAX bytes, the upload chunk's
+ * size for the same reason: other frames interleave. */
+#define PROTO_MESH_HASH_SIZE 32u
+#define PROTO_MESH_CHUNK_MAX 16384u
 #define PROTO_SNAPSHOT_MAX_ENTRIES \
     ((PROTO_MAX_LEN - 2u - PROTO_SNAPSHOT_HEAD_SIZE) / PROTO_SNAPSHOT_ENTRY_SIZE)
 
@@ -66,6 +73,7 @@ _Static_assert(PROTO_PASSWORD_MAX <= 255u && PROTO_RESUME_TOKEN_SIZE <= PROTO_PA
 _Static_assert(PROTO_MAX_LEN <= 16u * 1024u * 1024u, "frames stay small");
 _Static_assert(PROTO_SNAPSHOT_MAX_ENTRIES <= 0xffffu, "count is a u16");
 _Static_assert(PROTO_CHUNK_MAX + 16u <= PROTO_MAX_LEN, "a chunk fits a frame");
+_Static_assert(PROTO_MESH_CHUNK_MAX + 20u <= PROTO_MAX_LEN, "a mesh chunk fits a frame");
 _Static_assert(128u + PROTO_OBJECT_BOXES_MAX * PROTO_BOX_ENTRY_SIZE <= PROTO_MAX_LEN, "boxes fit a frame");
 
 /* Message types. Direction: C = client to server, S = server to client. */
@@ -90,6 +98,8 @@ enum proto_type {
     PROTO_OBJECT_INFO = 38,         /* S: an object, its transform and boxes */
     PROTO_OBJECT_REMOVED = 39,      /* S */
     PROTO_OBJECT_REJECTED = 40,     /* S: a request refused; the connection stays */
+    PROTO_MESH_REQUEST = 41,        /* C: send me this object's mesh */
+    PROTO_MESH_CHUNK = 42,          /* S: a piece of an encoded mesh */
     PROTO_COLLISION = 48,           /* S: your avatar was blocked */
     /* Reserved for the issues that follow; not decodable yet. */
     PROTO_RESERVED_FIRST = 36,
@@ -133,7 +143,8 @@ enum proto_status {
     PROTO_ERR_AUTH = 40,           /* wrong name, password or token; or a guest took an account's name */
     PROTO_ERR_AUTH_REQUIRED = 41,  /* this server admits accounts only */
     PROTO_ERR_RATE_LIMITED = 42,   /* too many logins or connections from this address */
-    PROTO_ERR_PLACEMENT = 43       /* the object would not fit: past the world, too large, not finite */
+    PROTO_ERR_PLACEMENT = 43,      /* the object would not fit: past the world, too large, not finite */
+    PROTO_ERR_STALE_MESH = 44      /* the mesh asked for is not the object's (its hash differs) */
 };
 
 /* What a join proves (proto_join.credential). */
@@ -275,6 +286,7 @@ typedef struct proto_object_info {
     proto_transform at;
     uint32_t ecm_version;
     uint32_t tri_count;
+    uint8_t mesh_hash[PROTO_MESH_HASH_SIZE]; /* names the mesh: MESH_REQUEST */
     uint16_t box_count; /* <= PROTO_OBJECT_BOXES_MAX: proto_object_box() */
     const uint8_t *boxes;
 } proto_object_info;
@@ -284,6 +296,20 @@ typedef struct proto_object_rejected {
     uint16_t code;       /* enum proto_status, >= 16 */
     proto_str message;
 } proto_object_rejected;
+
+typedef struct proto_mesh_request {
+    uint32_t object_id;
+    uint8_t mesh_hash[PROTO_MESH_HASH_SIZE]; /* the one OBJECT_INFO gave */
+} proto_mesh_request;
+
+/* Bytes offset..offset+len of an encoded mesh of total bytes (proto_mesh.h). */
+typedef struct proto_mesh_chunk {
+    uint32_t object_id;
+    uint32_t total;      /* >= 1 */
+    uint32_t offset;     /* offset + len <= total */
+    const uint8_t *data; /* 1..PROTO_MESH_CHUNK_MAX bytes, to the end of the frame */
+    uint32_t len;
+} proto_mesh_chunk;
 
 typedef struct proto_collision {
     uint32_t object_id;
@@ -316,6 +342,8 @@ typedef struct proto_msg {
         proto_object_info object_info;
         proto_object_rejected object_rejected;
         proto_collision collision;
+        proto_mesh_request mesh_request;
+        proto_mesh_chunk mesh_chunk;
     } u;
 } proto_msg;
 
@@ -397,6 +425,9 @@ void proto_put_object_remove(proto_writer *w, uint32_t object_id);
 void proto_put_object_removed(proto_writer *w, uint32_t object_id);
 void proto_put_object_rejected(proto_writer *w, uint32_t request_id, uint16_t code, const char *message);
 void proto_put_collision(proto_writer *w, const proto_collision *m);
+void proto_put_mesh_request(proto_writer *w, const proto_mesh_request *m);
+/* A chunk of more than PROTO_MESH_CHUNK_MAX bytes is not written (FRAME_TOO_LONG). */
+void proto_put_mesh_chunk(proto_writer *w, const proto_mesh_chunk *m);
 /* m->boxes is ignored: the boxes come from min/max, box_count of each
  * (at most PROTO_OBJECT_BOXES_MAX; more is an error). */
 void proto_put_object_info(proto_writer *w, const proto_object_info *m, const float (*min)[3], const float (*max)[3]);
@@ -424,9 +455,11 @@ void proto_put_snapshot_end(proto_writer *w, size_t frame_at);
 #define PROTO_SIZE_TRANSFORM 20u
 #define PROTO_SIZE_OBJECT_INFO(n) \
     (PROTO_HEADER_SIZE + 8u + 2u + PROTO_NAME_MAX + PROTO_OBJECT_NAME_MAX + PROTO_SIZE_TRANSFORM + 10u + \
-     (n) * PROTO_BOX_ENTRY_SIZE)
+     PROTO_MESH_HASH_SIZE + (n) * PROTO_BOX_ENTRY_SIZE)
 #define PROTO_SIZE_OBJECT_REMOVED (PROTO_HEADER_SIZE + 4u)
 #define PROTO_SIZE_OBJECT_REJECTED_MAX (PROTO_HEADER_SIZE + 4u + 2u + 1u + PROTO_MESSAGE_MAX)
+#define PROTO_SIZE_MESH_REQUEST (PROTO_HEADER_SIZE + 4u + PROTO_MESH_HASH_SIZE)
+#define PROTO_SIZE_MESH_CHUNK(k) (PROTO_HEADER_SIZE + 12u + (k))
 #define PROTO_SIZE_COLLISION (PROTO_HEADER_SIZE + 4u + 4u + 2u + 1u + 24u)
 
 #endif

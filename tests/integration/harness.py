@@ -22,12 +22,12 @@ TEMP_DIRS = []  # removed when every test passed; kept (with server logs) otherw
 T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINED=7,
          AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12, UPLOAD_BEGIN=32, UPLOAD_CHUNK=33,
          UPLOAD_END=34, OBJECT_PLACE=35, OBJECT_REMOVE=37, OBJECT_INFO=38, OBJECT_REMOVED=39,
-         OBJECT_REJECTED=40, COLLISION=48)
+         OBJECT_REJECTED=40, MESH_REQUEST=41, MESH_CHUNK=42, COLLISION=48)
 E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
          BAD_STRING=21, NOT_FINITE=22, BAD_VALUE=23, BAD_MAGIC=24, VERSION=25, UNEXPECTED=26,
          ALREADY_JOINED=27, TRUNCATED=28, TIMEOUT=29, SERVER_FULL=30, BAD_SEQ=32, INTERNAL=34,
          UPLOAD=35, IMPORT=36, NO_OBJECT=37, NOT_OWNER=38, GUEST=39, AUTH=40, AUTH_REQUIRED=41,
-         RATE_LIMITED=42, PLACEMENT=43)
+         RATE_LIMITED=42, PLACEMENT=43, STALE_MESH=44)
 PREJOIN_CAP = 256  # PROTO_MAX_LEN_PREJOIN
 MODELS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "shared", "models")
 
@@ -47,7 +47,7 @@ def s8(text):
     return bytes([len(b)]) + b
 
 
-def hello(version=1, magic=MAGIC):
+def hello(version=2, magic=MAGIC):
     return frame(T["HELLO"], struct.pack("<IH", magic, version))
 
 
@@ -153,11 +153,16 @@ def decode(t, p):
         at += 1 + p[at]
         name = p[at + 1:at + 1 + p[at]].decode()
         at += 1 + p[at]
-        x, y, z, yaw, scale, ver, tris, nb = struct.unpack_from("<5fIIH", p, at)
-        at += 30
+        x, y, z, yaw, scale, ver, tris = struct.unpack_from("<5fII", p, at)
+        mesh = p[at + 28:at + 60]
+        nb, = struct.unpack_from("<H", p, at + 60)
+        at += 62
         boxes = [struct.unpack_from("<6f", p, at + 24 * i) for i in range(nb)]
         return dict(type="object", id=oid, upload=up, owner=owner, name=name, pos=(x, y, z), yaw=yaw,
-                    scale=scale, ecm_version=ver, triangles=tris, boxes=boxes)
+                    scale=scale, ecm_version=ver, triangles=tris, mesh=mesh, boxes=boxes)
+    if t == T["MESH_CHUNK"]:
+        oid, total, offset = struct.unpack_from("<III", p)
+        return dict(type="mesh_chunk", id=oid, total=total, offset=offset, data=p[12:])
     if t == T["OBJECT_REMOVED"]:
         return dict(type="object_removed", id=struct.unpack_from("<I", p)[0])
     if t == T["OBJECT_REJECTED"]:

@@ -114,7 +114,7 @@ def test_second_join():
 
 def test_handshake_fields():
     rejected(hello(magic=0x12345678), E["BAD_MAGIC"])
-    rejected(hello(version=2), E["VERSION"], words="speaks 1")
+    rejected(hello(version=1), E["VERSION"], words="speaks 2")
     rejected(frame(T["WELCOME"], b"\0" * 60), E["UNEXPECTED"], joined=True, words="server-to-client")
 
 
@@ -170,7 +170,7 @@ def test_others_unaffected_and_bye_on_shutdown():
     assert any(e["reason"] == "shutdown" for e in bystander.of("bye")), bystander.events[-3:]
     assert bystander.of("pong"), "bystander's ping was not answered"
     log = srv.logtext()
-    assert "protocol version 2 not supported" in log
+    assert "protocol version 1 not supported" in log
 
 
 run([test_length_zero, test_length_over_cap, test_length_overflowing_32_bits, test_truncated_then_close,

@@ -164,7 +164,7 @@ static size_t build_samples(sample *s)
     const proto_upload_end ue = {5, {{1.0f, 2.0f, 3.0f}, 0.5f, 2.0f}};
     const proto_object_place op = {9, {{-1.0f, 0.0f, -2.0f}, -3.0f, 0.5f}};
     const proto_object_info oi = {9, 5, {"ann", 3}, {"chair", 5}, {{4.0f, 0.0f, 4.0f}, 1.5f, 1.0f},
-                                  1, 12, 2, NULL};
+                                  1, 12, {0xa5, 0, 0x5a}, 2, NULL};
     const proto_collision co = {9, 1, 0, 0, {1.0f, 0.0f, 2.0f}, {-1.0f, 0.0f, 0.0f}};
     size_t at;
 
@@ -261,7 +261,7 @@ static size_t build_samples(sample *s)
     ADD(PROTO_OBJECT_INFO, proto_put_object_info(&w, &oi, sample_min, sample_max));
     STR(8, 3, 1, PROTO_NAME_MAX);
     STR(12, 5, 1, PROTO_OBJECT_NAME_MAX);
-    FLOATS(18, 22, 26, 30, 34, 48, 52, 56, 60, 64, 68, 72, 76, 80, 84, 88, 92);
+    FLOATS(18, 22, 26, 30, 34, 80, 84, 88, 92, 96, 100, 104, 108, 112, 116, 120, 124);
     s[n].scale = 34;
     IDS(0, 38);
     n++;
@@ -833,7 +833,8 @@ static void object_info_roundtrip(uint16_t n, const char *owner, const char *nam
     static float mn[PROTO_OBJECT_BOXES_MAX][3], mx[PROTO_OBJECT_BOXES_MAX][3];
     const size_t no = strlen(owner), nn = strlen(name);
     const proto_object_info in = {0xfffffffeu, upload_id, {owner, (uint32_t)no}, {name, (uint32_t)nn},
-                                  {{1.0f, -0.0f, -2.5f}, -3.0f, PROTO_SCALE_MAX}, 7, UINT32_MAX, n, NULL};
+                                  {{1.0f, -0.0f, -2.5f}, -3.0f, PROTO_SCALE_MAX}, 7, UINT32_MAX,
+                                  {1, 2, 3, [PROTO_MESH_HASH_SIZE - 1] = 0xff}, n, NULL};
     proto_writer w;
     proto_msg m;
 
@@ -852,7 +853,7 @@ static void object_info_roundtrip(uint16_t n, const char *owner, const char *nam
     proto_writer_init(&w, big, BIG);
     proto_put_object_info(&w, &in, n ? (const float (*)[3])mn : NULL, n ? (const float (*)[3])mx : NULL);
     assert_int_equal(w.err, PROTO_OK);
-    assert_int_equal(w.len, PROTO_HEADER_SIZE + 40 + no + nn + (size_t)n * PROTO_BOX_ENTRY_SIZE);
+    assert_int_equal(w.len, PROTO_HEADER_SIZE + 72 + no + nn + (size_t)n * PROTO_BOX_ENTRY_SIZE);
     decode_all(big, w.len, &m);
     assert_int_equal(m.type, PROTO_OBJECT_INFO);
     assert_int_equal(m.u.object_info.object_id, in.object_id);
@@ -865,8 +866,9 @@ static void object_info_roundtrip(uint16_t n, const char *owner, const char *nam
     assert_same_floats(&m.u.object_info.at.scale, &in.at.scale, 1);
     assert_int_equal(m.u.object_info.ecm_version, 7);
     assert_int_equal(m.u.object_info.tri_count, UINT32_MAX);
+    assert_memory_equal(m.u.object_info.mesh_hash, in.mesh_hash, PROTO_MESH_HASH_SIZE);
     assert_int_equal(m.u.object_info.box_count, n);
-    assert_ptr_equal(m.u.object_info.boxes, big + PROTO_HEADER_SIZE + 40 + no + nn);
+    assert_ptr_equal(m.u.object_info.boxes, big + PROTO_HEADER_SIZE + 72 + no + nn);
     for (uint16_t i = 0; i < m.u.object_info.box_count; i++) {
         float lo[3], hi[3];
 
@@ -901,7 +903,7 @@ static void test_object_info_max_boxes(void **state)
     name[PROTO_OBJECT_NAME_MAX] = 0;
     object_info_roundtrip(PROTO_OBJECT_BOXES_MAX, owner, name, UINT32_MAX);
     assert_int_equal(PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX),
-                     PROTO_HEADER_SIZE + 40 + PROTO_NAME_MAX + PROTO_OBJECT_NAME_MAX +
+                     PROTO_HEADER_SIZE + 72 + PROTO_NAME_MAX + PROTO_OBJECT_NAME_MAX +
                          PROTO_OBJECT_BOXES_MAX * PROTO_BOX_ENTRY_SIZE);
     assert_true(PROTO_SIZE_OBJECT_INFO(PROTO_OBJECT_BOXES_MAX) - 4 <= PROTO_MAX_LEN);
 }
@@ -1020,7 +1022,7 @@ static void test_object_string_truncation(void **state)
         const proto_upload_begin ub = {1, 1, {names[i].in, (uint32_t)strlen(names[i].in)}, {"obj", 3},
                                        PROTO_UP_Y, 1.0f};
         const proto_object_info oi = {1, 0, {"ann", 3}, {names[i].in, (uint32_t)strlen(names[i].in)},
-                                      {{0, 0, 0}, 0, 1}, 1, 0, 0, NULL};
+                                      {{0, 0, 0}, 0, 1}, 1, 0, {0}, 0, NULL};
 
         proto_writer_init(&w, big, BIG);
         proto_put_upload_begin(&w, &ub);
@@ -1043,7 +1045,7 @@ static void test_object_string_truncation(void **state)
     }
     for (size_t i = 0; i < sizeof owners / sizeof owners[0]; i++) {
         const proto_object_info oi = {1, 0, {owners[i].in, (uint32_t)strlen(owners[i].in)}, {"x", 1},
-                                      {{0, 0, 0}, 0, 1}, 1, 0, 0, NULL};
+                                      {{0, 0, 0}, 0, 1}, 1, 0, {0}, 0, NULL};
 
         proto_writer_init(&w, big, BIG);
         proto_put_object_info(&w, &oi, NULL, NULL);
@@ -1211,7 +1213,7 @@ static void test_stream_of_frames(void **state)
 static void test_worked_examples(void **state)
 {
     static const uint8_t hello_bytes[] = {0x08, 0x00, 0x00, 0x00, 0x01, 0x00,
-                                          0x43, 0x56, 0x52, 0x45, 0x01, 0x00};
+                                          0x43, 0x56, 0x52, 0x45, 0x02, 0x00};
     static const uint8_t move_bytes[] = {0x12, 0x00, 0x00, 0x00, 0x05, 0x00, 0x01, 0x00,
                                          0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
                                          0x00, 0x00, 0x00, 0x00, 0x20, 0xc0};
@@ -1220,12 +1222,12 @@ static void test_worked_examples(void **state)
                                           0x00, 0x00, 0x00, 0x00, 0x20, 0x41, 0xdb, 0x0f,
                                           0xc9, 0x3f, 0x00, 0x00, 0x00, 0x40};
     proto_writer w;
-    const proto_hello hello = {PROTO_MAGIC, 1};
+    const proto_hello hello = {PROTO_MAGIC, 2};
     const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
     const proto_object_place place = {3, {{0.0f, 0.0f, 10.0f}, 1.57079632679f, 2.0f}};
 
     (void)state;
-    assert_int_equal(PROTO_VERSION, 1);
+    assert_int_equal(PROTO_VERSION, 2);
     proto_writer_init(&w, big, BIG);
     proto_put_hello(&w, &hello);
     assert_int_equal(w.len, sizeof hello_bytes);
@@ -1295,7 +1297,7 @@ static void test_writer_overflow_sticky(void **state)
     const proto_upload_chunk uc = {1, 0, &byte, 1};
     const proto_upload_end ue = {1, {{0, 0, 0}, 0, 1}};
     const proto_object_place op = {1, {{0, 0, 0}, 0, 1}};
-    const proto_object_info oi = {1, 0, {"a", 1}, {"b", 1}, {{0, 0, 0}, 0, 1}, 1, 0, 0, NULL};
+    const proto_object_info oi = {1, 0, {"a", 1}, {"b", 1}, {{0, 0, 0}, 0, 1}, 1, 0, {0}, 0, NULL};
     const proto_collision co = {1, 1, 0, 0, {0, 0, 0}, {0, 1, 0}};
 
     (void)state;
@@ -1401,7 +1403,8 @@ static void test_writer_info_over_max(void **state)
     static float mn[PROTO_OBJECT_BOXES_MAX + 1][3], mx[PROTO_OBJECT_BOXES_MAX + 1][3];
     proto_writer w;
     proto_msg m;
-    proto_object_info oi = {1, 0, {"a", 1}, {"b", 1}, {{0, 0, 0}, 0, 1}, 1, 0, PROTO_OBJECT_BOXES_MAX + 1, NULL};
+    proto_object_info oi = {1, 0, {"a", 1}, {"b", 1}, {{0, 0, 0}, 0, 1}, 1, 0, {0}, PROTO_OBJECT_BOXES_MAX + 1,
+                            NULL};
 
     (void)state;
     proto_writer_init(&w, big, BIG);
@@ -1626,6 +1629,8 @@ static void test_unknown_and_reserved_types(void **state)
     for (uint32_t t = 0; t <= 0xffff; t++) {
         if ((t >= PROTO_HELLO && t <= PROTO_BYE) || (t >= PROTO_OBJECT_UPLOAD_BEGIN && t <= PROTO_OBJECT_REJECTED &&
                                                      t != PROTO_OBJECT_MOVE) || t == PROTO_COLLISION)
+            continue;
+        if (t == PROTO_MESH_REQUEST || t == PROTO_MESH_CHUNK)
             continue;
         assert_int_equal(decode_raw((uint16_t)t, payload, sizeof payload), PROTO_ERR_UNKNOWN_TYPE);
         assert_int_equal(decode_raw((uint16_t)t, NULL, 0), PROTO_ERR_UNKNOWN_TYPE);
@@ -2203,9 +2208,10 @@ static size_t info_payload(uint8_t *p, uint16_t count, size_t nboxes)
     at += 4;
     wr_u32(p + at, 1);
     wr_u32(p + at + 4, 12);
-    wr_u16(p + at + 8, count);
-    at += 10;
-    assert_int_equal(at, 42);
+    memset(p + at + 8, 0x5a, PROTO_MESH_HASH_SIZE);
+    wr_u16(p + at + 8 + PROTO_MESH_HASH_SIZE, count);
+    at += 10 + PROTO_MESH_HASH_SIZE;
+    assert_int_equal(at, 74);
     for (size_t i = 0; i < nboxes; i++) {
         for (int k = 0; k < 3; k++, at += 4)
             wr_f32(p + at, 0.0f);
@@ -2238,29 +2244,29 @@ static void test_object_info_boxes(void **state)
     /* Over the cap even with every box there, or with none. */
     len = info_payload(p, PROTO_OBJECT_BOXES_MAX + 1, PROTO_OBJECT_BOXES_MAX + 1);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
-    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, 42), PROTO_ERR_BAD_VALUE);
+    assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, 74), PROTO_ERR_BAD_VALUE);
     len = info_payload(p, 0xffff, 0);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
 
     /* min > max on each axis of box 1 of 2; equal is a flat box. */
     for (size_t k = 0; k < 3; k++) {
         len = info_payload(p, 2, 2);
-        wr_f32(p + 42 + e + 4 * k, 1.5f);
+        wr_f32(p + 74 + e + 4 * k, 1.5f);
         assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
-        wr_f32(p + 42 + e + 4 * k, 1.0f);
+        wr_f32(p + 74 + e + 4 * k, 1.0f);
         assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
-        wr_f32(p + 42 + e + 12 + 4 * k, -1.0f);
+        wr_f32(p + 74 + e + 12 + 4 * k, -1.0f);
         assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
-        wr_f32(p + 42 + e + 12 + 4 * k, -0.0f); /* min 1.0 */
+        wr_f32(p + 74 + e + 12 + 4 * k, -0.0f); /* min 1.0 */
         assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
     }
     /* -0.0 and 0.0 are equal: either may be min or max. */
     len = info_payload(p, 1, 1);
-    wr_f32(p + 42, 0.0f);
-    wr_f32(p + 42 + 12, -0.0f);
+    wr_f32(p + 74, 0.0f);
+    wr_f32(p + 74 + 12, -0.0f);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
-    wr_f32(p + 42, -0.0f);
-    wr_f32(p + 42 + 12, 0.0f);
+    wr_f32(p + 74, -0.0f);
+    wr_f32(p + 74 + 12, 0.0f);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_OK);
 }
 
@@ -2382,15 +2388,15 @@ static void test_first_failure_wins_objects(void **state)
     /* object_info: box 0 min.x > max.x, then a NaN at max.y: the x axis is
      * wrong first */
     len = info_payload(p, 2, 2);
-    wr_f32(p + 42, 5.0f);
-    wr_u32(p + 42 + 16, 0x7fc00000u);
+    wr_f32(p + 74, 5.0f);
+    wr_u32(p + 74 + 16, 0x7fc00000u);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_BAD_VALUE);
     /* ...but a NaN at max.x itself is found before the comparison */
-    wr_u32(p + 42 + 12, 0x7fc00000u);
+    wr_u32(p + 74 + 12, 0x7fc00000u);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len), PROTO_ERR_NOT_FINITE);
     /* object_info: min > max in box 0, and box 1 cut short */
     len = info_payload(p, 2, 2);
-    wr_f32(p + 42 + 4, 5.0f);
+    wr_f32(p + 74 + 4, 5.0f);
     assert_int_equal(decode_raw(PROTO_OBJECT_INFO, p, len - 10), PROTO_ERR_BAD_VALUE);
     /* object_info: a count over the cap, and no boxes at all */
     len = info_payload(p, 2000, 0);
@@ -2434,7 +2440,7 @@ static void test_strerror_total(void **state)
 {
     const char *unknown = proto_strerror(-1);
     const int known[] = {PROTO_OK, PROTO_INCOMPLETE, 16, 17, 18, 19, 20, 21, 22, 23, 24,
-                         25, 26, 27, 28, 29, 30, 32, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43};
+                         25, 26, 27, 28, 29, 30, 32, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44};
 
     (void)state;
     for (int s = -2000; s <= 2000; s++) {
@@ -2447,7 +2453,7 @@ static void test_strerror_total(void **state)
     assert_ptr_equal(proto_strerror(15), unknown);
     assert_ptr_equal(proto_strerror(31), unknown); /* reserved */
     assert_ptr_equal(proto_strerror(33), unknown);
-    assert_ptr_equal(proto_strerror(44), unknown);
+    assert_ptr_equal(proto_strerror(45), unknown);
     for (size_t i = 0; i < sizeof known / sizeof known[0]; i++) {
         assert_true(proto_strerror(known[i]) != unknown);
         for (size_t j = 0; j < i; j++)
@@ -2472,12 +2478,14 @@ static void test_type_names(void **state)
         {PROTO_OBJECT_INFO, "object_info"},
         {PROTO_OBJECT_REMOVED, "object_removed"},
         {PROTO_OBJECT_REJECTED, "object_rejected"},
+        {PROTO_MESH_REQUEST, "mesh_request"},
+        {PROTO_MESH_CHUNK, "mesh_chunk"},
         {PROTO_COLLISION, "collision"},
         {PROTO_ECM_UPDATE, "ecm_update"},
         {PROTO_ADMIN_REQUEST, "admin_request"},
         {PROTO_ADMIN_REPLY, "admin_reply"},
     };
-    const uint16_t unknown[] = {0, 13, 31, 41, 47, 50, 63, 66, 79, 80, 0xffff};
+    const uint16_t unknown[] = {0, 13, 31, 43, 47, 50, 63, 66, 79, 80, 0xffff};
 
     (void)state;
     for (uint16_t t = PROTO_HELLO; t <= PROTO_BYE; t++)
