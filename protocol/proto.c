@@ -14,6 +14,7 @@
 #include "utf8.h"
 
 #include <assert.h>
+#include <math.h>
 #include <string.h>
 
 _Static_assert(sizeof(float) == sizeof(uint32_t), "floats travel as IEEE-754 binary32");
@@ -423,6 +424,46 @@ static void decode_collision(reader *r, proto_collision *m)
     get_vec3(r, m->normal);
 }
 
+static int16_t get_i16(reader *r) { return (int16_t)get_u16(r); }
+
+/* A pose (PROTOCOL.md, section 1): the facing, then the parts the bits
+ * name, each checked right after it is read: the head within
+ * PROTO_POSE_HEAD_RANGE_MM of the avatar, a hand within PROTO_POSE_REACH_MM
+ * of the head, every quaternion of unit length within tolerance. */
+static void get_pose(reader *r, proto_pose *p)
+{
+    p->yaw = get_f32(r);
+    p->pitch = get_f32(r);
+    if (!(p->pitch >= -PROTO_PITCH_MAX && p->pitch <= PROTO_PITCH_MAX))
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
+    p->parts = get_u8(r);
+    if (p->parts >> PROTO_POSE_PARTS || (p->parts && !PROTO_POSE_HAS(p, PROTO_POSE_HEAD)))
+        reader_reject(r, PROTO_ERR_BAD_VALUE);
+    memset(p->pos, 0, sizeof p->pos);
+    memset(p->rot, 0, sizeof p->rot);
+    for (unsigned k = 0; k < PROTO_POSE_PARTS && r->err == PROTO_OK; k++) {
+        if (!PROTO_POSE_HAS(p, k))
+            continue;
+        int64_t d2 = 0, q2 = 0;
+        for (int i = 0; i < 3; i++) {
+            p->pos[k][i] = get_i16(r);
+            int64_t d = p->pos[k][i] - (k == PROTO_POSE_HEAD ? 0 : p->pos[PROTO_POSE_HEAD][i]);
+            if (k == PROTO_POSE_HEAD && (d > PROTO_POSE_HEAD_RANGE_MM || d < -PROTO_POSE_HEAD_RANGE_MM))
+                reader_reject(r, PROTO_ERR_BAD_VALUE);
+            d2 += d * d;
+        }
+        if (k != PROTO_POSE_HEAD && d2 > (int64_t)PROTO_POSE_REACH_MM * PROTO_POSE_REACH_MM)
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
+        for (int i = 0; i < 4; i++) {
+            p->rot[k][i] = get_i16(r);
+            q2 += (int64_t)p->rot[k][i] * p->rot[k][i];
+        }
+        double n2 = (double)q2 / ((double)PROTO_QUAT_ONE * PROTO_QUAT_ONE);
+        if (!(fabs(n2 - 1.0) <= PROTO_QUAT_NORM2_TOLERANCE))
+            reader_reject(r, PROTO_ERR_BAD_VALUE);
+    }
+}
+
 /* A join and its optional credential: a kind, then 1..PROTO_PASSWORD_MAX
  * password bytes (any bytes: the store hashes them) or a token of exactly
  * PROTO_RESUME_TOKEN_SIZE. */
@@ -475,6 +516,13 @@ int proto_decode(const proto_frame *f, proto_msg *m)
     case PROTO_MOVE:
         m->u.move.seq = get_u32(r);
         get_vec3(r, m->u.move.pos);
+        m->u.move.has_pose = r->err == PROTO_OK && r->left > 0;
+        if (m->u.move.has_pose)
+            get_pose(r, &m->u.move.pose);
+        break;
+    case PROTO_AVATAR_POSE:
+        m->u.avatar_pose.id = get_u32(r);
+        get_pose(r, &m->u.avatar_pose.pose);
         break;
     case PROTO_SNAPSHOT:
         decode_snapshot(r, &m->u.snapshot);
@@ -628,6 +676,7 @@ const char *proto_type_name(uint16_t type)
     case PROTO_PING: return "ping";
     case PROTO_PONG: return "pong";
     case PROTO_BYE: return "bye";
+    case PROTO_AVATAR_POSE: return "avatar_pose";
     case PROTO_OBJECT_UPLOAD_BEGIN: return "object_upload_begin";
     case PROTO_OBJECT_UPLOAD_CHUNK: return "object_upload_chunk";
     case PROTO_OBJECT_UPLOAD_END: return "object_upload_end";
@@ -791,14 +840,72 @@ void proto_put_join_ok(proto_writer *w, const proto_join_ok *m)
         st_bytes(p, m->token, PROTO_RESUME_TOKEN_SIZE);
 }
 
+/* Bytes of a pose on the wire: the facing and its parts. */
+static size_t pose_size(const proto_pose *p)
+{
+    size_t n = PROTO_POSE_HEAD_SIZE;
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++)
+        n += PROTO_POSE_HAS(p, k) ? PROTO_POSE_PART_SIZE : 0u;
+    return n;
+}
+
+static uint8_t *st_pose(uint8_t *p, const proto_pose *m)
+{
+    p = st_f32(p, m->yaw);
+    p = st_f32(p, m->pitch);
+    p = st_u8(p, m->parts);
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++) {
+        if (!PROTO_POSE_HAS(m, k))
+            continue;
+        for (int i = 0; i < 3; i++)
+            p = st_u16(p, (uint16_t)m->pos[k][i]);
+        for (int i = 0; i < 4; i++)
+            p = st_u16(p, (uint16_t)m->rot[k][i]);
+    }
+    return p;
+}
+
 void proto_put_move(proto_writer *w, const proto_move *m)
 {
-    uint8_t *p = frame_open(w, PROTO_MOVE, PROTO_SIZE_MOVE - PROTO_HEADER_SIZE);
+    uint8_t *p = frame_open(w, PROTO_MOVE,
+                            PROTO_SIZE_MOVE - PROTO_HEADER_SIZE + (m->has_pose ? pose_size(&m->pose) : 0u));
 
     if (!p)
         return;
     p = st_u32(p, m->seq);
-    st_vec3(p, m->pos);
+    p = st_vec3(p, m->pos);
+    if (m->has_pose)
+        st_pose(p, &m->pose);
+}
+
+void proto_put_avatar_pose(proto_writer *w, const proto_avatar_pose *m)
+{
+    uint8_t *p = frame_open(w, PROTO_AVATAR_POSE, 4u + pose_size(&m->pose));
+
+    if (!p)
+        return;
+    p = st_u32(p, m->id);
+    st_pose(p, &m->pose);
+}
+
+/* Rounds v x scale to the nearest int16, saturating. */
+static int16_t quantize(float v, float scale)
+{
+    float x = roundf(v * scale);
+    if (x != x) /* NaN: the caller's bug; nothing undefined comes of it */
+        return 0;
+    return (int16_t)(x > 32767.0f ? 32767.0f : x < -32768.0f ? -32768.0f : x);
+}
+
+void proto_pose_set_part(proto_pose *p, unsigned part, const float pos[3], const float q[4])
+{
+    float n = sqrtf(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+
+    for (int i = 0; i < 3; i++)
+        p->pos[part][i] = quantize(pos[i], 1000.0f);
+    for (int i = 0; i < 4; i++)
+        p->rot[part][i] = quantize(n > 0.0f ? q[i] / n : (i == 3), (float)PROTO_QUAT_ONE);
+    p->parts |= (uint8_t)(1u << part);
 }
 
 void proto_put_avatar_joined(proto_writer *w, const proto_avatar_joined *m)

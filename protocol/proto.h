@@ -65,6 +65,26 @@
 #define PROTO_MESH_CHUNK_MAX 16384u
 #define PROTO_SNAPSHOT_MAX_ENTRIES \
     ((PROTO_MAX_LEN - 2u - PROTO_SNAPSHOT_HEAD_SIZE) / PROTO_SNAPSHOT_ENTRY_SIZE)
+/* VR pose (a MOVE's optional tail, AVATAR_POSE). Positions of the head and
+ * hands are int16 millimetres relative to the avatar's position: +-32 m
+ * is far more than a body, and 1 mm is below what anyone can see. A
+ * quaternion is four int16 components scaled by PROTO_QUAT_ONE. */
+#define PROTO_QUAT_ONE 32767
+/* Pitch: straight down to straight up; the binary32 nearest pi/2. */
+#define PROTO_PITCH_MAX 1.5707964f
+/* The head stays within 4 m of the avatar's position on each axis: the
+ * largest avatar box is 4 m, and a head farther out is not on the body. */
+#define PROTO_POSE_HEAD_RANGE_MM 4000
+/* A hand is at most 1.5 m from the head: an adult's arm span is about
+ * 1.8 m, so a hand lies within about 1 m of the head; the rest is room
+ * for tracking noise and long arms. Farther is not a hand. */
+#define PROTO_POSE_REACH_MM 1500
+/* A quaternion's squared length must be within 1 +- 0.02: int16 rounding
+ * moves it by under 1e-4, a client's float drift by less; 0.02 still
+ * refuses one that was never normalised. */
+#define PROTO_QUAT_NORM2_TOLERANCE 0.02
+#define PROTO_POSE_PART_SIZE 14u /* 3 x i16 position + 4 x i16 quaternion */
+#define PROTO_POSE_HEAD_SIZE 9u  /* f32 yaw + f32 pitch + u8 parts */
 
 _Static_assert(PROTO_MAX_LEN_PREJOIN >= 2u + 1u + PROTO_NAME_MAX + 12u + 2u + PROTO_PASSWORD_MAX,
                "a join with a password must fit before join");
@@ -90,6 +110,7 @@ enum proto_type {
     PROTO_PING = 10,         /* C or S; the other side answers pong */
     PROTO_PONG = 11,         /* C or S */
     PROTO_BYE = 12,          /* C or S */
+    PROTO_AVATAR_POSE = 13,  /* S: an avatar's facing, head and hands */
     PROTO_OBJECT_UPLOAD_BEGIN = 32, /* C */
     PROTO_OBJECT_UPLOAD_CHUNK = 33, /* C */
     PROTO_OBJECT_UPLOAD_END = 34,   /* C: the upload is complete; place it */
@@ -200,10 +221,31 @@ typedef struct proto_join_ok {
     uint8_t token[PROTO_RESUME_TOKEN_SIZE];
 } proto_join_ok;
 
+/* The parts of a pose (proto_pose.parts): the head, and the hands, which
+ * come only with the head. */
+enum proto_pose_part { PROTO_POSE_HEAD = 0, PROTO_POSE_LEFT = 1, PROTO_POSE_RIGHT = 2, PROTO_POSE_PARTS = 3 };
+#define PROTO_POSE_HAS(p, part) (((p)->parts >> (part)) & 1u)
+
+/* Where an avatar looks, and its tracked head and hands. */
+typedef struct proto_pose {
+    float yaw;     /* radians about +y, finite */
+    float pitch;   /* radians, in [-PROTO_PITCH_MAX, PROTO_PITCH_MAX] */
+    uint8_t parts; /* bit k: part k is present (enum proto_pose_part) */
+    int16_t pos[PROTO_POSE_PARTS][3]; /* mm from the avatar's position */
+    int16_t rot[PROTO_POSE_PARTS][4]; /* x, y, z, w, each x PROTO_QUAT_ONE */
+} proto_pose;
+
 typedef struct proto_move {
     uint32_t seq; /* strictly increasing per connection */
     float pos[3]; /* requested position */
+    uint8_t has_pose; /* on the wire an optional tail: absent, the facing stays */
+    proto_pose pose;
 } proto_move;
+
+typedef struct proto_avatar_pose {
+    uint32_t id;
+    proto_pose pose;
+} proto_avatar_pose;
 
 /* One snapshot entry: an avatar whose position changed. */
 typedef struct proto_avatar {
@@ -328,6 +370,7 @@ typedef struct proto_msg {
         proto_join join;
         proto_join_ok join_ok;
         proto_move move;
+        proto_avatar_pose avatar_pose;
         proto_snapshot snapshot;
         proto_avatar_joined avatar_joined;
         proto_avatar_left avatar_left;
@@ -411,6 +454,10 @@ void proto_put_welcome(proto_writer *w, const proto_welcome *m);
 void proto_put_join(proto_writer *w, const proto_join *m);
 void proto_put_join_ok(proto_writer *w, const proto_join_ok *m);
 void proto_put_move(proto_writer *w, const proto_move *m);
+void proto_put_avatar_pose(proto_writer *w, const proto_avatar_pose *m);
+/* Quantizes one part of a pose: pos in metres from the avatar, q a
+ * quaternion (x, y, z, w), normalised here; sets the part's bit. */
+void proto_pose_set_part(proto_pose *p, unsigned part, const float pos[3], const float q[4]);
 void proto_put_avatar_joined(proto_writer *w, const proto_avatar_joined *m);
 void proto_put_avatar_left(proto_writer *w, const proto_avatar_left *m);
 void proto_put_error(proto_writer *w, uint16_t code, const char *message);
@@ -446,6 +493,9 @@ void proto_put_snapshot_end(proto_writer *w, size_t frame_at);
 #define PROTO_SIZE_JOIN_OK (PROTO_HEADER_SIZE + 4u + 12u + 12u)
 #define PROTO_SIZE_JOIN_OK_MAX (PROTO_SIZE_JOIN_OK + PROTO_RESUME_TOKEN_SIZE)
 #define PROTO_SIZE_MOVE (PROTO_HEADER_SIZE + 4u + 12u)
+#define PROTO_SIZE_POSE_MAX (PROTO_POSE_HEAD_SIZE + PROTO_POSE_PARTS * PROTO_POSE_PART_SIZE)
+#define PROTO_SIZE_MOVE_MAX (PROTO_SIZE_MOVE + PROTO_SIZE_POSE_MAX)
+#define PROTO_SIZE_AVATAR_POSE_MAX (PROTO_HEADER_SIZE + 4u + PROTO_SIZE_POSE_MAX)
 #define PROTO_SIZE_AVATAR_JOINED_MAX (PROTO_HEADER_SIZE + 4u + 1u + PROTO_NAME_MAX + 24u)
 #define PROTO_SIZE_AVATAR_LEFT (PROTO_HEADER_SIZE + 5u)
 #define PROTO_SIZE_ERROR_MAX (PROTO_HEADER_SIZE + 2u + 1u + PROTO_MESSAGE_MAX)

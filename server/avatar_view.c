@@ -33,7 +33,7 @@ void avatar_view__update(server *s, client *c, uint32_t tick)
         return;
     const world_avatar *me = world_get(s->world, c->avatar_id);
     uint32_t n = world_neighbours(s->world, c->avatar_id, s->vis, SRV_AOI_MAX - 1);
-    uint32_t nleft = 0, njoined = 0, nsnap = 0;
+    uint32_t nleft = 0, njoined = 0, nsnap = 0, npose = 0;
     if (s->stamp >= UINT32_MAX - 2) { /* wrapped: forget every old stamp */
         memset(s->mark_stamp, 0, s->cfg.max_clients * sizeof *s->mark_stamp);
         s->stamp = 0;
@@ -53,20 +53,22 @@ void avatar_view__update(server *s, client *c, uint32_t tick)
             s->mark_stamp[slot] = S + 1;
             if (v->changed_tick > c->last_sent_tick)
                 s->snap[nsnap++] = v;
+            npose += v->has_pose && v->pose_tick > c->last_sent_tick;
         } else {
             s->joined[njoined++] = v;
+            npose += v->has_pose != 0;
         }
     }
     for (uint32_t k = 0; k < c->nknown; k++)
         if (s->mark_stamp[world_slot(c->known[k])] == S)
             s->left[nleft++] = c->known[k];
     int ack_changed = me->ack_seq != c->sent_ack;
-    if (!nleft && !njoined && !nsnap && !ack_changed) {
+    if (!nleft && !njoined && !nsnap && !npose && !ack_changed) {
         c->last_sent_tick = tick;
         return;
     }
     size_t need = nleft * PROTO_SIZE_AVATAR_LEFT + njoined * PROTO_SIZE_AVATAR_JOINED_MAX +
-                  PROTO_SIZE_SNAPSHOT(nsnap);
+                  npose * PROTO_SIZE_AVATAR_POSE_MAX + PROTO_SIZE_SNAPSHOT(nsnap);
     proto_writer w;
     if (clients__out_begin(s, c, need, &w) < 0)
         return;
@@ -82,6 +84,16 @@ void avatar_view__update(server *s, client *c, uint32_t tick)
         memcpy(m.pos, a->pos, sizeof m.pos);
         memcpy(m.box, a->box, sizeof m.box);
         proto_put_avatar_joined(&w, &m);
+    }
+    /* Poses: of those just come into view, and the changed ones of those
+     * still in view (restamped S + 1 above). The own avatar's is not sent
+     * back. */
+    for (uint32_t k = 0; npose && k < n; k++) {
+        const world_avatar *v = s->vis[k];
+        uint32_t slot = world_slot(v->id);
+        int known = s->mark_stamp[slot] == S + 1 && s->mark_id[slot] == v->id;
+        if (v->has_pose && (!known || v->pose_tick > c->last_sent_tick))
+            proto_put_avatar_pose(&w, &(proto_avatar_pose){.id = v->id, .pose = v->pose});
     }
     if (nsnap || ack_changed) {
         size_t at = proto_put_snapshot_begin(&w, tick, me->ack_seq);

@@ -1,7 +1,8 @@
 /*
  * avatar_view.h: what each client is told of the avatars in its area of
- * interest: who came into view, who left it, and where those it sees have
- * moved (the snapshot, with the last move of its own that was applied).
+ * interest: who came into view, who left it, where those it sees have
+ * moved (the snapshot, with the last move of its own that was applied) and
+ * how they have turned (their poses).
  * Calls clients.h only.
  */
 #ifndef CVRE_AVATAR_VIEW_H

@@ -198,6 +198,8 @@ static void on_move(server *s, client *c, const proto_move *m)
         return;
     }
     world_request_move(s->world, c->avatar_id, m->seq, m->pos);
+    if (m->has_pose) /* already checked by the codec (proto.c) */
+        world_set_pose(s->world, c->avatar_id, &m->pose);
 }
 
 /* Whether clients may send this type at all. */

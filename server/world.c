@@ -198,6 +198,46 @@ void world_request_move(world *w, uint32_t id, uint32_t seq, const float pos[3])
     memcpy(a->request, pos, sizeof a->request);
 }
 
+/* The angle between two quantized unit quaternions: 2 acos |q.r|. */
+static float turn(const int16_t q[4], const int16_t r[4])
+{
+    float dot = 0;
+    for (int i = 0; i < 4; i++)
+        dot += (float)q[i] * (float)r[i];
+    dot = fabsf(dot) / ((float)PROTO_QUAT_ONE * (float)PROTO_QUAT_ONE);
+    return 2.0f * acosf(dot > 1.0f ? 1.0f : dot);
+}
+
+/* Whether p is far enough from q, the pose last taken, to be sent again. */
+static int pose_moved(const proto_pose *p, const proto_pose *q)
+{
+    if (p->parts != q->parts || fabsf(remainderf(p->yaw - q->yaw, 2.0f * (float)M_PI)) > WORLD_POSE_ANGLE_MIN ||
+        fabsf(p->pitch - q->pitch) > WORLD_POSE_ANGLE_MIN)
+        return 1;
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++) {
+        if (!PROTO_POSE_HAS(p, k))
+            continue;
+        for (int i = 0; i < 3; i++)
+            if (abs(p->pos[k][i] - q->pos[k][i]) > WORLD_POSE_MOVE_MIN_MM)
+                return 1;
+        if (turn(p->rot[k], q->rot[k]) > WORLD_POSE_TURN_MIN)
+            return 1;
+    }
+    return 0;
+}
+
+int world_set_pose(world *w, uint32_t id, const proto_pose *p)
+{
+    avatar *a = lookup(w, id);
+    if (!a || (a->pub.has_pose && !pose_moved(p, &a->pub.pose)))
+        return 0;
+    a->pub.has_pose = 1;
+    a->pub.pose = *p;
+    /* This step's updates may be done already: the next one sends it. */
+    a->pub.pose_tick = w->step + 1;
+    return 1;
+}
+
 /* Moves a for one step: toward its request (if any) by at most max_speed x
  * the time since its last applied move, under gravity, through move_step
  * against the boxes the scene finds along the way; then keeps it inside the

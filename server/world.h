@@ -25,6 +25,15 @@ typedef struct world world;
 #define WORLD_SPAWN_SEARCH 64.0f
 #endif
 
+/* A pose is passed on to the avatar's viewers only when it moved this far
+ * from the one they were last given: the facing by 0.01 rad (half a
+ * degree, the least a viewer can notice at a few metres), the head or a
+ * hand by 5 mm or 0.02 rad of turn. Below that a tracked headset's jitter
+ * alone would send a pose every tick. */
+#define WORLD_POSE_ANGLE_MIN 0.01f
+#define WORLD_POSE_MOVE_MIN_MM 5
+#define WORLD_POSE_TURN_MIN 0.02f
+
 /* An avatar id is its slot (below the world's capacity) plus a generation
  * in the upper bits, so per-avatar tables can be indexed by slot. */
 #define WORLD_SLOT_BITS 16u
@@ -50,6 +59,9 @@ typedef struct world_avatar {
     uint32_t ack_seq;      /* seq of the last move request applied */
     float vy;              /* vertical velocity, m/s */
     int grounded;          /* standing on the floor or a box */
+    int has_pose;          /* it has sent a facing */
+    proto_pose pose;       /* the pose its viewers were last given */
+    uint32_t pose_tick;    /* the step from which viewers are to get it */
 } world_avatar;
 
 /* NULL if out of memory or the config is unusable. */
@@ -73,6 +85,11 @@ const world_avatar *world_get(const world *w, uint32_t id);
 /* Records a move request; a later request in the same step replaces it.
  * pos must be finite (the codec guarantees it). */
 void world_request_move(world *w, uint32_t id, uint32_t seq, const float pos[3]);
+
+/* Takes avatar id's pose if it is its first or differs from the last one
+ * taken by more than the WORLD_POSE_* thresholds; viewers get it at the
+ * next step's update. Returns 1 when taken, 0 when not (or no avatar). */
+int world_set_pose(world *w, uint32_t id, const proto_pose *p);
 
 /* Called for each contact that blocked an avatar (or that it made from
  * inside a box) during world_step; vel is the avatar's requested velocity. */

@@ -40,7 +40,7 @@ static uint8_t reenc[PROTO_MAX_LEN + 4];
 /* Every type that decodes, for the checks and the generator. */
 static const uint16_t types[] = {
     PROTO_HELLO, PROTO_WELCOME, PROTO_JOIN, PROTO_JOIN_OK, PROTO_MOVE, PROTO_SNAPSHOT,
-    PROTO_AVATAR_JOINED, PROTO_AVATAR_LEFT, PROTO_ERROR, PROTO_PING, PROTO_PONG, PROTO_BYE,
+    PROTO_AVATAR_JOINED, PROTO_AVATAR_LEFT, PROTO_ERROR, PROTO_PING, PROTO_PONG, PROTO_BYE, PROTO_AVATAR_POSE,
     PROTO_OBJECT_UPLOAD_BEGIN, PROTO_OBJECT_UPLOAD_CHUNK, PROTO_OBJECT_UPLOAD_END,
     PROTO_OBJECT_PLACE, PROTO_OBJECT_REMOVE, PROTO_OBJECT_INFO, PROTO_OBJECT_REMOVED,
     PROTO_OBJECT_REJECTED, PROTO_COLLISION,
@@ -74,6 +74,18 @@ static int same_transform(const proto_transform *a, const proto_transform *b)
            same_floats(&a->scale, &b->scale, 1);
 }
 
+/* Only the parts present are compared: the others are not on the wire. */
+static int same_pose(const proto_pose *a, const proto_pose *b)
+{
+    if (!same_floats(&a->yaw, &b->yaw, 1) || !same_floats(&a->pitch, &b->pitch, 1) || a->parts != b->parts)
+        return 0;
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++)
+        if (PROTO_POSE_HAS(a, k) && (memcmp(a->pos[k], b->pos[k], sizeof a->pos[k]) != 0 ||
+                                     memcmp(a->rot[k], b->rot[k], sizeof a->rot[k]) != 0))
+            return 0;
+    return 1;
+}
+
 static int same_msg(const proto_msg *a, const proto_msg *b)
 {
     if (a->type != b->type)
@@ -100,7 +112,11 @@ static int same_msg(const proto_msg *a, const proto_msg *b)
                same_floats(a->u.join_ok.box, b->u.join_ok.box, 3) && a->u.join_ok.has_token == b->u.join_ok.has_token &&
                (!a->u.join_ok.has_token || memcmp(a->u.join_ok.token, b->u.join_ok.token, PROTO_RESUME_TOKEN_SIZE) == 0);
     case PROTO_MOVE:
-        return a->u.move.seq == b->u.move.seq && same_floats(a->u.move.pos, b->u.move.pos, 3);
+        return a->u.move.seq == b->u.move.seq && same_floats(a->u.move.pos, b->u.move.pos, 3) &&
+               a->u.move.has_pose == b->u.move.has_pose &&
+               (!a->u.move.has_pose || same_pose(&a->u.move.pose, &b->u.move.pose));
+    case PROTO_AVATAR_POSE:
+        return a->u.avatar_pose.id == b->u.avatar_pose.id && same_pose(&a->u.avatar_pose.pose, &b->u.avatar_pose.pose);
     case PROTO_SNAPSHOT: {
         const proto_snapshot *x = &a->u.snapshot, *y = &b->u.snapshot;
         if (x->tick != y->tick || x->ack_seq != y->ack_seq || x->count != y->count)
@@ -217,6 +233,7 @@ static void encode(proto_writer *w, const proto_msg *m)
     case PROTO_PING: proto_put_ping(w, m->u.ping.stamp); break;
     case PROTO_PONG: proto_put_pong(w, m->u.ping.stamp); break;
     case PROTO_BYE: proto_put_bye(w, m->u.bye.reason); break;
+    case PROTO_AVATAR_POSE: proto_put_avatar_pose(w, &m->u.avatar_pose); break;
     case PROTO_OBJECT_UPLOAD_BEGIN: proto_put_upload_begin(w, &m->u.upload_begin); break;
     case PROTO_OBJECT_UPLOAD_CHUNK: proto_put_upload_chunk(w, &m->u.upload_chunk); break;
     case PROTO_OBJECT_UPLOAD_END: proto_put_upload_end(w, &m->u.upload_end); break;
@@ -314,6 +331,14 @@ static void check_object(const proto_frame *f, const proto_msg *m)
     }
 }
 
+/* The decoder's promises for a pose: a finite facing, a pitch in range,
+ * known parts, hands only with the head. */
+static void check_pose(const proto_pose *p)
+{
+    CHECK(isfinite(p->yaw) && p->pitch >= -PROTO_PITCH_MAX && p->pitch <= PROTO_PITCH_MAX);
+    CHECK(p->parts >> PROTO_POSE_PARTS == 0 && (p->parts == 0 || PROTO_POSE_HAS(p, PROTO_POSE_HEAD)));
+}
+
 /* Checks a message the decoder accepted, then its round trip. */
 static void check_decoded(const proto_frame *f, const proto_msg *m)
 {
@@ -327,6 +352,10 @@ static void check_decoded(const proto_frame *f, const proto_msg *m)
         CHECK(inside(f, m->u.join.name.ptr, m->u.join.name.len));
     if (m->type == PROTO_AVATAR_JOINED)
         CHECK(inside(f, m->u.avatar_joined.name.ptr, m->u.avatar_joined.name.len));
+    if (m->type == PROTO_MOVE && m->u.move.has_pose)
+        check_pose(&m->u.move.pose);
+    if (m->type == PROTO_AVATAR_POSE)
+        check_pose(&m->u.avatar_pose.pose);
     if (m->type == PROTO_ERROR)
         CHECK(inside(f, m->u.error.message.ptr, m->u.error.message.len));
     if (m->type == PROTO_SNAPSHOT) {
@@ -435,6 +464,29 @@ static void rnd_vec3(float v[3])
 {
     for (int i = 0; i < 3; i++)
         v[i] = rnd_float();
+}
+
+/* A pose: mostly a plausible one, sometimes with a part out of reach, a
+ * quaternion off unit length, a pitch past straight up or unknown bits. */
+static void rnd_pose(proto_pose *p)
+{
+    static const float parts[PROTO_POSE_PARTS][3] = {{0, 1.7f, 0}, {-0.3f, 1.2f, 0.4f}, {0.3f, 1.2f, 0.4f}};
+    memset(p, 0, sizeof *p);
+    p->yaw = rnd_float();
+    p->pitch = below(8) ? (float)below(3142) / 1000.0f - 1.571f : rnd_float();
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++) {
+        float at[3], q[4];
+        for (int i = 0; i < 3; i++)
+            at[i] = parts[k][i] + (below(8) ? (float)below(401) / 1000.0f - 0.2f : rnd_float());
+        for (int i = 0; i < 4; i++)
+            q[i] = (float)below(2001) / 1000.0f - 1.0f;
+        if (below(2))
+            proto_pose_set_part(p, k, at, q);
+        if (below(16) == 0)
+            p->rot[k][below(4)] = (int16_t)rnd();
+    }
+    if (below(16) == 0)
+        p->parts = (uint8_t)rnd();
 }
 
 /* Text of about max bytes built from pieces, some of them invalid, and
@@ -564,6 +616,8 @@ static void gen_frame(proto_writer *w, uint16_t type)
         proto_move m;
         m.seq = (uint32_t)rnd();
         rnd_vec3(m.pos);
+        m.has_pose = below(2) == 0;
+        rnd_pose(&m.pose);
         proto_put_move(w, &m);
         break;
     }
@@ -611,6 +665,12 @@ static void gen_frame(proto_writer *w, uint16_t type)
     case PROTO_PING: proto_put_ping(w, rnd()); break;
     case PROTO_PONG: proto_put_pong(w, rnd()); break;
     case PROTO_BYE: proto_put_bye(w, (uint8_t)below(4)); break;
+    case PROTO_AVATAR_POSE: {
+        proto_avatar_pose m = {.id = (uint32_t)rnd()};
+        rnd_pose(&m.pose);
+        proto_put_avatar_pose(w, &m);
+        break;
+    }
     case PROTO_OBJECT_UPLOAD_BEGIN: {
         proto_upload_begin m;
         m.upload_id = rnd_id();

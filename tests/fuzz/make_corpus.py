@@ -434,6 +434,10 @@ def proto_corpus(out, fuzz_proto):
         subprocess.run([fuzz_proto, '--write-seeds', d], check=True, stdout=subprocess.DEVNULL)
     hello = struct.pack('<IH', 0x45525643, 1)
     nan = struct.pack('<I', 0x7fc00000)
+    # A pose (PROTOCOL.md 6.5): facing, then head and both hands in mm and
+    # quaternions x 32767.
+    pose = struct.pack('<ffB', 0.5, -0.25, 7) + b''.join(
+        struct.pack('<3h4h', *at, 0, 0, 0, 32767) for at in ((0, 1700, 0), (-300, 1200, 400), (300, 1200, 400)))
     cases = {
         'hostile-length-0': struct.pack('<I', 0) + b'\1\0',
         'hostile-length-1': struct.pack('<I', 1) + b'\1',
@@ -449,6 +453,16 @@ def proto_corpus(out, fuzz_proto):
         'hostile-hello-trailing': frame(1, hello + b'x'),
         'hostile-move-nan': frame(5, struct.pack('<I', 1) + nan * 3),
         'hostile-move-inf': frame(5, struct.pack('<I3I', 1, 0x7f800000, 0xff800000, 0)),
+        'move-pose-full': frame(5, struct.pack('<I3f', 1, 0, 0, 0) + pose),
+        'avatar-pose-head': frame(13, struct.pack('<I', 7) + pose[:8] + b'\1' + pose[9:9 + 14]),
+        'hostile-pose-yaw-nan': frame(5, struct.pack('<I3f', 1, 0, 0, 0) + nan + pose[4:]),
+        'hostile-pose-pitch-over': frame(13, struct.pack('<Iff', 7, 0, 1.6) + b'\0'),
+        'hostile-pose-hands-no-head': frame(13, struct.pack('<I', 7) + pose[:8] + b'\6' + pose[9 + 14:]),
+        'hostile-pose-quat-zero': frame(13, struct.pack('<I', 7) + pose[:9 + 6] + b'\0' * 8),
+        'hostile-pose-hand-far': frame(5, struct.pack('<I3f', 1, 0, 0, 0) + pose[:9 + 14] +
+                                       struct.pack('<3h4h', 0, 1700, 1600, 0, 0, 0, 32767) + pose[9 + 28:]),
+        'hostile-pose-parts-high': frame(13, struct.pack('<Iff', 7, 0, 0) + b'\x80'),
+        'hostile-pose-cut': frame(13, struct.pack('<I', 7) + pose[:20]),
         'hostile-join-bad-utf8': frame(3, bytes([3]) + b'\xc3\x28\xff' + struct.pack('<3f', 1, 1, 1)),
         'hostile-join-name-past-end': frame(3, bytes([200]) + b'ab'),
         'hostile-snapshot-count-over': frame(6, struct.pack('<IIH', 1, 1, 60000)),

@@ -20,7 +20,7 @@ from datetime import datetime, timezone
 MAGIC = 0x45525643
 TEMP_DIRS = []  # removed when every test passed; kept (with server logs) otherwise
 T = dict(HELLO=1, WELCOME=2, JOIN=3, JOIN_OK=4, MOVE=5, SNAPSHOT=6, AVATAR_JOINED=7,
-         AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12, UPLOAD_BEGIN=32, UPLOAD_CHUNK=33,
+         AVATAR_LEFT=8, ERROR=9, PING=10, PONG=11, BYE=12, AVATAR_POSE=13, UPLOAD_BEGIN=32, UPLOAD_CHUNK=33,
          UPLOAD_END=34, OBJECT_PLACE=35, OBJECT_REMOVE=37, OBJECT_INFO=38, OBJECT_REMOVED=39,
          OBJECT_REJECTED=40, MESH_REQUEST=41, MESH_CHUNK=42, COLLISION=48)
 E = dict(FRAME_EMPTY=16, FRAME_TOO_LONG=17, UNKNOWN_TYPE=18, SHORT=19, TRAILING=20,
@@ -142,6 +142,8 @@ def decode(t, p):
     if t == T["ERROR"]:
         code, ln = struct.unpack_from("<HB", p)
         return dict(type="error", code=code, message=p[3:3 + ln].decode())
+    if t == T["AVATAR_POSE"]:
+        return dict(type="pose", id=struct.unpack_from("<I", p)[0], pose=p[4:])
     if t == T["PONG"]:
         return dict(type="pong", stamp=struct.unpack_from("<Q", p)[0])
     if t == T["BYE"]:

@@ -154,7 +154,7 @@ static size_t build_samples(sample *s)
     const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
     const proto_join join = {.name = {"ann", 3}, .box = {0.5f, 1.8f, 0.5f}};
     const proto_join_ok jok = {.avatar_id = 7, .pos = {1.0f, 0.0f, 2.0f}, .box = {0.5f, 1.8f, 0.5f}};
-    const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
+    const proto_move move = {.seq = 1, .pos = {1.0f, 0.0f, -2.5f}};
     const proto_avatar e0 = {7, {1.0f, 2.0f, 3.0f}}, e1 = {8, {-1.0f, -2.0f, -3.0f}};
     const proto_avatar_joined aj = {8, {"bob", 3}, {4.0f, 0.0f, 4.0f}, {1.0f, 1.0f, 1.0f}};
     const proto_avatar_left al = {8, PROTO_LEFT_OUT_OF_RANGE};
@@ -489,7 +489,7 @@ static void test_move_roundtrip(void **state)
     for (size_t i = 0; i < sizeof odd / sizeof odd[0]; i++) {
         proto_writer w;
         proto_msg m;
-        const proto_move in = {(uint32_t)i * 0x10001u + 0xff000000u, {odd[i], -odd[i], 1.0f}};
+        const proto_move in = {.seq = (uint32_t)i * 0x10001u + 0xff000000u, .pos = {odd[i], -odd[i], 1.0f}};
 
         proto_writer_init(&w, big, BIG);
         proto_put_move(&w, &in);
@@ -498,6 +498,187 @@ static void test_move_roundtrip(void **state)
         assert_int_equal(m.type, PROTO_MOVE);
         assert_int_equal(m.u.move.seq, in.seq);
         assert_same_floats(m.u.move.pos, in.pos, 3);
+    }
+}
+
+/* A pose with the head and both hands: looking a little down, the hands
+ * in front of the chest, the right one turned a quarter about y. */
+static proto_pose full_pose(void)
+{
+    proto_pose p = {.yaw = 1.25f, .pitch = -0.5f};
+    const float head[3] = {0.0f, 1.7f, 0.0f}, left[3] = {-0.3f, 1.2f, 0.4f}, right[3] = {0.3f, 1.2f, 0.4f};
+    const float id[4] = {0, 0, 0, 1}, quarter[4] = {0, 0.70710678f, 0, 0.70710678f};
+
+    proto_pose_set_part(&p, PROTO_POSE_HEAD, head, id);
+    proto_pose_set_part(&p, PROTO_POSE_LEFT, left, id);
+    proto_pose_set_part(&p, PROTO_POSE_RIGHT, right, quarter);
+    return p;
+}
+
+static void assert_same_pose(const proto_pose *a, const proto_pose *b)
+{
+    assert_same_floats(&a->yaw, &b->yaw, 1);
+    assert_same_floats(&a->pitch, &b->pitch, 1);
+    assert_int_equal(a->parts, b->parts);
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++) {
+        if (!PROTO_POSE_HAS(a, k))
+            continue;
+        assert_memory_equal(a->pos[k], b->pos[k], sizeof a->pos[k]);
+        assert_memory_equal(a->rot[k], b->rot[k], sizeof a->rot[k]);
+    }
+}
+
+/* A move with a pose of each shape (facing only, head, head and hands)
+ * and an avatar pose decode to what was written, at the sizes
+ * PROTOCOL.md gives. */
+static void test_pose_roundtrip(void **state)
+{
+    const proto_pose full = full_pose();
+    const uint8_t shapes[] = {0, 1, 3, 5, 7};
+    (void)state;
+
+    assert_int_equal(full.pos[PROTO_POSE_HEAD][1], 1700);
+    assert_int_equal(full.rot[PROTO_POSE_HEAD][3], PROTO_QUAT_ONE);
+    assert_int_equal(full.rot[PROTO_POSE_RIGHT][1], 23170);
+    assert_int_equal(full.pos[PROTO_POSE_LEFT][0], -300);
+    for (size_t i = 0; i < sizeof shapes; i++) {
+        proto_writer w;
+        proto_msg m;
+        proto_move in = {7, {1.0f, 0.0f, 2.0f}, 1, full};
+        proto_avatar_pose ap = {0x10002, full};
+        size_t parts = (shapes[i] & 1u) + (shapes[i] >> 1 & 1u) + (shapes[i] >> 2 & 1u);
+
+        in.pose.parts = ap.pose.parts = shapes[i];
+        proto_writer_init(&w, big, BIG);
+        proto_put_move(&w, &in);
+        assert_int_equal(w.len, PROTO_SIZE_MOVE + PROTO_POSE_HEAD_SIZE + parts * PROTO_POSE_PART_SIZE);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.u.move.seq, 7);
+        assert_true(m.u.move.has_pose);
+        assert_same_pose(&m.u.move.pose, &in.pose);
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_avatar_pose(&w, &ap);
+        assert_int_equal(w.len, PROTO_HEADER_SIZE + 4u + PROTO_POSE_HEAD_SIZE + parts * PROTO_POSE_PART_SIZE);
+        decode_all(big, w.len, &m);
+        assert_int_equal(m.type, PROTO_AVATAR_POSE);
+        assert_int_equal(m.u.avatar_pose.id, 0x10002);
+        assert_same_pose(&m.u.avatar_pose.pose, &ap.pose);
+    }
+    /* Without a pose a move is the 16 bytes of version 1. */
+    {
+        proto_writer w;
+        proto_msg m;
+        const proto_move in = {8, {1.0f, 0.0f, 2.0f}, 0, full};
+
+        proto_writer_init(&w, big, BIG);
+        proto_put_move(&w, &in);
+        assert_int_equal(w.len, PROTO_SIZE_MOVE);
+        decode_all(big, w.len, &m);
+        assert_false(m.u.move.has_pose);
+    }
+    assert_int_equal(PROTO_SIZE_MOVE_MAX, PROTO_SIZE_MOVE + 51u);
+    assert_int_equal(PROTO_SIZE_AVATAR_POSE_MAX, PROTO_HEADER_SIZE + 55u);
+}
+
+/* Quantizing normalises the quaternion, rounds to the millimetre,
+ * saturates out-of-range positions and keeps NaN harmless. */
+static void test_pose_quantize(void **state)
+{
+    proto_pose p = {0};
+    const float at[3] = {0.0014f, -0.0016f, 100.0f}, q[4] = {0, 0, 0, 2}, zero[4] = {0, 0, 0, 0};
+    const float nan_at[3] = {bits_f32(0x7fc00000u), 0, -100.0f};
+    (void)state;
+
+    proto_pose_set_part(&p, PROTO_POSE_LEFT, at, q);
+    assert_int_equal(p.parts, 2);
+    assert_int_equal(p.pos[1][0], 1);
+    assert_int_equal(p.pos[1][1], -2);
+    assert_int_equal(p.pos[1][2], 32767);
+    assert_int_equal(p.rot[1][3], PROTO_QUAT_ONE);
+    proto_pose_set_part(&p, PROTO_POSE_HEAD, nan_at, zero);
+    assert_int_equal(p.parts, 3);
+    assert_int_equal(p.pos[0][0], 0);
+    assert_int_equal(p.pos[0][2], -32768);
+    assert_int_equal(p.rot[0][3], PROTO_QUAT_ONE); /* no direction: the identity */
+}
+
+/* The pose's bytes inside a payload, for the refusals: move tail at 16,
+ * avatar pose at 4. */
+static size_t pose_payload(uint16_t type, const proto_pose *pose, uint8_t *out)
+{
+    proto_writer w;
+    proto_writer_init(&w, big, BIG);
+    if (type == PROTO_MOVE)
+        proto_put_move(&w, &(proto_move){1, {0, 0, 0}, 1, *pose});
+    else
+        proto_put_avatar_pose(&w, &(proto_avatar_pose){9, *pose});
+    assert_int_equal(w.err, PROTO_OK);
+    memcpy(out, big + PROTO_HEADER_SIZE, w.len - PROTO_HEADER_SIZE);
+    return w.len - PROTO_HEADER_SIZE;
+}
+
+static void wr_i16(uint8_t *p, int v) { wr_u16(p, (uint16_t)(int16_t)v); }
+
+/* Every refusal of a pose, in a move and in an avatar pose alike: a NaN
+ * or infinite facing, a pitch past straight up or down, unknown part
+ * bits, hands without the head, the head out of range, a hand out of
+ * reach, a quaternion too far from unit length; and every cut is short,
+ * every extra byte trailing. */
+static void test_pose_refusals(void **state)
+{
+    const uint16_t types[] = {PROTO_MOVE, PROTO_AVATAR_POSE};
+    const proto_pose full = full_pose();
+    (void)state;
+
+    for (size_t t = 0; t < 2; t++) {
+        uint8_t p[128], q[128];
+        size_t n = pose_payload(types[t], &full, p);
+        size_t at = types[t] == PROTO_MOVE ? 16 : 4; /* yaw */
+        size_t head = at + PROTO_POSE_HEAD_SIZE, left = head + PROTO_POSE_PART_SIZE;
+        size_t right = left + PROTO_POSE_PART_SIZE;
+
+        assert_int_equal(decode_raw(types[t], p, n), PROTO_OK);
+        for (size_t cut = types[t] == PROTO_MOVE ? 17 : 0; cut < n; cut++)
+            assert_int_equal(decode_raw(types[t], p, cut), PROTO_ERR_SHORT);
+        memcpy(q, p, n);
+        q[n] = 0;
+        assert_int_equal(decode_raw(types[t], q, n + 1), PROTO_ERR_TRAILING);
+#define TRY(want, edit)                                            \
+    do {                                                           \
+        memcpy(q, p, n);                                           \
+        edit;                                                      \
+        assert_int_equal(decode_raw(types[t], q, n), (want));      \
+    } while (0)
+        TRY(PROTO_ERR_NOT_FINITE, wr_u32(q + at, 0x7fc00000u));
+        TRY(PROTO_ERR_NOT_FINITE, wr_u32(q + at + 4, 0xff800000u));
+        TRY(PROTO_OK, wr_f32(q + at + 4, PROTO_PITCH_MAX));
+        TRY(PROTO_OK, wr_f32(q + at + 4, -PROTO_PITCH_MAX));
+        TRY(PROTO_ERR_BAD_VALUE, wr_f32(q + at + 4, 1.5708f));
+        TRY(PROTO_ERR_BAD_VALUE, wr_f32(q + at + 4, -1.6f));
+        TRY(PROTO_ERR_BAD_VALUE, q[at + 8] = 0x0f);
+        TRY(PROTO_ERR_BAD_VALUE, q[at + 8] = 0x87);
+        /* Hands without the head: refused at the parts byte. */
+        TRY(PROTO_ERR_BAD_VALUE, q[at + 8] = 6);
+        TRY(PROTO_ERR_BAD_VALUE, q[at + 8] = 2);
+        TRY(PROTO_OK, (wr_i16(q + head, PROTO_POSE_HEAD_RANGE_MM), wr_i16(q + left, PROTO_POSE_HEAD_RANGE_MM - 300),
+                       wr_i16(q + right, PROTO_POSE_HEAD_RANGE_MM + 300)));
+        TRY(PROTO_ERR_BAD_VALUE, wr_i16(q + head + 2, PROTO_POSE_HEAD_RANGE_MM + 1));
+        TRY(PROTO_ERR_BAD_VALUE, wr_i16(q + head + 4, -PROTO_POSE_HEAD_RANGE_MM - 1));
+        /* Reach is measured from the head (0, 1700, 0): 1500 mm is in. */
+        TRY(PROTO_OK, (wr_i16(q + left, 0), wr_i16(q + left + 2, 200), wr_i16(q + left + 4, 0)));
+        TRY(PROTO_ERR_BAD_VALUE, (wr_i16(q + left, 0), wr_i16(q + left + 2, 199), wr_i16(q + left + 4, 0)));
+        TRY(PROTO_ERR_BAD_VALUE, (wr_i16(q + right, 1100), wr_i16(q + right + 2, 2800), wr_i16(q + right + 4, 0)));
+        /* Quaternions: a little off unit length is rounding, far off is not
+         * a rotation; each part's is checked. */
+        TRY(PROTO_OK, wr_i16(q + head + 12, 32767 - 300));
+        TRY(PROTO_ERR_BAD_VALUE, wr_i16(q + head + 12, 32767 - 400));
+        TRY(PROTO_ERR_BAD_VALUE, wr_i16(q + left + 12, 0));
+        TRY(PROTO_ERR_BAD_VALUE, (wr_i16(q + right + 6, 32767), wr_i16(q + right + 12, 32767)));
+        /* First failure wins: a bad pitch before a bad quaternion. */
+        TRY(PROTO_ERR_BAD_VALUE, (wr_f32(q + at + 4, 3.0f), wr_i16(q + head + 12, 0)));
+        TRY(PROTO_ERR_NOT_FINITE, (wr_u32(q + at, 0x7f800000u), q[at + 8] = 0xff));
+#undef TRY
     }
 }
 
@@ -1169,7 +1350,7 @@ static void test_stream_of_frames(void **state)
     proto_writer w;
     const proto_hello hello = {PROTO_MAGIC, PROTO_VERSION};
     const proto_join join = {.name = {"ann", 3}, .box = {1, 1, 1}};
-    const proto_move move = {1, {0, 0, 0}};
+    const proto_move move = {.seq = 1};
 
     (void)state;
     proto_writer_init(&w, big, BIG);
@@ -1221,13 +1402,25 @@ static void test_worked_examples(void **state)
                                           0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
                                           0x00, 0x00, 0x00, 0x00, 0x20, 0x41, 0xdb, 0x0f,
                                           0xc9, 0x3f, 0x00, 0x00, 0x00, 0x40};
+    static const uint8_t posed_bytes[] = {0x29, 0x00, 0x00, 0x00, 0x05, 0x00, 0x02, 0x00, 0x00, 0x00,
+                                          0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+                                          0x20, 0xc0, 0x00, 0x00, 0x00, 0x3f, 0x00, 0x00, 0x80, 0xbe,
+                                          0x01, 0x00, 0x00, 0xa4, 0x06, 0x00, 0x00, 0x00, 0x00, 0x00,
+                                          0x00, 0x00, 0x00, 0xff, 0x7f};
     proto_writer w;
+    proto_move posed = {.seq = 2, .pos = {1.0f, 0.0f, -2.5f}, .has_pose = 1, .pose = {.yaw = 0.5f, .pitch = -0.25f}};
     const proto_hello hello = {PROTO_MAGIC, 2};
-    const proto_move move = {1, {1.0f, 0.0f, -2.5f}};
+    const proto_move move = {.seq = 1, .pos = {1.0f, 0.0f, -2.5f}};
     const proto_object_place place = {3, {{0.0f, 0.0f, 10.0f}, 1.57079632679f, 2.0f}};
 
     (void)state;
     assert_int_equal(PROTO_VERSION, 2);
+    proto_pose_set_part(&posed.pose, PROTO_POSE_HEAD, (const float[3]){0.0f, 1.7f, 0.0f},
+                        (const float[4]){0.0f, 0.0f, 0.0f, 1.0f});
+    proto_writer_init(&w, big, BIG);
+    proto_put_move(&w, &posed);
+    assert_int_equal(w.len, sizeof posed_bytes);
+    assert_memory_equal(big, posed_bytes, sizeof posed_bytes);
     proto_writer_init(&w, big, BIG);
     proto_put_hello(&w, &hello);
     assert_int_equal(w.len, sizeof hello_bytes);
@@ -1248,7 +1441,7 @@ static void test_writer_exact_fit(void **state)
 {
     uint8_t b[PROTO_SIZE_MOVE];
     proto_writer w;
-    const proto_move move = {1, {0, 0, 0}};
+    const proto_move move = {.seq = 1};
 
     (void)state;
     proto_writer_init(&w, b, sizeof b);
@@ -1264,7 +1457,7 @@ static void test_writer_overflow_first_frame(void **state)
 {
     uint8_t b[PROTO_SIZE_MOVE - 1];
     proto_writer w;
-    const proto_move move = {1, {0, 0, 0}};
+    const proto_move move = {.seq = 1};
 
     (void)state;
     proto_writer_init(&w, b, sizeof b);
@@ -1288,7 +1481,7 @@ static void test_writer_overflow_sticky(void **state)
     const proto_hello hello = {PROTO_MAGIC, 1};
     const proto_join join = {.name = {"a", 1}, .box = {1, 1, 1}};
     const proto_join_ok jok = {.avatar_id = 1, .box = {1, 1, 1}};
-    const proto_move move = {1, {0, 0, 0}};
+    const proto_move move = {.seq = 1};
     const proto_avatar_joined aj = {1, {"a", 1}, {0, 0, 0}, {1, 1, 1}};
     const proto_avatar_left al = {1, 0};
     const proto_avatar a = {1, {0, 0, 0}};
@@ -1627,7 +1820,7 @@ static void test_unknown_and_reserved_types(void **state)
 
     (void)state;
     for (uint32_t t = 0; t <= 0xffff; t++) {
-        if ((t >= PROTO_HELLO && t <= PROTO_BYE) || (t >= PROTO_OBJECT_UPLOAD_BEGIN && t <= PROTO_OBJECT_REJECTED &&
+        if ((t >= PROTO_HELLO && t <= PROTO_AVATAR_POSE) || (t >= PROTO_OBJECT_UPLOAD_BEGIN && t <= PROTO_OBJECT_REJECTED &&
                                                      t != PROTO_OBJECT_MOVE) || t == PROTO_COLLISION)
             continue;
         if (t == PROTO_MESH_REQUEST || t == PROTO_MESH_CHUNK)
@@ -1684,6 +1877,10 @@ static void test_trailing_every_type(void **state)
             int got = decode_raw(s[i].type, p, s[i].len + extra);
             if (s[i].type == PROTO_JOIN || s[i].type == PROTO_JOIN_OK)
                 assert_true(got == PROTO_ERR_SHORT || got == PROTO_ERR_BAD_VALUE);
+            else if (s[i].type == PROTO_MOVE) /* zeros: a pose tail, facing only, once whole */
+                assert_int_equal(got, extra < PROTO_POSE_HEAD_SIZE    ? PROTO_ERR_SHORT
+                                      : extra == PROTO_POSE_HEAD_SIZE ? PROTO_OK
+                                                                      : PROTO_ERR_TRAILING);
             else
                 assert_int_equal(got, s[i].data_at ? PROTO_OK : PROTO_ERR_TRAILING);
         }
@@ -2464,7 +2661,8 @@ static void test_strerror_total(void **state)
 static void test_type_names(void **state)
 {
     static const char *want[] = {NULL, "hello", "welcome", "join", "join_ok", "move", "snapshot",
-                                 "avatar_joined", "avatar_left", "error", "ping", "pong", "bye"};
+                                 "avatar_joined", "avatar_left", "error", "ping", "pong", "bye",
+                                 "avatar_pose"};
     static const struct {
         uint16_t type;
         const char *name;
@@ -2485,10 +2683,10 @@ static void test_type_names(void **state)
         {PROTO_ADMIN_REQUEST, "admin_request"},
         {PROTO_ADMIN_REPLY, "admin_reply"},
     };
-    const uint16_t unknown[] = {0, 13, 31, 43, 47, 50, 63, 66, 79, 80, 0xffff};
+    const uint16_t unknown[] = {0, 14, 31, 43, 47, 50, 63, 66, 79, 80, 0xffff};
 
     (void)state;
-    for (uint16_t t = PROTO_HELLO; t <= PROTO_BYE; t++)
+    for (uint16_t t = PROTO_HELLO; t <= PROTO_AVATAR_POSE; t++)
         assert_string_equal(proto_type_name(t), want[t]);
     for (size_t i = 0; i < sizeof objects / sizeof objects[0]; i++)
         assert_string_equal(proto_type_name(objects[i].type), objects[i].name);
@@ -2506,6 +2704,9 @@ int main(void)
         cmocka_unit_test(test_join_roundtrip),
         cmocka_unit_test(test_join_credentials),
         cmocka_unit_test(test_join_ok_roundtrip),
+        cmocka_unit_test(test_pose_roundtrip),
+        cmocka_unit_test(test_pose_quantize),
+        cmocka_unit_test(test_pose_refusals),
         cmocka_unit_test(test_move_roundtrip),
         cmocka_unit_test(test_snapshot_empty),
         cmocka_unit_test(test_snapshot_one),
