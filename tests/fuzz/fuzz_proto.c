@@ -43,7 +43,7 @@ static const uint16_t types[] = {
     PROTO_AVATAR_JOINED, PROTO_AVATAR_LEFT, PROTO_ERROR, PROTO_PING, PROTO_PONG, PROTO_BYE, PROTO_AVATAR_POSE,
     PROTO_OBJECT_UPLOAD_BEGIN, PROTO_OBJECT_UPLOAD_CHUNK, PROTO_OBJECT_UPLOAD_END,
     PROTO_OBJECT_PLACE, PROTO_OBJECT_REMOVE, PROTO_OBJECT_INFO, PROTO_OBJECT_REMOVED,
-    PROTO_OBJECT_REJECTED, PROTO_COLLISION,
+    PROTO_OBJECT_REJECTED, PROTO_COLLISION, PROTO_MESH_REQUEST, PROTO_MESH_CHUNK,
 };
 #define NTYPES (sizeof types / sizeof types[0])
 
@@ -169,7 +169,8 @@ static int same_msg(const proto_msg *a, const proto_msg *b)
         const proto_object_info *x = &a->u.object_info, *y = &b->u.object_info;
         if (x->object_id != y->object_id || x->upload_id != y->upload_id || !same_str(x->owner, y->owner) ||
             !same_str(x->name, y->name) || !same_transform(&x->at, &y->at) ||
-            x->ecm_version != y->ecm_version || x->tri_count != y->tri_count || x->box_count != y->box_count)
+            x->ecm_version != y->ecm_version || x->tri_count != y->tri_count || x->box_count != y->box_count ||
+            memcmp(x->mesh_hash, y->mesh_hash, PROTO_MESH_HASH_SIZE) != 0)
             return 0;
         for (uint16_t i = 0; i < x->box_count; i++) {
             float p[2][3], q[2][3];
@@ -189,6 +190,14 @@ static int same_msg(const proto_msg *a, const proto_msg *b)
         return x->object_id == y->object_id && x->ecm_version == y->ecm_version &&
                x->box_index == y->box_index && x->inside == y->inside && same_floats(x->point, y->point, 3) &&
                same_floats(x->normal, y->normal, 3);
+    }
+    case PROTO_MESH_REQUEST:
+        return a->u.mesh_request.object_id == b->u.mesh_request.object_id &&
+               memcmp(a->u.mesh_request.mesh_hash, b->u.mesh_request.mesh_hash, PROTO_MESH_HASH_SIZE) == 0;
+    case PROTO_MESH_CHUNK: {
+        const proto_mesh_chunk *x = &a->u.mesh_chunk, *y = &b->u.mesh_chunk;
+        return x->object_id == y->object_id && x->total == y->total && x->offset == y->offset && x->len == y->len &&
+               memcmp(x->data, y->data, x->len) == 0;
     }
     default:
         return 0;
@@ -251,6 +260,8 @@ static void encode(proto_writer *w, const proto_msg *m)
                                   c_text(m->u.object_rejected.message, text));
         break;
     case PROTO_COLLISION: proto_put_collision(w, &m->u.collision); break;
+    case PROTO_MESH_REQUEST: proto_put_mesh_request(w, &m->u.mesh_request); break;
+    case PROTO_MESH_CHUNK: proto_put_mesh_chunk(w, &m->u.mesh_chunk); break;
     }
 }
 
@@ -307,7 +318,7 @@ static void check_object(const proto_frame *f, const proto_msg *m)
         CHECK(o->object_id != 0 && o->ecm_version != 0 && transform_ok(&o->at));
         CHECK(inside(f, o->owner.ptr, o->owner.len) && inside(f, o->name.ptr, o->name.len));
         CHECK(o->box_count <= PROTO_OBJECT_BOXES_MAX);
-        CHECK(f->payload_len == 40u + o->owner.len + o->name.len + n);
+        CHECK(f->payload_len == 72u + o->owner.len + o->name.len + n);
         CHECK(inside(f, o->boxes, n));
         for (uint16_t i = 0; i < o->box_count; i++) {
             float lo[3], hi[3];
@@ -326,6 +337,16 @@ static void check_object(const proto_frame *f, const proto_msg *m)
         CHECK(m->u.collision.object_id != 0 && m->u.collision.ecm_version != 0 && m->u.collision.inside <= 1);
         CHECK(finite3(m->u.collision.point) && finite3(m->u.collision.normal));
         break;
+    case PROTO_MESH_REQUEST:
+        CHECK(m->u.mesh_request.object_id != 0 && f->payload_len == 4u + PROTO_MESH_HASH_SIZE);
+        break;
+    case PROTO_MESH_CHUNK: {
+        const proto_mesh_chunk *c = &m->u.mesh_chunk;
+        CHECK(c->object_id != 0 && c->total != 0 && c->offset < c->total);
+        CHECK(c->len >= 1 && c->len <= PROTO_MESH_CHUNK_MAX && c->len <= c->total - c->offset);
+        CHECK(c->len == f->payload_len - 12 && c->data == f->payload + 12);
+        break;
+    }
     default:
         break;
     }
@@ -734,6 +755,8 @@ static void gen_frame(proto_writer *w, uint16_t type)
         rnd_transform(&m.at);
         m.ecm_version = rnd_id();
         m.tri_count = (uint32_t)rnd();
+        for (unsigned i = 0; i < PROTO_MESH_HASH_SIZE; i++)
+            m.mesh_hash[i] = (uint8_t)rnd();
         m.box_count = (uint16_t)(below(4) ? below(8) : below(200));
         if (below(512) == 0)
             m.box_count = (uint16_t)(PROTO_OBJECT_BOXES_MAX + below(2));
@@ -750,6 +773,36 @@ static void gen_frame(proto_writer *w, uint16_t type)
             }
         }
         proto_put_object_info(w, &m, (const float (*)[3])box_min, (const float (*)[3])box_max);
+        break;
+    }
+    case PROTO_MESH_REQUEST: {
+        proto_mesh_request m = {.object_id = rnd_id()};
+        for (unsigned i = 0; i < PROTO_MESH_HASH_SIZE; i++)
+            m.mesh_hash[i] = (uint8_t)rnd();
+        proto_put_mesh_request(w, &m);
+        break;
+    }
+    case PROTO_MESH_CHUNK: {
+        /* Mostly a chunk inside its total; now and then the largest, one
+         * byte more (the writer refuses it), none, or one running past the
+         * total or starting at it (the decoder refuses those). */
+        proto_mesh_chunk m;
+        m.object_id = rnd_id();
+        switch (below(64)) {
+        case 0: m.len = PROTO_MESH_CHUNK_MAX; break;
+        case 1: m.len = PROTO_MESH_CHUNK_MAX + 1; break;
+        case 2: m.len = 0; break;
+        case 3: m.len = 1 + below(PROTO_MESH_CHUNK_MAX); break;
+        default: m.len = 1 + below(64); break;
+        }
+        m.offset = below(2) ? below(1u << 20) : 0;
+        m.total = m.offset + m.len + (below(8) ? below(1u << 20) : 0);
+        if (below(32) == 0)
+            m.total = below(2) ? m.offset : m.offset + m.len - 1;
+        for (uint32_t i = 0; i < m.len && i < PROTO_MESH_CHUNK_MAX; i++)
+            data[i] = (uint8_t)rnd();
+        m.data = data;
+        proto_put_mesh_chunk(w, &m);
         break;
     }
     case PROTO_OBJECT_REJECTED: {

@@ -466,12 +466,20 @@ def proto_corpus(out, fuzz_proto):
         'hostile-join-bad-utf8': frame(3, bytes([3]) + b'\xc3\x28\xff' + struct.pack('<3f', 1, 1, 1)),
         'hostile-join-name-past-end': frame(3, bytes([200]) + b'ab'),
         'hostile-snapshot-count-over': frame(6, struct.pack('<IIH', 1, 1, 60000)),
-        'hostile-object-info-boxes-over': frame(38, b'\0' * 38 + struct.pack('<H', 1025)),
+        'hostile-object-info-boxes-over': frame(38, b'\0' * 70 + struct.pack('<H', 1025)),
         'hostile-chunk-empty': frame(33, struct.pack('<II', 1, 0)),
         'hostile-chunk-over': frame(33, struct.pack('<II', 1, 0) + b'\0' * 16385),
         'hostile-upload-begin-scale-nan': frame(32, struct.pack('<II', 1, 10) + b'\1a\3obj\0' + nan),
         'hostile-two-frames-second-cut': frame(10, b'\0' * 8) + frame(10, b'\0' * 8)[:9],
         'hostile-ping-then-garbage': frame(10, b'\0' * 8) + b'\xff' * 16,
+        # Meshes (PROTOCOL.md 6.22, 6.23): a request for id 0 or cut short; a
+        # chunk with no data, starting at its total, running past it, over the cap.
+        'hostile-mesh-request-id-zero': frame(41, b'\0' * 36),
+        'hostile-mesh-request-cut': frame(41, struct.pack('<I', 1) + b'\xab' * 20),
+        'hostile-mesh-chunk-empty': frame(42, struct.pack('<III', 1, 10, 0)),
+        'hostile-mesh-chunk-at-total': frame(42, struct.pack('<III', 1, 10, 10) + b'x'),
+        'hostile-mesh-chunk-past-total': frame(42, struct.pack('<III', 1, 10, 5) + b'x' * 6),
+        'hostile-mesh-chunk-over': frame(42, struct.pack('<III', 1, 0xffffffff, 0) + b'\0' * 16385),
     }
     for name, data in cases.items():
         write(out, t, name, data)
