@@ -170,8 +170,10 @@ static void object_info(const proto_object_info *o)
     put_vec3("pos", o->at.pos);
     put_fine("yaw", o->at.yaw);
     put_fine("scale", o->at.scale);
-    sb_printf(&line, ",\"ecm_version\":%" PRIu32 ",\"triangles\":%" PRIu32 ",\"boxes\":[", o->ecm_version,
+    sb_printf(&line, ",\"ecm_version\":%" PRIu32 ",\"triangles\":%" PRIu32 ",\"mesh\":\"", o->ecm_version,
               o->tri_count);
+    put_hex(o->mesh_hash, PROTO_MESH_HASH_SIZE);
+    sb_puts(&line, "\",\"boxes\":[");
     for (uint16_t i = 0; i < o->box_count; i++) {
         float box[6];
         proto_object_box(o, i, box, box + 3);
@@ -325,6 +327,21 @@ void events_done_object(const char *command, const char *result, uint32_t object
         put_vec3("box_min", box);
         put_vec3("box_max", box + 3);
     }
+    finish();
+}
+
+void events_fetched(uint32_t object_id, const char *file, uint32_t vertices, uint32_t triangles, size_t bytes,
+                    int cached)
+{
+    if (to_terminal) {
+        terminal_fetched(object_id, file, triangles, cached);
+        return;
+    }
+    begin("fetched", -1);
+    sb_printf(&line, ",\"object\":%" PRIu32, object_id);
+    put_string("file", file, strlen(file));
+    sb_printf(&line, ",\"vertices\":%" PRIu32 ",\"triangles\":%" PRIu32 ",\"bytes\":%zu,\"cached\":%s", vertices,
+              triangles, bytes, cached ? "true" : "false");
     finish();
 }
 

@@ -57,6 +57,11 @@ void events_done(const char *command, const float pos[3]);
 void events_done_object(const char *command, const char *result, uint32_t object_id, uint32_t upload_id,
                         double seconds, const float box[6]);
 
+/* A fetch wrote file: the mesh of object_id, encoded in bytes, from the
+ * server or (cached) from the session's earlier fetches. */
+void events_fetched(uint32_t object_id, const char *file, uint32_t vertices, uint32_t triangles, size_t bytes,
+                    int cached);
+
 void events_stats(const events_counts *k, double t);
 void events_summary(const events_counts *k, double duration);
 

@@ -62,6 +62,8 @@ void known_put(known *k, const proto_object_info *o)
     known_object *e = &k->objs[i];
     e->yaw = o->at.yaw;
     e->scale = o->at.scale;
+    e->tri_count = o->tri_count;
+    memcpy(e->mesh_hash, o->mesh_hash, sizeof e->mesh_hash);
     if (o->box_count > e->n_boxes || !e->boxes)
         e->boxes = cvre_xrealloc(e->boxes, (o->box_count ? o->box_count : 1u) * sizeof *e->boxes);
     e->n_boxes = o->box_count;

@@ -18,6 +18,8 @@ typedef struct known known;
 typedef struct known_object {
     uint32_t id;
     float yaw, scale;
+    uint32_t tri_count;
+    uint8_t mesh_hash[PROTO_MESH_HASH_SIZE]; /* what a fetch asks for */
     uint16_t n_boxes;
     float (*boxes)[6]; /* min x y z, max x y z; owned by the table */
 } known_object;

@@ -65,6 +65,7 @@ static void cmd_release(script *s)
     s->imp_id = 0;
     s->imp_object = 0;
     s->imp_aborted = 0;
+    script__fetch_release(s);
     script_cmd_clear(&s->cur);
     s->running = 0;
 }
@@ -213,6 +214,9 @@ void script__on_cmd_timer(ev_loop *loop, void *data)
     case SCRIPT_IMPORT:
         script__import_check(s, now);
         break;
+    case SCRIPT_FETCH:
+        script__fetch_check(s, now);
+        break;
     case SCRIPT_PLACE:
     case SCRIPT_REMOVE:
         log_warn("%s %" PRIu32 ": no answer within %llu s", script_op_name(s->cur.op), s->cur.object_id,
@@ -273,6 +277,9 @@ static void cmd_start(script *s, const script_cmd *cmd)
         break;
     case SCRIPT_IMPORT:
         script__import_start(s);
+        break;
+    case SCRIPT_FETCH:
+        script__fetch_start(s);
         break;
     case SCRIPT_PLACE: {
         const known_object *k = known_get(s->objs, cmd->object_id);
@@ -340,7 +347,7 @@ static uint32_t awaited_request(const script *s)
         return 0;
     if (s->cur.op == SCRIPT_IMPORT)
         return s->imp_phase == IMPORT_SETTLE ? s->imp_object : s->imp_phase != IMPORT_NONE ? s->imp_id : 0;
-    return s->cur.op == SCRIPT_PLACE || s->cur.op == SCRIPT_REMOVE ? s->cur.object_id : 0;
+    return s->cur.op == SCRIPT_PLACE || s->cur.op == SCRIPT_REMOVE || s->cur.op == SCRIPT_FETCH ? s->cur.object_id : 0;
 }
 
 static void on_msg(session *c, const proto_msg *m, void *data)
@@ -389,6 +396,10 @@ static void on_msg(session *c, const proto_msg *m, void *data)
         known_del(s->objs, m->u.object_id);
         if (s->running && s->cur.op == SCRIPT_REMOVE && m->u.object_id == s->cur.object_id)
             script__obj_finish(s, "ok", NULL);
+        break;
+    case PROTO_MESH_CHUNK:
+        if (s->running && s->cur.op == SCRIPT_FETCH)
+            script__fetch_chunk(s, &m->u.mesh_chunk);
         break;
     case PROTO_OBJECT_REJECTED: {
         uint32_t want = awaited_request(s);
@@ -647,5 +658,6 @@ void script_free(script *s)
         script_cmd_clear(&s->q[i]);
     free(s->q);
     known_free(s->objs);
+    script__fetch_free_cache(s);
     free(s);
 }

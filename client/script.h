@@ -26,6 +26,7 @@ enum script_op {
     SCRIPT_IMPORT,
     SCRIPT_PLACE,
     SCRIPT_REMOVE,
+    SCRIPT_FETCH,
     SCRIPT_QUIT
 };
 
@@ -38,12 +39,12 @@ enum script_anchor {
 typedef struct script_cmd {
     int op;        /* enum script_op */
     double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms; import, place: x y z */
-    uint32_t object_id; /* place, remove */
+    uint32_t object_id; /* place, remove, fetch */
     double yaw_deg;     /* import, place: degrees about +y */
     double size;        /* import, place: uniform object scale */
     int has_yaw, has_size; /* place: given (else the object's current ones) */
+    char *file;         /* import, fetch: as written, owned: script_cmd_clear() frees it */
     /* import only */
-    char *file;         /* as written, owned: script_cmd_clear() frees it */
     char name[PROTO_OBJECT_NAME_MAX + 1]; /* --name, or "": the file's base name */
     int up_axis;        /* enum proto_up_axis */
     double unit_scale;  /* file units to metres */

@@ -1,7 +1,7 @@
 /*
  * scriptInt.h: what script.c (the runner) and script_upload.c (imports)
  * share: the runner's state and the few calls each makes into the other.
- * Nothing outside these two files includes it.
+ * Nothing outside these files includes it.
  */
 #ifndef CVRE_CLIENT_SCRIPTINT_H
 #define CVRE_CLIENT_SCRIPTINT_H
@@ -80,6 +80,15 @@ struct script {
     uint32_t last_upload_id;
     uint8_t chunk[PROTO_CHUNK_MAX];
 
+    /* fetch: the mesh of the running command as its chunks come, and the
+     * meshes fetched this session, by hash (script_fetch.c) */
+    uint8_t fetch_hash[PROTO_MESH_HASH_SIZE];
+    uint32_t fetch_tris;
+    uint8_t *fetch_buf;
+    uint32_t fetch_len, fetch_total;
+    struct fetched *fetched;
+    size_t nfetched;
+
     /* Objects the server told us about: a place that does not name a yaw
      * or a size keeps the current ones, and --drop lands on their boxes. */
     known *objs;
@@ -119,6 +128,18 @@ void script__import_probed(script *s, uint64_t stamp);
 void script__import_object(script *s, const proto_object_info *o);
 /* The import timer's check: gives up after a time without progress. */
 void script__import_check(script *s, uint64_t now);
+/* script_fetch.c: the fetch command. */
+
+/* Starts the running fetch: from the session's meshes, or a request. */
+void script__fetch_start(script *s);
+/* A MESH_CHUNK; the last one writes the file and ends the command. */
+void script__fetch_chunk(script *s, const proto_mesh_chunk *ch);
+/* The fetch timer's check: gives up after a time without a chunk. */
+void script__fetch_check(script *s, uint64_t now);
+/* Frees the running fetch's partial mesh; the cache, at the end. */
+void script__fetch_release(script *s);
+void script__fetch_free_cache(script *s);
+
 /* Yaw in radians from degrees, reduced to one turn first so that a large
  * angle loses nothing in the f32. */
 float script__yaw_radians(double deg);

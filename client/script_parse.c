@@ -49,6 +49,7 @@ static const struct {
      "[--yaw DEGREES] [--size S]"},
     {"place", SCRIPT_PLACE, -1, "place ID X Y Z [--yaw DEGREES] [--size S]"},
     {"remove", SCRIPT_REMOVE, -1, "remove ID"},
+    {"fetch", SCRIPT_FETCH, -1, "fetch ID FILE.obj|FILE.glb"},
     {"quit", SCRIPT_QUIT, 0, "quit"},
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
@@ -242,7 +243,7 @@ static int parse_object_opts(char **w, int n, const char *usage, script_cmd *cmd
     return 0;
 }
 
-/* import, place and remove; w[0] is the command. Returns 0 or -EINVAL. */
+/* import, place, remove and fetch; w[0] is the command. Returns 0 or -EINVAL. */
 static int parse_object_cmd(char **w, int n, const char *usage, script_cmd *cmd, char *err, size_t errlen)
 {
     cmd->yaw_deg = 0.0;
@@ -257,6 +258,14 @@ static int parse_object_cmd(char **w, int n, const char *usage, script_cmd *cmd,
         if (rc < 0)
             return rc;
         cmd->file = cvre_xstrdup(w[1]);
+        return 0;
+    }
+    if (cmd->op == SCRIPT_FETCH) {
+        const char *dot = n == 3 ? strrchr(w[2], '.') : NULL;
+        if (n != 3 || parse_id(w[1], &cmd->object_id) < 0 || !dot || (strcmp(dot, ".obj") && strcmp(dot, ".glb")))
+            return cvre_fail(err, errlen, -EINVAL, "fetch: expected an object id and a file ending in .obj or .glb: %s",
+                             usage);
+        cmd->file = cvre_xstrdup(w[2]);
         return 0;
     }
     const char *what = cmd->op == SCRIPT_PLACE ? "place" : "remove";
@@ -294,7 +303,7 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
         k++;
     if (k == NCOMMANDS)
         return cvre_fail(err, errlen, -EINVAL,
-                         "unknown command '%.40s' (move, walk, wait, ping, import, place, remove, quit)", tok[0]);
+                         "unknown command '%.40s' (move, walk, wait, ping, import, place, remove, fetch, quit)", tok[0]);
     *cmd = (script_cmd){.op = commands[k].op};
     if (commands[k].nargs < 0) {
         int rc = parse_object_cmd(tok, nt, commands[k].usage, cmd, err, errlen);

@@ -311,6 +311,7 @@ static int from_server(uint16_t type)
     case PROTO_OBJECT_INFO:
     case PROTO_OBJECT_REMOVED:
     case PROTO_OBJECT_REJECTED:
+    case PROTO_MESH_CHUNK:
     case PROTO_COLLISION:
         return 1;
     default:
@@ -323,7 +324,7 @@ static int from_server(uint16_t type)
 static int needs_join(uint16_t type)
 {
     return type == PROTO_OBJECT_INFO || type == PROTO_OBJECT_REMOVED || type == PROTO_OBJECT_REJECTED ||
-           type == PROTO_COLLISION;
+           type == PROTO_MESH_CHUNK || type == PROTO_COLLISION;
 }
 
 static void send_join(session *c)
@@ -759,6 +760,17 @@ int session_send_object_remove(session *c, uint32_t object_id)
     proto_writer w;
     proto_writer_init(&w, buf, sizeof buf);
     proto_put_object_remove(&w, object_id);
+    return send_frame(c, buf, w.len);
+}
+
+int session_send_mesh_request(session *c, const proto_mesh_request *m)
+{
+    if (c->state != SESSION_JOINED)
+        return -ENOTCONN;
+    uint8_t buf[PROTO_SIZE_MESH_REQUEST];
+    proto_writer w;
+    proto_writer_init(&w, buf, sizeof buf);
+    proto_put_mesh_request(&w, m);
     return send_frame(c, buf, w.len);
 }
 

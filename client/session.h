@@ -169,6 +169,7 @@ int session_send_upload_chunk(session *c, uint32_t upload_id, uint32_t offset, c
 int session_send_upload_end(session *c, const proto_upload_end *m);
 int session_send_object_place(session *c, const proto_object_place *m);
 int session_send_object_remove(session *c, uint32_t object_id);
+int session_send_mesh_request(session *c, const proto_mesh_request *m);
 
 /* Bytes queued in the session's backlog, not yet taken by the socket. A bulk
  * sender (an upload) sends only while this is 0, so that whatever else is

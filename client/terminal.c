@@ -294,6 +294,14 @@ void terminal_done(const char *command, const float pos[3])
     finish();
 }
 
+void terminal_fetched(uint32_t object_id, const char *file, uint32_t triangles, int cached)
+{
+    begin();
+    sb_printf(&t.line, "object %" PRIu32 ": %" PRIu32 " triangles written to %s%s", object_id, triangles, file,
+              cached ? " (from this session's meshes)" : "");
+    finish();
+}
+
 void terminal_done_object(const char *command, const char *result, uint32_t object_id, double seconds,
                           const float box[6])
 {

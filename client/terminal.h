@@ -25,6 +25,7 @@ void terminal_error(unsigned code, const char *text, size_t len);
 void terminal_bye(unsigned reason, int from_client);
 void terminal_closed(void);
 void terminal_done(const char *command, const float pos[3]);
+void terminal_fetched(uint32_t object_id, const char *file, uint32_t triangles, int cached);
 void terminal_done_object(const char *command, const char *result, uint32_t object_id, double seconds,
                           const float box[6]);
 

@@ -1,6 +1,7 @@
 #include "db.h"
 
 #include <errno.h>
+#include <sodium.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -341,6 +342,14 @@ int db_session_close(db *d, int64_t id, const char *reason, double at)
     return run(d, st);
 }
 
+void db_mesh_hash(const float *tris, uint32_t tri_count, uint8_t out[DB_MESH_HASH_SIZE])
+{
+    _Static_assert(DB_MESH_HASH_SIZE >= crypto_generichash_BYTES_MIN && DB_MESH_HASH_SIZE <= crypto_generichash_BYTES_MAX,
+                   "a BLAKE2b digest size");
+    crypto_generichash(out, DB_MESH_HASH_SIZE, (const unsigned char *)tris, (unsigned long long)tri_count * 9 * sizeof(float),
+                       NULL, 0);
+}
+
 /* Binds n doubles from v to parameters first..first+n-1. */
 static void bind_floats(sqlite3_stmt *st, int first, const float *v, int n)
 {
@@ -373,6 +382,7 @@ int db_object_create(db *d, db_object *o, double at)
         goto fail;
     o->id = sqlite3_last_insert_rowid(d->sql);
     o->ecm_version = 1;
+    db_mesh_hash(o->tris, o->tri_count, o->mesh_hash);
     st = d->st[ST_MESH_INSERT];
     sqlite3_bind_int64(st, 1, o->id);
     sqlite3_bind_blob64(st, 2, o->tris, (sqlite3_uint64)o->tri_count * 9 * sizeof(float), SQLITE_STATIC);
@@ -485,6 +495,7 @@ int db_objects_load(db *d, db_object_fn *fn, void *ctx)
             rc = db__fail(d, -EIO, "object %lld: mesh size does not match its triangle count", (long long)o.id);
             goto done;
         }
+        db_mesh_hash(o.tris, o.tri_count, o.mesh_hash);
         if ((rc = load_boxes(d, bx, o.id, o.ecm_version, &boxes, &o.box_count, &cap)) < 0)
             goto done;
         o.boxes = (const float(*)[6])boxes;

@@ -75,6 +75,15 @@ int db_user_upsert(db *d, const char *name, double at, int64_t *user_id);
 int db_session_join(db *d, int64_t id, const char *name, uint32_t avatar_id, double at, int64_t *user_id);
 int db_session_close(db *d, int64_t id, const char *reason, double at);
 
+/* An object's mesh is named by the BLAKE2b hash (libsodium's
+ * crypto_generichash, 32 bytes) of its triangles as stored: 9 little-endian
+ * float32 a triangle, in object-local coordinates. Clients cache meshes by
+ * it (PROTOCOL.md, "Meshes"). It is computed, not stored: at import and
+ * when the store is read, so every row has one and no row can hold a
+ * stale one. */
+#define DB_MESH_HASH_SIZE 32u
+void db_mesh_hash(const float *tris, uint32_t tri_count, uint8_t out[DB_MESH_HASH_SIZE]);
+
 /* An object as stored: its mesh and the boxes of one ECM version, all in
  * object-local coordinates; world = R_y(yaw) * (scale * local) + pos. */
 typedef struct db_object {
@@ -86,6 +95,7 @@ typedef struct db_object {
     uint32_t ecm_version;
     uint32_t tri_count;
     const float *tris;  /* 9 floats a triangle */
+    uint8_t mesh_hash[DB_MESH_HASH_SIZE]; /* set by db_object_create and db_objects_load */
     float min[3], max[3]; /* MBR */
     uint32_t box_count;
     const float (*boxes)[6]; /* min x y z, max x y z */

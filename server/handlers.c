@@ -216,7 +216,8 @@ static int from_client(uint16_t type)
     case PROTO_OBJECT_UPLOAD_CHUNK:
     case PROTO_OBJECT_UPLOAD_END:
     case PROTO_OBJECT_PLACE:
-    case PROTO_OBJECT_REMOVE: return 1;
+    case PROTO_OBJECT_REMOVE:
+    case PROTO_MESH_REQUEST: return 1;
     default: return 0;
     }
 }
@@ -239,7 +240,8 @@ static void on_message(server *s, client *c, const proto_msg *m)
     case PROTO_OBJECT_UPLOAD_CHUNK:
     case PROTO_OBJECT_UPLOAD_END:
     case PROTO_OBJECT_PLACE:
-    case PROTO_OBJECT_REMOVE: legal = c->state == ST_JOINED; break;
+    case PROTO_OBJECT_REMOVE:
+    case PROTO_MESH_REQUEST: legal = c->state == ST_JOINED; break;
     default: return; /* server-to-client types never get here (handle_input) */
     }
     if (!legal) {

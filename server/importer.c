@@ -95,6 +95,7 @@ static void import_one(importer *im, import_job *job, import_result *r)
     r->at = job->at;
     r->tris = mesh.tris; /* the result takes the triangles over */
     r->tri_count = mesh.ntris;
+    memcpy(r->mesh_hash, o.mesh_hash, sizeof r->mesh_hash);
     memcpy(r->min, mesh.min, sizeof r->min);
     memcpy(r->max, mesh.max, sizeof r->max);
 }

@@ -15,6 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "db.h"
 #include "proto.h"
 #include "import_proc.h"
 #include "scene.h"
@@ -45,6 +46,7 @@ typedef struct import_result {
     proto_transform at;
     float *tris;                  /* owned by the result: importer_result_free */
     uint32_t tri_count;
+    uint8_t mesh_hash[DB_MESH_HASH_SIZE]; /* db_mesh_hash of tris */
     float min[3], max[3];         /* the MBR: ECM version 1's only box */
 } import_result;
 

@@ -24,9 +24,12 @@
 #include "err.h"
 #include "log.h"
 #include "import_proc.h"
+#include "proto_mesh.h"
 #include "clients.h"
 #include "session_log.h"
 #include "srv_limits.h"
+
+_Static_assert(DB_MESH_HASH_SIZE == PROTO_MESH_HASH_SIZE, "a mesh is named on the wire as in the store");
 
 /* Where objects may stand in this server's world (srv_limits.h). */
 static scene_limits world_limits(const server *s)
@@ -56,6 +59,7 @@ static int send_info(server *s, client *c, const scene_object *o, uint32_t uploa
                            .name = {o->name, (uint32_t)strlen(o->name)}, .at = o->at,
                            .ecm_version = o->ecm_version, .tri_count = o->tri_count,
                            .box_count = (uint16_t)o->box_count};
+    memcpy(m.mesh_hash, o->mesh_hash, sizeof m.mesh_hash);
     proto_put_object_info(&w, &m, (const float(*)[3])lo, (const float(*)[3])hi);
     free(lo);
     free(hi);
@@ -154,7 +158,7 @@ static void view_scratch(server *s, uint32_t n)
  * as the client reads. Known objects are stamped per slot, so the work is
  * linear in what c knows plus what is near.
  */
-void objects__view(server *s, client *c, int force)
+static void view(server *s, client *c, int force)
 {
     const world_avatar *me = world_get(s->world, c->avatar_id);
     const float step = SRV_OBJECT_VIEW_STEP;
@@ -256,6 +260,112 @@ static void reject(server *s, client *c, uint32_t request_id, int code, const ch
     clients__out_end(s, c, &w);
 }
 
+/* ---- meshes ----------------------------------------------------------- */
+
+/* Whether c has been told of object id (and not told to forget it). */
+static int knows(const client *c, uint32_t id)
+{
+    for (uint32_t k = 0; k < c->nobjs; k++)
+        if (c->objs[k].id == id)
+            return 1;
+    return 0;
+}
+
+/* Frees the mesh c is being sent, if any. */
+static void mesh_done(server *s, client *c)
+{
+    client_mesh *m = &c->mesh;
+    s->mesh_bytes -= m->len;
+    free(m->data);
+    m->data = NULL;
+    m->len = m->sent = 0;
+}
+
+/* Starts sending the oldest waiting mesh c can still have: the object may
+ * have been removed, or left c's view, since it asked. Returns 1 when one
+ * is being sent, 0 when none waits or the meshes in flight are at
+ * SRV_MESH_MEMORY (the request waits for the next tick). */
+static int mesh_next(server *s, client *c)
+{
+    client_mesh *m = &c->mesh;
+    while (m->nqueue > 0) {
+        uint32_t id = m->queue[0];
+        const scene_object *o = scene_get(s->scene, id);
+        if (o && knows(c, id) && s->mesh_bytes + 30ull * o->tri_count + PROTO_MESH_HEAD_SIZE > SRV_MESH_MEMORY)
+            return 0;
+        memmove(m->queue, m->queue + 1, --m->nqueue * sizeof *m->queue);
+        if (!o || !knows(c, id)) {
+            reject(s, c, id, PROTO_ERR_NO_OBJECT, "object %u is gone from your view", id);
+            continue;
+        }
+        int rc = proto_mesh_encode(o->tris, o->tri_count, &m->data, &m->len);
+        if (rc < 0) {
+            reject(s, c, id, PROTO_ERR_INTERNAL, "the mesh of object %u cannot be encoded: %s", id, strerror(-rc));
+            continue;
+        }
+        m->object_id = id;
+        m->sent = 0;
+        s->mesh_bytes += m->len;
+        return 1;
+    }
+    return 0;
+}
+
+/* Sends c the next chunks of its meshes while its unread output is under
+ * SRV_OBJECT_VIEW_BUDGET; the tick calls it again for the rest. */
+static void mesh_pump(server *s, client *c)
+{
+    client_mesh *m = &c->mesh;
+    while (conn_out_pending(&c->c) < SRV_OBJECT_VIEW_BUDGET && (m->data || mesh_next(s, c))) {
+        size_t k = m->len - m->sent < PROTO_MESH_CHUNK_MAX ? m->len - m->sent : PROTO_MESH_CHUNK_MAX;
+        proto_writer w;
+        if (clients__out_begin(s, c, PROTO_SIZE_MESH_CHUNK(k), &w) < 0)
+            return;
+        proto_mesh_chunk ch = {.object_id = m->object_id, .total = (uint32_t)m->len, .offset = (uint32_t)m->sent,
+                               .data = m->data + m->sent, .len = (uint32_t)k};
+        proto_put_mesh_chunk(&w, &ch);
+        clients__out_end(s, c, &w);
+        m->sent += k;
+        if (m->sent == m->len)
+            mesh_done(s, c);
+    }
+}
+
+/* A mesh request is answered from what c knows: only an object in its
+ * view (or its own), named with the hash its OBJECT_INFO gave. */
+static void on_mesh_request(server *s, client *c, const proto_mesh_request *r)
+{
+    client_mesh *m = &c->mesh;
+    const scene_object *o = scene_get(s->scene, r->object_id);
+    if (!ratelimit_take(s->mesh_requests, c->addr, server__now(s))) {
+        reject(s, c, r->object_id, PROTO_ERR_RATE_LIMITED, "too many mesh requests; at most %g a second",
+               SRV_MESH_PER_SECOND);
+        return;
+    }
+    if (!o || !knows(c, r->object_id)) {
+        reject(s, c, r->object_id, PROTO_ERR_NO_OBJECT, "no object %u in your view", r->object_id);
+        return;
+    }
+    if (memcmp(r->mesh_hash, o->mesh_hash, PROTO_MESH_HASH_SIZE) != 0) {
+        reject(s, c, r->object_id, PROTO_ERR_STALE_MESH, "object %u has another mesh than the one asked for",
+               r->object_id);
+        return;
+    }
+    if (m->nqueue == SRV_MESH_QUEUE) {
+        reject(s, c, r->object_id, PROTO_ERR_RATE_LIMITED, "%u mesh requests are waiting already", SRV_MESH_QUEUE);
+        return;
+    }
+    m->queue[m->nqueue++] = r->object_id;
+    mesh_pump(s, c);
+}
+
+void objects__view(server *s, client *c, int force)
+{
+    view(s, c, force);
+    if (c->state == ST_JOINED && !c->closing)
+        mesh_pump(s, c);
+}
+
 /* ---- uploads ---------------------------------------------------------- */
 
 static void drop_upload(server *s, client *c)
@@ -268,6 +378,7 @@ static void drop_upload(server *s, client *c)
 
 void objects__client_gone(server *s, client *c)
 {
+    mesh_done(s, c);
     free(c->objs);
     c->objs = NULL;
     c->nobjs = c->objs_cap = 0;
@@ -372,7 +483,8 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
         memcpy(mbr.min, r.min, sizeof mbr.min);
         memcpy(mbr.max, r.max, sizeof mbr.max);
         scene_object_def def = {.id = r.object_id, .owner = r.owner, .name = r.name, .at = r.at, .ecm_version = 1,
-                                .tri_count = r.tri_count, .tris = r.tris, .box_count = 1, .boxes = &mbr};
+                                .tri_count = r.tri_count, .tris = r.tris, .mesh_hash = r.mesh_hash,
+                                .box_count = 1, .boxes = &mbr};
         int rc = scene_add(s->scene, &def);
         importer_result_free(&r);
         if (rc < 0) {
@@ -497,6 +609,10 @@ void objects__owner_gone(server *s, const char *owner)
 
 void objects__on_message(server *s, client *c, const proto_msg *m)
 {
+    if (m->type == PROTO_MESH_REQUEST) { /* guests may look: meshes too */
+        on_mesh_request(s, c, &m->u.mesh_request);
+        return;
+    }
     if (c->account_id == 0) {
         reject(s, c, request_of(m), PROTO_ERR_GUEST, "guests may walk and look: log in to change the world");
         return;
@@ -527,7 +643,7 @@ static int add_stored(server *s, const db_object *o)
     scene_object_def def = {.id = (uint32_t)o->id, .owner = o->owner, .name = o->name,
                             .at = {.pos = {o->pos[0], o->pos[1], o->pos[2]}, .yaw = o->yaw, .scale = o->scale},
                             .ecm_version = o->ecm_version, .tri_count = o->tri_count, .tris = o->tris,
-                            .box_count = o->box_count, .boxes = boxes};
+                            .mesh_hash = o->mesh_hash, .box_count = o->box_count, .boxes = boxes};
     int rc = scene_add(s->scene, &def);
     char why[160];
     scene_limits lim = world_limits(s);
@@ -852,7 +968,8 @@ int objects__start(server *s, char *err, size_t errlen)
     float half = s->cfg.world_size * 0.5f;
     float lo[3] = {-half, 0, -half}, hi[3] = {half, SRV_WORLD_HEIGHT, half};
     s->scene = scene_create(lo, hi);
-    if (!s->scene)
+    s->mesh_requests = ratelimit_create(SRV_LOGIN_SLOTS, SRV_MESH_PER_SECOND, SRV_MESH_BURST);
+    if (!s->scene || !s->mesh_requests)
         return cvre_fail(err, errlen, -ENOMEM, "out of memory");
     /* Changes after this point reach the scene through the refiner. */
     int64_t feed_head;
@@ -908,6 +1025,8 @@ void objects__stop(server *s)
     }
     scene_destroy(s->scene);
     s->scene = NULL;
+    ratelimit_destroy(s->mesh_requests);
+    s->mesh_requests = NULL;
     free(s->obj_stamp);
     free(s->obj_found);
     free(s->picks);

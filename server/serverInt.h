@@ -38,6 +38,7 @@
 #include "refiner.h"
 #include "scene.h"
 #include "server.h"
+#include "srv_limits.h"
 #include "world.h"
 
 #define NS_PER_MS ((uint64_t)1000000)
@@ -55,6 +56,16 @@ typedef struct client_upload {
     int z_up;
     float unit_scale;
 } client_upload;
+
+/* Meshes a client asked for (objects.c): the encoded one being sent, and
+ * the object ids waiting, oldest first. */
+typedef struct client_mesh {
+    uint8_t *data; /* NULL: none being sent */
+    size_t len, sent;
+    uint32_t object_id;
+    uint32_t queue[SRV_MESH_QUEUE];
+    uint32_t nqueue;
+} client_mesh;
 
 /* ST_AUTH: the join waits for the auth worker (auth.h). */
 typedef enum { ST_HELLO, ST_JOIN, ST_AUTH, ST_JOINED } client_state;
@@ -106,6 +117,7 @@ typedef struct client {
     float objs_at[2];   /* where (x, z) */
     int objs_more;      /* the view is not whole yet: made again next tick */
     int objs_owned;     /* its own objects, wherever they are, still to be sent */
+    client_mesh mesh;
 } client;
 
 enum { EVT_OPEN, EVT_JOIN, EVT_CLOSE, EVT_PLACE, EVT_REMOVE };
@@ -177,6 +189,8 @@ struct server {
     int64_t admin_feed_last;  /* the last admin action applied (db/moderation.h) */
     refiner *refiner;    /* new collision maps from the online loop and the store */
     size_t upload_bytes; /* held by unfinished uploads, all clients */
+    size_t mesh_bytes;   /* held by encoded meshes being sent, all clients */
+    ratelimit *mesh_requests; /* mesh requests per address */
     uint32_t scene_gen;  /* grows with every change to the scene a client may see */
     /* objects__view's scratch: a stamp per object slot, the slots a query
      * found, and the objects to send. */

@@ -125,6 +125,18 @@
  * this: a join in a crowded place is streamed over ticks as the client
  * reads, never queued past the output limits at once. */
 #define SRV_OBJECT_VIEW_BUDGET (SRV_OUTBUF_SOFT / 2u)
+/* Meshes (objects.c): MESH_CHUNKs are sent under the same budget as the
+ * view, after it, so a download never starves the objects' news and never
+ * reaches the output limits. A client may have SRV_MESH_QUEUE requests
+ * waiting behind the mesh being sent (a page asks for every object it is
+ * told of); an address may ask for SRV_MESH_BURST at once and then
+ * SRV_MESH_PER_SECOND a second, so a flood costs the server nothing but
+ * refusals. Encoded meshes in flight, all clients together, hold at most
+ * SRV_MESH_MEMORY: a request waits its turn beyond that. */
+#define SRV_MESH_QUEUE 16u
+#define SRV_MESH_BURST 32.0
+#define SRV_MESH_PER_SECOND 8.0
+#define SRV_MESH_MEMORY (256u * 1024u * 1024u)
 /* The online loop looks for clusters every 10 s: a crowd stopped at a
  * doorway gets it opened within seconds, and a quiet world costs one
  * indexed read of new rows per interval. */
@@ -177,6 +189,7 @@ _Static_assert(SRV_WORLD_HEIGHT_M <= MOVE_MAX_COORD_M, "the world's top fits the
 _Static_assert(SRV_MAX_SPEED_LIMIT_M * SRV_MOVE_MAX_DT_MS <= MOVE_MAX_COORD_M * 1000, "one move fits the movement range");
 _Static_assert(SRV_MOVE_MAX_DT_MS <= MOVE_MAX_DT_MS && 1000 / SRV_TICK_HZ_MIN <= MOVE_MAX_DT_MS, "ticks fit the movement code");
 _Static_assert(SRV_MAX_UPLOAD_DEFAULT <= SRV_MAX_UPLOAD_LIMIT, "the default upload fits the budget");
+_Static_assert(30ull * IMPORT_MAX_TRIANGLES + 32u <= SRV_MESH_MEMORY, "the largest encoded mesh fits the budget");
 _Static_assert(SRV_UPLOAD_BUDGET <= IMPORT_MAX_BYTES, "an upload the server takes, the importer reads");
 _Static_assert(SRV_MAX_TRIANGLES_DEFAULT <= SRV_MAX_TRIANGLES_LIMIT, "default triangles within the importer's");
 _Static_assert(SRV_OBJECT_SIZE_MAX_M <= SRV_WORLD_SIZE_DEFAULT_M, "an object fits the default world");

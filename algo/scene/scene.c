@@ -318,6 +318,8 @@ int scene_add(scene *s, const scene_object_def *d)
     o->pub.ecm_version = d->ecm_version;
     o->pub.tri_count = d->tri_count;
     o->pub.tris = o->tris;
+    if (d->mesh_hash)
+        memcpy(o->pub.mesh_hash, d->mesh_hash, sizeof o->pub.mesh_hash);
     o->pub.box_count = d->box_count;
     o->pub.local = o->local;
     o->pub.world = o->world;

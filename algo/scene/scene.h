@@ -32,6 +32,7 @@ typedef struct scene_object {
     uint32_t ecm_version;
     uint32_t tri_count;
     const float *tris;       /* 9 floats a triangle, local */
+    uint8_t mesh_hash[PROTO_MESH_HASH_SIZE]; /* names the mesh to clients (db_mesh_hash) */
     uint32_t box_count;
     const scene_box *local;  /* ECM boxes, local */
     const scene_box *world;  /* the same, as world AABBs */
@@ -48,6 +49,7 @@ typedef struct scene_object_def {
     uint32_t ecm_version;
     uint32_t tri_count;
     const float *tris;
+    const uint8_t *mesh_hash; /* PROTO_MESH_HASH_SIZE bytes; NULL: zeros */
     uint32_t box_count;
     const scene_box *boxes; /* local */
 } scene_object_def;
