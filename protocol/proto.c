@@ -1043,15 +1043,23 @@ void proto_put_upload_begin(proto_writer *w, const proto_upload_begin *m)
     st_f32(p, m->unit_scale);
 }
 
+/* True, failing the writer as a frame too long would, when n is over max:
+ * what the caller would write past a codec limit is not written at all. */
+static int over_limit(proto_writer *w, size_t n, size_t max)
+{
+    if (n <= max)
+        return 0;
+    if (w->err == PROTO_OK)
+        w->err = PROTO_ERR_FRAME_TOO_LONG;
+    return 1;
+}
+
 void proto_put_upload_chunk(proto_writer *w, const proto_upload_chunk *m)
 {
     uint8_t *p;
 
-    if (m->len > PROTO_CHUNK_MAX) {
-        if (w->err == PROTO_OK)
-            w->err = PROTO_ERR_FRAME_TOO_LONG;
+    if (over_limit(w, m->len, PROTO_CHUNK_MAX))
         return;
-    }
     p = frame_open(w, PROTO_OBJECT_UPLOAD_CHUNK, 8u + m->len);
     if (!p)
         return;
@@ -1120,11 +1128,8 @@ void proto_put_mesh_chunk(proto_writer *w, const proto_mesh_chunk *m)
 {
     uint8_t *p;
 
-    if (m->len > PROTO_MESH_CHUNK_MAX) {
-        if (w->err == PROTO_OK)
-            w->err = PROTO_ERR_FRAME_TOO_LONG;
+    if (over_limit(w, m->len, PROTO_MESH_CHUNK_MAX))
         return;
-    }
     p = frame_open(w, PROTO_MESH_CHUNK, PROTO_SIZE_MESH_CHUNK(m->len) - PROTO_HEADER_SIZE);
     if (!p)
         return;
@@ -1153,11 +1158,8 @@ void proto_put_object_info(proto_writer *w, const proto_object_info *m, const fl
     uint8_t no = str_len(m->owner, PROTO_NAME_MAX), nn = str_len(m->name, PROTO_OBJECT_NAME_MAX);
     uint8_t *p;
 
-    if (m->box_count > PROTO_OBJECT_BOXES_MAX) {
-        if (w->err == PROTO_OK)
-            w->err = PROTO_ERR_FRAME_TOO_LONG;
+    if (over_limit(w, m->box_count, PROTO_OBJECT_BOXES_MAX))
         return;
-    }
     p = frame_open(w, PROTO_OBJECT_INFO,
                    8u + 1u + no + 1u + nn + PROTO_SIZE_TRANSFORM + 10u + PROTO_MESH_HASH_SIZE +
                        (size_t)m->box_count * PROTO_BOX_ENTRY_SIZE);

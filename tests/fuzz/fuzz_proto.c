@@ -555,6 +555,19 @@ static float rnd_scale(void)
     }
 }
 
+/* A chunk's data length: mostly small; now and then max, one byte more
+ * (the writer refuses it) or none (the decoder does). */
+static uint32_t rnd_chunk_len(uint32_t max)
+{
+    switch (below(64)) {
+    case 0: return max;
+    case 1: return max + 1;
+    case 2: return 0;
+    case 3: return 1 + below(max);
+    default: return 1 + below(64);
+    }
+}
+
 static void rnd_transform(proto_transform *t)
 {
     rnd_vec3(t->pos);
@@ -705,18 +718,10 @@ static void gen_frame(proto_writer *w, uint16_t type)
         break;
     }
     case PROTO_OBJECT_UPLOAD_CHUNK: {
-        /* Mostly small; now and then the largest, one byte more (the
-         * writer refuses it) or none (the decoder does). */
         proto_upload_chunk m;
         m.upload_id = rnd_id();
         m.offset = below(2) ? below(1u << 24) : (uint32_t)rnd();
-        switch (below(64)) {
-        case 0: m.len = PROTO_CHUNK_MAX; break;
-        case 1: m.len = PROTO_CHUNK_MAX + 1; break;
-        case 2: m.len = 0; break;
-        case 3: m.len = 1 + below(PROTO_CHUNK_MAX); break;
-        default: m.len = 1 + below(64); break;
-        }
+        m.len = rnd_chunk_len(PROTO_CHUNK_MAX);
         for (uint32_t i = 0; i < m.len; i++)
             data[i] = (uint8_t)rnd();
         m.data = data;
@@ -788,13 +793,7 @@ static void gen_frame(proto_writer *w, uint16_t type)
          * total or starting at it (the decoder refuses those). */
         proto_mesh_chunk m;
         m.object_id = rnd_id();
-        switch (below(64)) {
-        case 0: m.len = PROTO_MESH_CHUNK_MAX; break;
-        case 1: m.len = PROTO_MESH_CHUNK_MAX + 1; break;
-        case 2: m.len = 0; break;
-        case 3: m.len = 1 + below(PROTO_MESH_CHUNK_MAX); break;
-        default: m.len = 1 + below(64); break;
-        }
+        m.len = rnd_chunk_len(PROTO_MESH_CHUNK_MAX);
         m.offset = below(2) ? below(1u << 20) : 0;
         m.total = m.offset + m.len + (below(8) ? below(1u << 20) : 0);
         if (below(32) == 0)
