@@ -162,6 +162,10 @@ static void serve(bots *b, bot *t, uint64_t now)
         random_walk(b, &w, step, raw_lo, raw_hi, now);
     else
         random_walk(b, &w, step, wel->world_min, wel->world_max, now);
+    /* Facing the way it walks (yaw 0 looks down -z), head level. */
+    float dx = w.pos[0] - t->w.pos[0], dz = w.pos[2] - t->w.pos[2];
+    if (b->o.pose && st == SESSION_JOINED && (dx != 0.0f || dz != 0.0f))
+        session_set_facing(t->c, atan2f(-dx, -dz), 0.0f, 1);
     uint32_t seq = session_send_move(t->c, w.pos);
     if (!seq) {
         b->k.moves_dropped++;

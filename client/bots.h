@@ -23,6 +23,7 @@ typedef struct bots_opts {
     double duration;    /* seconds from start until every bot says bye */
     double ramp;        /* connections started per second */
     int no_handshake;   /* raw: no hello or join, moves only */
+    int pose;           /* moves carry a facing and a head pose */
 } bots_opts;
 
 typedef struct bots bots;

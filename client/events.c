@@ -185,6 +185,32 @@ static void object_info(const proto_object_info *o)
     finish();
 }
 
+/* An avatar's pose: the facing in radians and each part present, its
+ * position in metres from the avatar and its quaternion (x, y, z, w). */
+static void avatar_pose(const proto_avatar_pose *a)
+{
+    static const char *const part_names[PROTO_POSE_PARTS] = {"head", "left", "right"};
+    begin("pose", -1);
+    sb_printf(&line, ",\"id\":%" PRIu32, a->id);
+    put_fine("yaw", a->pose.yaw);
+    put_fine("pitch", a->pose.pitch);
+    for (unsigned k = 0; k < PROTO_POSE_PARTS; k++) {
+        if (!PROTO_POSE_HAS(&a->pose, k))
+            continue;
+        float at[3], q[4];
+        for (int i = 0; i < 3; i++)
+            at[i] = (float)a->pose.pos[k][i] / 1000.0f;
+        for (int i = 0; i < 4; i++)
+            q[i] = (float)a->pose.rot[k][i] / (float)PROTO_QUAT_ONE;
+        sb_printf(&line, ",\"%s\":{\"pos\":", part_names[k]);
+        put_floats(NULL, at, 3);
+        sb_puts(&line, ",\"rot\":");
+        put_floats(NULL, q, 4);
+        sb_puts(&line, "}");
+    }
+    finish();
+}
+
 static void collision(const proto_collision *c)
 {
     begin("collision", -1);
@@ -265,6 +291,9 @@ void events_message(const proto_msg *m, uint64_t now_us)
         break;
     case PROTO_COLLISION:
         collision(&m->u.collision);
+        break;
+    case PROTO_AVATAR_POSE:
+        avatar_pose(&m->u.avatar_pose);
         break;
     default:
         break;

@@ -45,6 +45,7 @@ typedef struct options {
     double duration;
     double ramp;
     int no_handshake;
+    int pose;  /* bots: facing and head with every move */
     int login; /* ask for the password on the terminal if CVRE_PASSWORD is unset */
     int json;  /* JSON lines even on a terminal */
 } options;
@@ -54,7 +55,7 @@ static void usage(FILE *f)
     fputs("usage: cvre-client [--host H] [--port P] [--name NAME] [--login] [--box X,Y,Z] [--rate HZ]\n"
           "                   [--script FILE] [--json]\n"
           "       cvre-client --bots N [--pattern random-walk|circle] [--duration S] [--ramp N]\n"
-          "                   [--no-handshake] [--host H] [--port P] [--name PREFIX] [--rate HZ]\n"
+          "                   [--no-handshake] [--pose] [--host H] [--port P] [--name PREFIX] [--rate HZ]\n"
           "       cvre-client --help | --version\n"
           "\n"
           "The thin client of a cvre-server: one user driven by hand or by a script, or a\n"
@@ -79,6 +80,8 @@ static void usage(FILE *f)
           "  --duration S       bots: seconds to run (default 10)\n"
           "  --ramp N           bots: connections started per second (default 1000)\n"
           "  --no-handshake     bots: skip hello and join, send only moves\n"
+          "  --pose             bots: every move carries a facing (the way they walk) and a\n"
+          "                     head pose, as a VR client's would\n"
           "  --help             show this help\n"
           "  --version          show the version\n"
           "\n"
@@ -203,6 +206,10 @@ static int parse_args(int argc, char **argv, options *o)
             o->no_handshake = 1;
             continue;
         }
+        if (strcmp(arg, "--pose") == 0) {
+            o->pose = 1;
+            continue;
+        }
         if (strcmp(arg, "--login") == 0) {
             o->login = 1;
             continue;
@@ -286,6 +293,10 @@ static int parse_args(int argc, char **argv, options *o)
     }
     if (o->no_handshake && o->bots == 0) {
         fprintf(stderr, "cvre-client: --no-handshake needs --bots\n");
+        return -EINVAL;
+    }
+    if (o->pose && (o->bots == 0 || o->no_handshake)) {
+        fprintf(stderr, "cvre-client: --pose needs --bots that join (a script has the pose command)\n");
         return -EINVAL;
     }
     if (o->bots > 0) {
@@ -451,7 +462,8 @@ int main(int argc, char **argv)
     code = 1;
     if (o.bots) {
         bots_opts bo = {.net = o.net, .rate = o.rate, .count = o.bots, .pattern = o.pattern,
-                        .duration = o.duration, .ramp = o.ramp, .no_handshake = o.no_handshake};
+                        .duration = o.duration, .ramp = o.ramp, .no_handshake = o.no_handshake,
+                        .pose = o.pose};
         m.bots = bots_create(loop, &bo, &code);
     } else {
         script_opts so = {.net = o.net, .rate = o.rate, .file = o.script, .json = o.json};

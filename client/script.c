@@ -73,7 +73,7 @@ static void cmd_release(script *s)
 /* Ends the running command; move, walk and wait report where we are. */
 static void cmd_done(script *s)
 {
-    if (s->cur.op == SCRIPT_MOVE || s->cur.op == SCRIPT_WALK || s->cur.op == SCRIPT_WAIT)
+    if (s->cur.op == SCRIPT_MOVE || s->cur.op == SCRIPT_WALK || s->cur.op == SCRIPT_WAIT || s->cur.op == SCRIPT_POSE)
         events_done(script_op_name(s->cur.op), session_get_view(s->c)->pos);
     cmd_release(s);
 }
@@ -266,6 +266,12 @@ static void cmd_start(script *s, const script_cmd *cmd)
     case SCRIPT_WAIT:
         s->cmd_timer = session_timer_start(s->loop, (uint64_t)(cmd->arg[0] * (double)NS_PER_MS), 0, script__on_cmd_timer, s);
         break;
+    case SCRIPT_POSE: /* the facing sticks to the moves that follow; this one says it standing */
+        session_set_facing(s->c, script__yaw_radians(cmd->arg[0]), (float)(cmd->arg[1] * (M_PI / 180.0)), 1);
+        if (!session_send_move(s->c, v->pos))
+            log_warn("pose not sent: output backlog full");
+        cmd_done(s);
+        return;
     case SCRIPT_PING:
         s->ping_stamp = ev_clock(s->loop) / 1000u;
         if (session_send_ping(s->c, s->ping_stamp) < 0) {

@@ -23,6 +23,7 @@ enum script_op {
     SCRIPT_WALK,
     SCRIPT_WAIT,
     SCRIPT_PING,
+    SCRIPT_POSE,
     SCRIPT_IMPORT,
     SCRIPT_PLACE,
     SCRIPT_REMOVE,
@@ -38,7 +39,7 @@ enum script_anchor {
 
 typedef struct script_cmd {
     int op;        /* enum script_op */
-    double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms; import, place: x y z */
+    double arg[3]; /* move: x y z; walk: dx dz seconds; wait: ms; pose: yaw pitch (degrees); import, place: x y z */
     uint32_t object_id; /* place, remove, fetch */
     double yaw_deg;     /* import, place: degrees about +y */
     double size;        /* import, place: uniform object scale */

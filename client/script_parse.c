@@ -30,6 +30,8 @@
 #define OBJ_SCALE_MIN 0.001
 #define OBJ_SCALE_MAX 1000.0
 #define YAW_MAX_DEG 1e6
+/* pose: straight down to straight up. */
+#define PITCH_MAX_DEG 90.0
 
 /* Words on one line: a full import has 19. */
 #define WORDS_MAX 24
@@ -44,6 +46,7 @@ static const struct {
     {"walk", SCRIPT_WALK, 3, "walk DX DZ SECONDS"},
     {"wait", SCRIPT_WAIT, 1, "wait MS"},
     {"ping", SCRIPT_PING, 0, "ping"},
+    {"pose", SCRIPT_POSE, 2, "pose YAW PITCH"},
     {"import", SCRIPT_IMPORT, -1,
      "import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z [--anchor origin|base] [--drop] "
      "[--yaw DEGREES] [--size S]"},
@@ -303,7 +306,7 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
         k++;
     if (k == NCOMMANDS)
         return cvre_fail(err, errlen, -EINVAL,
-                         "unknown command '%.40s' (move, walk, wait, ping, import, place, remove, fetch, quit)", tok[0]);
+                         "unknown command '%.40s' (move, walk, wait, ping, pose, import, place, remove, fetch, quit)", tok[0]);
     *cmd = (script_cmd){.op = commands[k].op};
     if (commands[k].nargs < 0) {
         int rc = parse_object_cmd(tok, nt, commands[k].usage, cmd, err, errlen);
@@ -320,6 +323,9 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
         } else if (cmd->op == SCRIPT_WALK && i == 2) {
             lo = 0.0;
             hi = WALK_MAX_S;
+        } else if (cmd->op == SCRIPT_POSE) {
+            hi = i == 0 ? YAW_MAX_DEG : PITCH_MAX_DEG;
+            lo = -hi;
         }
         if (parse_number(tok[i + 1], lo, hi, &cmd->arg[i]) < 0)
             return cvre_fail(err, errlen, -EINVAL, "%s: bad number '%.40s' (want a finite number in [%g, %g]): %s",

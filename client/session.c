@@ -2,6 +2,7 @@
 #include "session.h"
 
 #include <errno.h>
+#include <math.h>
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -65,6 +66,8 @@ struct session {
     int ended;
     session_end end;
     uint32_t seq;
+    int has_pose;    /* session_set_facing was called: moves carry pose */
+    proto_pose pose;
     uint64_t last_send;
     uint64_t keepalive_stamp; /* of our own ping whose pong is not in yet; 0 when none */
     uint8_t *in; /* unfinished frame, in_len bytes */
@@ -308,6 +311,7 @@ static int from_server(uint16_t type)
     case PROTO_PING:
     case PROTO_PONG:
     case PROTO_BYE:
+    case PROTO_AVATAR_POSE:
     case PROTO_OBJECT_INFO:
     case PROTO_OBJECT_REMOVED:
     case PROTO_OBJECT_REJECTED:
@@ -682,15 +686,28 @@ uint32_t session_send_move(session *c, const float pos[3])
 {
     if (c->state != SESSION_JOINED && c->state != SESSION_RAW)
         return 0;
-    uint8_t buf[PROTO_SIZE_MOVE];
+    uint8_t buf[PROTO_SIZE_MOVE_MAX];
     proto_writer w;
     proto_writer_init(&w, buf, sizeof buf);
-    proto_move m = {.seq = c->seq + 1};
+    proto_move m = {.seq = c->seq + 1, .has_pose = (uint8_t)c->has_pose, .pose = c->pose};
     memcpy(m.pos, pos, sizeof m.pos);
     proto_put_move(&w, &m);
     if (send_frame(c, buf, w.len) < 0)
         return 0;
     return ++c->seq;
+}
+
+void session_set_facing(session *c, float yaw, float pitch, int head)
+{
+    c->has_pose = 1;
+    c->pose = (proto_pose){.yaw = yaw, .pitch = pitch};
+    if (!head)
+        return;
+    /* Turned by yaw about y, then by pitch about x: q_yaw x q_pitch. */
+    float sy = sinf(yaw * 0.5f), cy = cosf(yaw * 0.5f), sp = sinf(pitch * 0.5f), cp = cosf(pitch * 0.5f);
+    const float q[4] = {cy * sp, sy * cp, -sy * sp, cy * cp};
+    const float eyes[3] = {0.0f, SESSION_EYE_HEIGHT * c->view.box[1], 0.0f};
+    proto_pose_set_part(&c->pose, PROTO_POSE_HEAD, eyes, q);
 }
 
 int session_send_ping(session *c, uint64_t stamp)

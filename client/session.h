@@ -152,6 +152,15 @@ const session_view *session_get_view(const session *c);
  * the sequence number is not used.
  */
 uint32_t session_send_move(session *c, const float pos[3]);
+/*
+ * From now on every move carries this facing (radians; pitch within
+ * +-PROTO_PITCH_MAX, positive looks up) and, when head is set, a head at
+ * SESSION_EYE_HEIGHT of the avatar's height, turned the same way: what a
+ * client without a headset can say of where its avatar looks. Call it once
+ * joined (the box sets the eye height).
+ */
+#define SESSION_EYE_HEIGHT 0.93f /* eyes of a standing adult: 1.67 m of 1.8 */
+void session_set_facing(session *c, float yaw, float pitch, int head);
 /* Sends a ping (legal only once joined); 0, or -ENOBUFS (backlog full) or
  * -ENOTCONN. */
 int session_send_ping(session *c, uint64_t stamp);

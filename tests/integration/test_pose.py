@@ -3,9 +3,11 @@ clients that see the avatar and no others, only when they changed beyond
 the server's thresholds; a bad pose ends only its sender's connection and
 moves nothing."""
 import math
+import os
 import struct
+import subprocess
 
-from harness import E, Raw, Server, T, args, close_to, frame, move, ping, run
+from harness import E, Client, Raw, Server, T, args, close_to, frame, move, ping, run
 
 A = args()
 ONE = 32767  # PROTO_QUAT_ONE
@@ -134,4 +136,45 @@ def test_bad_poses():
     assert srv.stop() == 0
 
 
-run([test_pose_reaches_viewers_only, test_bad_poses])
+def test_client_pose_and_bots():
+    """cvre-client's pose command turns its avatar and shows the others'
+    poses as events; bots with --pose send a facing and a head as they walk."""
+    srv = Server(A.bin, "--max-speed", "200", "--spawn-radius", "4", "--joins-per-second", "0",
+                 "--max-per-address", "0")
+    viewer, poser = Client(A.bin, srv.port, "viewer", None), Client(A.bin, srv.port, "poser", None)
+    me = poser.until("poser joins", lambda e: e["event"] == "join_ok")["id"]
+    viewer.until("viewer sees poser", lambda e: e["event"] == "joined" and e["id"] == me)
+    poser.send("pose 90 10\n")
+    poser.until("pose done", lambda e: e["event"] == "done" and e["command"] == "pose")
+    e = viewer.until("viewer sees the pose", lambda e: e["event"] == "pose" and e["id"] == me)
+    assert abs(e["yaw"] - math.pi / 2) < 1e-6 and abs(e["pitch"] - math.radians(10)) < 1e-6, e
+    # The head at eye height, turned 90 degrees about y and 10 about x.
+    assert close_to(e["head"]["pos"], (0, 0.93 * 1.8, 0), 0.002), e
+    half, tilt = math.radians(45), math.radians(5)
+    want = (math.cos(half) * math.sin(tilt), math.sin(half) * math.cos(tilt), -math.sin(half) * math.sin(tilt),
+            math.cos(half) * math.cos(tilt))
+    assert close_to(e["head"]["rot"], want, 0.002), e
+    assert "left" not in e and "right" not in e, e
+    # Past straight up: a script error (exit 2), nothing sent.
+    poser.send("pose 90 95\n")
+    assert poser.wait(30) == 2 and "pose: bad number '95'" in poser.stderr, poser.stderr
+    viewer.until("viewer sees poser leave", lambda e: e["event"] == "left" and e["id"] == me)
+    assert [e for e in viewer.of("pose") if e["id"] == me] == [e], viewer.of("pose")
+    viewer.send("quit\n")
+    assert viewer.wait(30) == 0, viewer.stderr
+
+    # Two bots with --pose beside a raw watcher: their poses arrive.
+    watcher, _ = joined(srv.port, "watcher")
+    bots = subprocess.run([os.path.join(A.bin, "cvre-client"), "--port", str(srv.port), "--bots", "2", "--pose",
+                           "--duration", "2", "--pattern", "circle"], capture_output=True, text=True, timeout=60)
+    assert bots.returncode == 0, bots
+    seen = watcher.collect("left", timeout=30, where=lambda m: m["reason"] == 1)
+    poses = [m for m in seen if m["type"] == "pose"]
+    assert poses, seen[-5:]
+    yaw, pitch, parts = struct.unpack_from("<ffB", poses[-1]["pose"])
+    assert parts == 1 and pitch == 0 and len(poses[-1]["pose"]) == 9 + 14, poses[-1]
+    watcher.close()
+    assert srv.stop() == 0
+
+
+run([test_pose_reaches_viewers_only, test_bad_poses, test_client_pose_and_bots])
