@@ -273,14 +273,16 @@ static void on_message(server *s, client *c, const proto_msg *m)
 static void handle_input(server *s, client *c)
 {
     uint32_t max_len = c->state == ST_JOINED ? PROTO_MAX_LEN : PROTO_MAX_LEN_PREJOIN;
-    size_t off = 0;
+    size_t off = 0, in_len;
+    uint8_t *in;
+    clients__input(c, &in, &in_len);
     while (!c->closing && c->state != ST_AUTH) {
         proto_frame f;
-        int rc = proto_frame_parse(c->c.in + off, c->c.in_len - off, max_len, &f);
+        int rc = proto_frame_parse(in + off, in_len - off, max_len, &f);
         if (rc == PROTO_INCOMPLETE)
             break;
         if (rc != PROTO_OK) {
-            uint32_t len = le_get_u32(c->c.in + off);
+            uint32_t len = le_get_u32(in + off);
             if (rc == PROTO_ERR_FRAME_TOO_LONG)
                 clients__protocol_error(s, c, rc, "frame length %u over the limit of %u%s", len, max_len,
                                c->state == ST_JOINED ? "" : " before join");
@@ -304,7 +306,7 @@ static void handle_input(server *s, client *c)
         /* The state may have changed the frame cap (join). */
         max_len = c->state == ST_JOINED ? PROTO_MAX_LEN : PROTO_MAX_LEN_PREJOIN;
     }
-    conn_consume(&c->c, c->closing ? c->c.in_len : off);
+    clients__consume(c, c->closing ? in_len : off);
 }
 
 static void on_peer_eof(server *s, client *c)
@@ -335,7 +337,7 @@ void handlers__on_io(ev_loop *loop, int fd, unsigned events, void *data)
     if (c->dead || !(events & (EV_READ | EV_ERROR)))
         return;
     uint32_t cap = c->state == ST_JOINED ? SRV_INBUF_CAP : SRV_INBUF_CAP_PREJOIN;
-    ssize_t n = conn_read(&c->c, cap, SRV_READ_BUDGET);
+    ssize_t n = conn_read(&c->c, clients__read_cap(c, cap), SRV_READ_BUDGET);
     if (n == -EAGAIN)
         return;
     if (n == 0) {
@@ -348,5 +350,6 @@ void handlers__on_io(ev_loop *loop, int fd, unsigned events, void *data)
         return;
     }
     s->st.bytes_in += (uint64_t)n;
+    clients__unwrap(s, c);
     handle_input(s, c);
 }

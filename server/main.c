@@ -66,6 +66,13 @@ static const char usage[] =
     "  --metrics HOST:PORT       serve Prometheus metrics at http://HOST:PORT/metrics\n"
     "                            ([IPV6]:PORT; port 0 picks a free one, logged as\n"
     "                            \"metrics on http://...\"); off by default\n"
+    "  --web HOST:PORT           serve the browser client over HTTP/1.1 at\n"
+    "                            http://HOST:PORT/ (its files from --web-root) and\n"
+    "                            the game protocol over a WebSocket there (binary\n"
+    "                            messages, one frame each); port 0 picks a free one,\n"
+    "                            logged as \"web on http://...\"; off by default\n"
+    "  --web-root DIR            the web client's files (default client/web under\n"
+    "                            the current directory)\n"
     "  --log-level LEVEL         debug, info, warn or error (default info)\n"
     "  --help                    show this help\n"
     "  --version                 show the version\n"
@@ -144,7 +151,7 @@ int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
            O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
-           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS };
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS, O_WEB, O_WEB_ROOT };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -165,6 +172,7 @@ int main(int argc, char **argv)
         {"max-per-address", required_argument, 0, O_PER_ADDR}, {"joins-per-second", required_argument, 0, O_JOINS},
         {"quota-objects", required_argument, 0, O_Q_OBJ}, {"quota-mb", required_argument, 0, O_Q_MB},
         {"metrics", required_argument, 0, O_METRICS},
+        {"web", required_argument, 0, O_WEB}, {"web-root", required_argument, 0, O_WEB_ROOT},
         {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
@@ -187,6 +195,8 @@ int main(int argc, char **argv)
         case O_SEED: cfg.seed = (uint64_t)integer("seed", optarg, 0, 9007199254740992.0); break;
         case O_STATS: cfg.stats_file = optarg; break;
         case O_METRICS: host_port("metrics", optarg, &cfg.metrics_host, &cfg.metrics_port); break;
+        case O_WEB: host_port("web", optarg, &cfg.web_host, &cfg.web_port); break;
+        case O_WEB_ROOT: cfg.web_root = optarg; break;
         case O_WORLD_FILE: cfg.world_file = optarg; break;
         case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, SRV_MAX_UPLOAD_LIMIT); break;
         case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, SRV_MAX_TRIANGLES_LIMIT); break;

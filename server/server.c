@@ -23,6 +23,7 @@
 #include "handlers.h"
 #include "log.h"
 #include "metrics_endpoint.h"
+#include "web_endpoint.h"
 #include "moderation.h"
 #include "objects.h"
 #include "record.h"
@@ -56,6 +57,7 @@ void server_config_defaults(server_config *cfg)
         .seed = 1,
         .stats_file = NULL,
         .stats_interval_ms = 10000,
+        .web_root = "client/web",
         .max_upload = SRV_MAX_UPLOAD_DEFAULT,
         .max_triangles = SRV_MAX_TRIANGLES_DEFAULT,
         .world_file = NULL,
@@ -114,6 +116,7 @@ static void begin_shutdown(server *s, const char *why)
     s->stopping = 1;
     s->stop_deadline_ns = server__now(s) + SHUTDOWN_GRACE_MS * NS_PER_MS;
     admission__stop(s);
+    web__stop(s);
     for (uint32_t i = 0; i < s->nclients; i++)
         say_bye(s, s->clients[i], PROTO_BYE_SHUTDOWN, "shutdown");
 }
@@ -231,6 +234,7 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
     server *s = cvre_xcalloc(1, sizeof *s);
     s->cfg = *cfg;
     s->signal_fd = -1;
+    s->web_root_fd = -1;
     /* fds are handed out lowest first, so this bounds every client fd. */
     s->max_fd = (int)cfg->max_clients + 64;
     float half = cfg->world_size * 0.5f;
@@ -305,7 +309,7 @@ server *server_create(const server_config *cfg, char *err, size_t errlen)
         snprintf(err, errlen, "event loop setup failed");
         goto fail;
     }
-    if (metrics__start(s, err, errlen) < 0)
+    if (metrics__start(s, err, errlen) < 0 || web__start(s, err, errlen) < 0)
         goto fail;
     ev_set_before_sleep(s->loop, before_sleep, s);
     s->st.interval_start_ns = ev_clock(s->loop);
@@ -352,6 +356,7 @@ void server_destroy(server *s)
     if (s->log)
         dblog_stop(s->log, NULL);
     metrics__stop(s);
+    web__stop(s);
     admission__stop(s);
     if (s->loop)
         ev_destroy(s->loop);

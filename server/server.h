@@ -31,6 +31,9 @@ typedef struct server_config {
     const char *world_file; /* objects to preload; NULL: none */
     const char *metrics_host; /* the Prometheus endpoint (--metrics); NULL: off */
     uint16_t metrics_port;    /* 0: any free port */
+    const char *web_host;     /* the web client and WebSocket endpoint (--web); NULL: off */
+    uint16_t web_port;        /* 0: any free port */
+    const char *web_root;     /* its files (--web-root) */
     import_proc importer;   /* the isolated importer every model goes through */
     int auth_required;      /* 1: accounts only; 0: guests may walk and look */
     double login_burst;     /* logins an address may make at once (then SRV_LOGIN_PER_SECOND) */

@@ -40,6 +40,7 @@
 #include "server.h"
 #include "srv_limits.h"
 #include "world.h"
+#include "ws.h"
 
 #define NS_PER_MS ((uint64_t)1000000)
 /* The user that owns the objects of the world file: the reserved account
@@ -88,6 +89,13 @@ typedef struct client {
     int closing;  /* no more input is handled; output is flushed, then closed (conn_begin_close) */
     int dead;     /* reaped at the next safe point */
     int in_write_list;
+    /* A WebSocket client (--web; clients.c): its frames' state, and the
+     * protocol bytes of the messages unwrapped so far, which handle_input
+     * reads instead of the socket's bytes; NULL for a TCP client. */
+    ws_reader *ws;
+    uint8_t *ws_in;
+    size_t ws_in_len, ws_in_cap;
+    uint16_t ws_close; /* the close code its close frame will carry; 0: 1000 */
     uint32_t index; /* in server.clients */
     int64_t session_id; /* 0 before hello */
     uint8_t token[PROTO_TOKEN_SIZE];
@@ -175,6 +183,8 @@ struct server {
     stats st;
     stats st_base;            /* st when the stats interval began */
     http_server *metrics;     /* --metrics (metrics_endpoint.c); NULL: off */
+    http_server *web;         /* --web (web_endpoint.c); NULL: off */
+    int web_root_fd;          /* --web-root, opened once; -1: off */
     char address[80];
     client **by_slot; /* the joined client of each avatar slot */
     dblog *log;       /* the collision log's writer thread */

@@ -225,6 +225,8 @@ const char *http_request_header(const http_request *r, const char *name)
     return NULL;
 }
 
+int http_request_minor(const http_request *r) { return r->parser.http_minor; }
+
 const char *http_reason(int status) { return http_status_str((enum http_status)status); }
 
 int http_response_head(char *out, size_t cap, int status, const char *content_type, size_t content_length,

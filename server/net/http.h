@@ -74,6 +74,8 @@ const char *http_request_method(const http_request *r);
 const char *http_request_target(const http_request *r);
 const char *http_request_path(const http_request *r);
 const char *http_request_header(const http_request *r, const char *name);
+/* Its HTTP minor version: 1 for HTTP/1.1 (a WebSocket needs it). */
+int http_request_minor(const http_request *r);
 
 /* The reason phrase of a status ("Not Found"), from http_parser's table. */
 const char *http_reason(int status);

@@ -50,6 +50,12 @@ typedef struct http_conn {
     int dead; /* reaped at the next safe point */
     int eof;  /* the peer shut its write side */
     uint64_t request_deadline_ns;
+    /* A file body still being read into the output (-1: none): the close
+     * begins once the last of it is queued; until then each write the
+     * peer takes gives it HTTP_LINGER_MS again (stream_deadline_ns). */
+    int file_fd;
+    uint64_t file_left;
+    uint64_t stream_deadline_ns;
     char peer[80];
 } http_conn;
 
@@ -78,6 +84,8 @@ static void reap_dead(http_server *h)
         }
         conn_free(&hc->c);
         http_request_free(hc->req);
+        if (hc->file_fd >= 0)
+            close(hc->file_fd);
         free(hc);
         h->conns[i] = h->conns[--h->nconns];
     }
@@ -101,15 +109,72 @@ static void kill_conn(http_conn *hc)
         h->reap_timer = ev_timer_start(h->loop, 0, 0, on_reap, h);
 }
 
+/* Tops the output up from the file body to HTTP_FILE_CHUNK pending; once
+ * the last byte is queued, closes the file and begins the close. 0, or
+ * -errno when the file cannot be read (or came out shorter than it was). */
+static int feed_file(http_conn *hc)
+{
+    while (hc->file_left > 0 && conn_out_pending(&hc->c) < HTTP_FILE_CHUNK) {
+        uint8_t *room;
+        size_t len;
+        int rc = conn_out_reserve(&hc->c, HTTP_FILE_CHUNK, &room, &len);
+        if (rc < 0)
+            return rc;
+        size_t want = hc->file_left < HTTP_FILE_CHUNK ? (size_t)hc->file_left : HTTP_FILE_CHUNK;
+        ssize_t n = read(hc->file_fd, room, want);
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n <= 0)
+            return n < 0 ? -errno : -EIO;
+        conn_out_commit(&hc->c, (size_t)n);
+        hc->file_left -= (uint64_t)n;
+    }
+    if (hc->file_left == 0) {
+        close(hc->file_fd);
+        hc->file_fd = -1;
+        conn_begin_close(&hc->c);
+    }
+    return 0;
+}
+
 /* Writes what is pending (conn_flush shuts the write side once all of it
- * is out); then drains, or closes if the peer has shut its side already. */
+ * is out, after the close began), topping a file body up as the socket
+ * takes it; then drains, or closes if the peer has shut its side already. */
 static void flush(http_conn *hc)
 {
-    ssize_t left = conn_flush(&hc->c);
+    ssize_t left;
+    do {
+        if (hc->file_fd >= 0) {
+            int rc = feed_file(hc);
+            if (rc < 0) {
+                log_warn("%s: %s: the file being sent: %s", hc->h->name, hc->peer, strerror(-rc));
+                kill_conn(hc);
+                return;
+            }
+        }
+        size_t before = conn_out_pending(&hc->c);
+        left = conn_flush(&hc->c);
+        if (left >= 0 && (size_t)left < before)
+            hc->stream_deadline_ns = ev_now(hc->h->loop) + HTTP_LINGER_MS * NS_PER_MS;
+    } while (left == 0 && hc->file_fd >= 0);
     if (left < 0 || (left == 0 && hc->eof))
         kill_conn(hc);
     else if (left == 0)
         hc->state = HC_DRAINING;
+}
+
+/* Hands hc's socket to the reply's takeover, with the reply's body to send
+ * first; hc leaves the server without closing it. */
+static void hand_over(http_conn *hc, http_reply *rep)
+{
+    int fd = hc->c.fd;
+    ev_io_del(hc->h->loop, fd);
+    hc->c.fd = -1; /* conn_free leaves it open */
+    log_debug("%s: %s: %s %s: taken over", hc->h->name, hc->peer, http_request_method(hc->req),
+              http_request_target(hc->req));
+    rep->takeover(rep->takeover_data, fd, hc->peer, (const uint8_t *)rep->body, rep->body_len);
+    free(rep->body);
+    kill_conn(hc);
 }
 
 /* The one-line body of a reply that has none: "404 Not Found\n". */
@@ -127,16 +192,22 @@ static void respond(http_conn *hc, http_reply *rep, int complete)
     if (rep->body_len > HTTP_BODY_MAX) {
         log_error("%s: a response of %zu bytes is over the limit of %u", hc->h->name, rep->body_len, HTTP_BODY_MAX);
         free(rep->body);
-        *rep = (http_reply){.status = 500};
+        *rep = (http_reply){.status = 500, .file_fd = -1};
     }
     const char *body = rep->body;
     size_t body_len = rep->body_len;
-    if (!body) {
+    int file = rep->file_fd >= 0;
+    if (file) {
+        body_len = 0;
+        hc->file_fd = rep->file_fd;
+        hc->file_left = rep->file_size;
+    } else if (!body) {
         body_len = status_body(rep->status, line, sizeof line);
         body = line;
         rep->content_type = "text/plain; charset=utf-8";
     }
-    int n = http_response_head(head, sizeof head, rep->status, rep->content_type, body_len, rep->extra);
+    int n = http_response_head(head, sizeof head, rep->status, rep->content_type,
+                               file ? (size_t)rep->file_size : body_len, rep->extra);
     uint8_t *room;
     size_t room_len;
     if (n < 0 || conn_out_reserve(&hc->c, (size_t)n + body_len, &room, &room_len) < 0) {
@@ -146,7 +217,8 @@ static void respond(http_conn *hc, http_reply *rep, int complete)
         return;
     }
     memcpy(room, head, (size_t)n);
-    memcpy(room + n, body, body_len);
+    if (body_len) /* a file's body follows from flush */
+        memcpy(room + n, body, body_len);
     conn_out_commit(&hc->c, (size_t)n + body_len);
     free(rep->body);
     if (complete)
@@ -155,7 +227,9 @@ static void respond(http_conn *hc, http_reply *rep, int complete)
     else
         log_debug("%s: %s: %d", hc->h->name, hc->peer, rep->status);
     hc->state = HC_WRITING;
-    conn_begin_close(&hc->c);
+    hc->stream_deadline_ns = ev_now(hc->h->loop) + HTTP_LINGER_MS * NS_PER_MS;
+    if (!file)
+        conn_begin_close(&hc->c);
     flush(hc);
 }
 
@@ -194,12 +268,15 @@ static void on_conn_io(ev_loop *loop, int fd, unsigned events, void *data)
     conn_consume(&hc->c, hc->c.in_len); /* the request keeps what it needs */
     if (rc == HTTP_INCOMPLETE)
         return;
-    http_reply rep = {.status = rc};
+    http_reply rep = {.status = rc, .file_fd = -1};
     if (rc == HTTP_COMPLETE) {
         rep.status = 200;
         hc->h->fn(hc->h->data, hc->req, &rep);
     }
-    respond(hc, &rep, rc == HTTP_COMPLETE);
+    if (rep.takeover)
+        hand_over(hc, &rep);
+    else
+        respond(hc, &rep, rc == HTTP_COMPLETE);
 }
 
 /* Deadlines: a request head that has not arrived gets 408; a response
@@ -215,10 +292,10 @@ static void on_sweep(ev_loop *loop, void *data)
             continue;
         if (hc->state == HC_READING) {
             if (now > hc->request_deadline_ns) {
-                http_reply rep = {.status = 408};
+                http_reply rep = {.status = 408, .file_fd = -1};
                 respond(hc, &rep, 0);
             }
-        } else if (conn_overdue(&hc->c) == -ETIMEDOUT) {
+        } else if (conn_overdue(&hc->c) == -ETIMEDOUT || (hc->file_fd >= 0 && now > hc->stream_deadline_ns)) {
             kill_conn(hc);
         }
     }
@@ -261,6 +338,7 @@ static void on_accepted(void *data, int cfd, const char *peer)
         return;
     }
     hc->h = h;
+    hc->file_fd = -1;
     snprintf(hc->peer, sizeof hc->peer, "%s", peer);
     hc->request_deadline_ns = ev_now(h->loop) + HTTP_REQUEST_TIMEOUT_MS * NS_PER_MS;
     h->conns[h->nconns++] = hc;

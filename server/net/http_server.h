@@ -2,7 +2,9 @@
  * http_server.h: a small HTTP/1.1 endpoint on the server's event loop, on
  * raw sockets: it accepts, reads one request head per connection within
  * a deadline (http.h parses it), hands a complete request to its handler,
- * writes the response with Connection: close, and closes. Bad requests get
+ * writes the response with Connection: close (a file's body streamed from
+ * its descriptor), and closes; or hands the socket over to a handler that
+ * takes it (an upgrade to a WebSocket). Bad requests get
  * their 4xx from http.h's checks, a request that does not arrive in time
  * 408, a connection past the cap 503; none of it reaches the handler.
  *
@@ -42,18 +44,42 @@
 #define HTTP_BODY_MAX (1024u * 1024u)
 #endif
 
+/* A file body is read into the output this much at a time, topped up as
+ * the socket takes it: a 1.2 MB script costs 64 KiB of buffer, not 1.2 MB. */
+#ifndef HTTP_FILE_CHUNK
+#define HTTP_FILE_CHUNK (64u * 1024u)
+#endif
+
 _Static_assert(HTTP_CONNS_DEFAULT >= 1, "at least one connection");
+_Static_assert(HTTP_FILE_CHUNK <= HTTP_BODY_MAX, "a file's chunk fits the output");
 _Static_assert(HTTP_REQUEST_TIMEOUT_MS >= 100 && HTTP_LINGER_MS >= 100, "deadlines a real client can meet");
 
-/* What a handler answers. The server sets status 200 and the rest empty
- * before the call. A reply without a body gets a one-line text body
- * naming its status. */
+/* Takes a connection over (an upgrade): the socket fd (non-blocking,
+ * close-on-exec) is the callee's from the call on, to keep or close; first
+ * is what it must send before anything else (the reply's body, for
+ * instance the 101 response), valid during the call only. Bytes the peer
+ * sent after the request head are not passed on: a WebSocket client waits
+ * for the 101 before it sends (RFC 6455 4.1). */
+typedef void http_takeover_fn(void *data, int fd, const char *peer, const uint8_t *first, size_t first_len);
+
+/* What a handler answers. The server sets status 200, file_fd -1 and the
+ * rest empty before the call. A reply without a body or a file gets a
+ * one-line text body naming its status. */
 typedef struct http_reply {
     int status;
     const char *content_type; /* static; NULL: none */
     const char *extra;        /* static header lines, each ending in CRLF; NULL: none */
     char *body;               /* malloc'd; the server frees it */
     size_t body_len;
+    /* A file sent as the body instead, read from the fd as the peer takes
+     * it (HTTP_FILE_CHUNK at a time, never the whole of a large file in
+     * memory); the server closes the fd. */
+    int file_fd;
+    uint64_t file_size;
+    /* Set: no response; the body's bytes and the socket go to takeover
+     * (with takeover_data), and the connection leaves this server. */
+    http_takeover_fn *takeover;
+    void *takeover_data;
 } http_reply;
 
 /* Answers a complete, well-formed request (any method and path). */

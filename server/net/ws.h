@@ -42,6 +42,7 @@ enum {
     WS_CLOSE_POLICY = 1008,    /* the game's kick */
     WS_CLOSE_TOO_BIG = 1009,   /* a message past the cap */
     WS_CLOSE_INTERNAL = 1011,  /* out of memory */
+    WS_CLOSE_TRY_AGAIN = 1013, /* the server is full (IANA's registry) */
 };
 
 /* A control frame's payload, at most (5.5). */

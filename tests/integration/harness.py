@@ -191,6 +191,22 @@ def split_frames(buf):
     return out, buf
 
 
+def drain(s):
+    """Everything the socket s receives until the server closes (or resets)
+    it; then closes s."""
+    buf = b""
+    while True:
+        try:
+            d = s.recv(65536)
+        except ConnectionResetError:
+            break
+        if not d:
+            break
+        buf += d
+    s.close()
+    return buf
+
+
 def listening_port(proc, timeout=60):
     """The port in the first line of a starting cvre-server's stdout
     ("listening on 127.0.0.1:PORT"), waited for at most timeout seconds (a
@@ -286,11 +302,15 @@ class Raw:
             if not d:
                 self.closed = True
                 break
-            msgs, self.buf = split_frames(self.buf + d)
-            out += msgs
+            out += self.frames(d)
             if first and out:
                 break
         return out
+
+    def frames(self, data):
+        """The messages whole once data is added to what came before."""
+        msgs, self.buf = split_frames(self.buf + data)
+        return msgs
 
     def expect(self, kind, timeout=5, where=None):
         """Consumes messages in order until one of this kind (for which

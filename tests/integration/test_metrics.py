@@ -13,7 +13,7 @@ import struct
 import subprocess
 import time
 
-from harness import E, T, Raw, Server, args, frame, hello, join, move, ping, run, still_moving, upload_frames
+from harness import E, T, Raw, Server, args, drain, frame, hello, join, move, ping, run, still_moving, upload_frames
 
 A = args()
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -40,21 +40,6 @@ def metrics_port(srv):
     m = re.search(r"metrics on http://127\.0\.0\.1:(\d+)/metrics", srv.logtext())
     assert m, srv.logtext()[-2000:]
     return int(m.group(1))
-
-
-def drain(s):
-    """Everything s receives until the server closes (or resets) it."""
-    buf = b""
-    while True:
-        try:
-            d = s.recv(4096)
-        except ConnectionResetError:
-            break
-        if not d:
-            break
-        buf += d
-    s.close()
-    return buf
 
 
 def http(port, data, timeout=30):

@@ -1,0 +1,337 @@
+"""The web endpoint (--web) on the real server: the web root's files over
+HTTP (a large one streamed whole, paths outside the root refused), a
+WebSocket handshake and a join from a raw socket, a WebSocket client and a
+TCP client that see each other, pings answered, the game's bye as a close
+frame; and each malformed class of the WebSocket side closes that
+connection only while a witness TCP client keeps playing."""
+import base64
+import hashlib
+import os
+import socket
+import struct
+import tempfile
+import time
+
+from harness import (TEMP_DIRS, T, Raw, Server, args, drain, frame, hello, join, move, ping, run, split_frames,
+                     still_moving)
+
+A = args()
+GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"  # RFC 6455 4.2.2
+HEAD_MAX = 8192  # server/net/http.h
+REQUEST_TIMEOUT = 5.0  # server/net/http_server.h
+ROOT = tempfile.mkdtemp(prefix="cvre-web-")
+TEMP_DIRS.append(ROOT)
+INDEX = b"<!doctype html><title>cvre</title>\n"
+BIG = os.urandom(1_300_000)  # three.js's size: streamed, never buffered whole
+with open(os.path.join(ROOT, "index.html"), "wb") as f:
+    f.write(INDEX)
+with open(os.path.join(ROOT, "big.js"), "wb") as f:
+    f.write(BIG)
+SRV = Server(A.bin, "--web", "127.0.0.1:0", "--web-root", ROOT)
+
+
+def web_port():
+    for _ in range(50):
+        for line in SRV.logtext().splitlines():
+            if "web on http://127.0.0.1:" in line:
+                return int(line.split("web on http://127.0.0.1:")[1].split("/")[0])
+        time.sleep(0.1)
+    raise AssertionError("no 'web on' line: " + SRV.logtext()[-2000:])
+
+
+PORT = web_port()
+
+
+def http(request, timeout=30):
+    """Sends request bytes, returns everything until the server closes."""
+    s = socket.create_connection(("127.0.0.1", PORT), timeout=timeout)
+    s.sendall(request)
+    return drain(s)
+
+
+def status(response):
+    return int(response.split(b" ", 2)[1])
+
+
+def upgrade_request(key=None, version="13", extra=""):
+    key = key if key is not None else base64.b64encode(os.urandom(16)).decode()
+    lines = ["GET /game HTTP/1.1", "Host: 127.0.0.1", "Upgrade: websocket", "Connection: keep-alive, Upgrade"]
+    if key:
+        lines.append("Sec-WebSocket-Key: " + key)
+    if version:
+        lines.append("Sec-WebSocket-Version: " + version)
+    return ("\r\n".join(lines) + "\r\n" + extra + "\r\n").encode()
+
+
+def ws_frame(b0, payload=b"", masked=True, length=None):
+    """A client frame; length overrides the one written (a 64-bit form)."""
+    n = len(payload)
+    m = 0x80 if masked else 0
+    if length is not None:
+        head = bytes([b0, m | 127]) + struct.pack(">Q", length)
+    elif n < 126:
+        head = bytes([b0, m | n])
+    elif n <= 0xFFFF:
+        head = bytes([b0, m | 126]) + struct.pack(">H", n)
+    else:
+        head = bytes([b0, m | 127]) + struct.pack(">Q", n)
+    if not masked:
+        return head + payload
+    key = os.urandom(4)
+    return head + key + bytes(c ^ key[i % 4] for i, c in enumerate(payload))
+
+
+class Ws(Raw):
+    """A WebSocket game connection from a raw socket: the protocol's frames
+    sent one per masked binary message, the server's messages unwrapped
+    (each must hold exactly one frame); a close frame is kept in
+    close_code."""
+
+    def __init__(self, port=None):
+        self.s = socket.create_connection(("127.0.0.1", port or PORT), timeout=5)
+        self.wsbuf, self.queue, self.closed = b"", [], False
+        self.close_code, self.pongs = None, []
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.s.sendall(upgrade_request(key))
+        head = b""
+        while b"\r\n\r\n" not in head:
+            d = self.s.recv(4096)
+            assert d, f"closed during the handshake: {head!r}"
+            head += d
+        head, rest = head.split(b"\r\n\r\n", 1)
+        lines = head.decode().split("\r\n")
+        assert lines[0] == "HTTP/1.1 101 Switching Protocols", lines
+        fields = {k.lower(): v.strip() for k, v in (line.split(":", 1) for line in lines[1:])}
+        want = base64.b64encode(hashlib.sha1(key.encode() + GUID).digest()).decode()
+        assert fields["sec-websocket-accept"] == want, fields
+        assert fields["upgrade"].lower() == "websocket" and fields["connection"].lower() == "upgrade", fields
+        self.queue += self.frames(rest)
+
+    def send(self, data):
+        """Each whole frame of data in a message of its own."""
+        out = b""
+        while data:
+            n = 4 + struct.unpack_from("<I", data)[0]
+            out += ws_frame(0x82, data[:n])
+            data = data[n:]
+        self.s.sendall(out)
+
+    def raw(self, data):
+        self.s.sendall(data)
+
+    def frames(self, data):
+        """The messages of the whole server frames buffered: binary ones
+        each one frame of the protocol; pongs and the close kept aside."""
+        self.wsbuf += data
+        out = []
+        while len(self.wsbuf) >= 2 and self.close_code is None:
+            b0, b1 = self.wsbuf[0], self.wsbuf[1]
+            assert b0 & 0x70 == 0 and b1 & 0x80 == 0, "a server frame with RSV bits or a mask"
+            n, at = b1 & 0x7F, 2
+            if n == 126:
+                if len(self.wsbuf) < 4:
+                    break
+                n, at = struct.unpack_from(">H", self.wsbuf, 2)[0], 4
+                assert n >= 126, "a 16-bit length not in its shortest form"
+            elif n == 127:
+                if len(self.wsbuf) < 10:
+                    break
+                n, at = struct.unpack_from(">Q", self.wsbuf, 2)[0], 10
+                assert n > 0xFFFF, "a 64-bit length not in its shortest form"
+            if len(self.wsbuf) < at + n:
+                break
+            payload, self.wsbuf = self.wsbuf[at:at + n], self.wsbuf[at + n:]
+            op = b0 & 0xF
+            assert b0 & 0x80, "a fragmented server frame"
+            if op == 0x2:
+                msgs, rest = split_frames(payload)
+                assert len(msgs) == 1 and rest == b"", f"a message that is not one frame: {payload!r}"
+                out += msgs
+            elif op == 0xA:
+                self.pongs.append(payload)
+            elif op == 0x8:
+                self.close_code = struct.unpack(">H", payload[:2])[0] if payload else 0
+            else:
+                raise AssertionError(f"unexpected server opcode {op}")
+        return out
+
+    def wait_close_frame(self, timeout=10):
+        """Reads until the server's close frame and the TCP close; returns
+        the close code."""
+        self.wait_closed(timeout)
+        assert self.close_code is not None, "closed without a close frame"
+        return self.close_code
+
+
+def witness():
+    w = Raw(SRV.port)
+    w.handshake("witness")
+    return w
+
+
+def test_files():
+    r = http(b"GET / HTTP/1.1\r\nHost: h\r\n\r\n")
+    head, body = r.split(b"\r\n\r\n", 1)
+    assert status(r) == 200 and body == INDEX, r
+    assert b"Content-Type: text/html" in head and b"Connection: close" in head, head
+    r = http(b"GET /big.js HTTP/1.1\r\nHost: h\r\n\r\n")
+    head, body = r.split(b"\r\n\r\n", 1)
+    assert status(r) == 200 and f"Content-Length: {len(BIG)}".encode() in head, head
+    assert body == BIG, f"{len(body)} bytes of {len(BIG)}"
+    assert status(http(b"GET /nothing.html HTTP/1.1\r\nHost: h\r\n\r\n")) == 404
+    assert status(http(b"GET /../" + os.path.basename(ROOT).encode() + b"/index.html HTTP/1.1\r\nHost: h\r\n\r\n")) \
+        == 403
+    assert status(http(b"GET /%2e%2e/etc/passwd HTTP/1.1\r\nHost: h\r\n\r\n")) == 403
+    assert status(http(b"POST / HTTP/1.1\r\nHost: h\r\n\r\n")) == 405
+
+
+def test_join_over_websocket():
+    """A WebSocket client and a TCP client see each other join and move."""
+    tcp = Raw(SRV.port)
+    tcp.handshake("tcp-anna")
+    ws = Ws()
+    ws.send(hello() + join("ws-bert"))
+    ws.expect("welcome")
+    ok = ws.expect("join_ok")
+    tcp.expect("joined", where=lambda m: m["name"] == "ws-bert" and m["id"] == ok["id"])
+    ws.expect("joined", where=lambda m: m["name"] == "tcp-anna")
+    start = ws.expect("snapshot")["avatars"][ok["id"]]
+    ws.send(move(1, (start[0] + 0.1, start[1], start[2])))
+    ws.expect("snapshot", where=lambda m: m["ack"] == 1)
+    tcp.expect("snapshot", where=lambda m: ok["id"] in m["avatars"] and m["avatars"][ok["id"]][0] > start[0])
+    # A ping of the WebSocket answered with its payload; the game's own ping too.
+    ws.raw(ws_frame(0x89, b"are you there"))
+    ws.send(ping(7))
+    ws.expect("pong", where=lambda m: m["stamp"] == 7)
+    assert ws.pongs == [b"are you there"], ws.pongs
+    # The game's bye: a close frame 1000 after it, then the close.
+    ws.send(frame(T["BYE"], bytes([0])))
+    assert ws.wait_close_frame() == 1000
+    tcp.expect("left", where=lambda m: m["id"] == ok["id"])
+    still_moving(tcp, 1)
+    tcp.close()
+
+
+def test_client_close_echoed():
+    ws = Ws()
+    ws.send(hello() + join("closer"))
+    ws.expect("join_ok")
+    ws.raw(ws_frame(0x88, struct.pack(">H", 4001) + b"bye now"))
+    assert ws.wait_close_frame() == 4001
+
+
+def test_fragmented_message():
+    """A frame of the protocol in three fragments, a ping between them."""
+    ws = Ws()
+    data = hello() + join("pieces")
+    h = hello()
+    ws.raw(ws_frame(0x02, h[:3]) + ws_frame(0x89, b"p") + ws_frame(0x00, h[3:5]) + ws_frame(0x80, h[5:]))
+    ws.send(data[len(h):])
+    ws.expect("join_ok")
+    assert ws.pongs == [b"p"]
+    ws.close()
+
+
+# Each malformed class: what it sends, and the close code (None: an HTTP
+# status instead, at the handshake).
+BAD_FRAMES = {
+    "unmasked": (ws_frame(0x82, frame(T["PING"], bytes(8)), masked=False), 1002),
+    "reserved bits": (ws_frame(0xC2, frame(T["PING"], bytes(8))), 1002),
+    "unknown opcode": (ws_frame(0x83, b"x"), 1002),
+    "64-bit length, top bit": (ws_frame(0x82, length=1 << 63), 1002),
+    "text message": (ws_frame(0x81, b"hello"), 1003),
+    "fragmented control frame": (ws_frame(0x09, b"x"), 1002),
+    "control frame over 125": (ws_frame(0x89, b"x" * 126), 1002),
+    "message past the cap": (ws_frame(0x82, length=1 << 20), 1009),
+    "close code never sent": (ws_frame(0x88, struct.pack(">H", 1005)), 1002),
+    "message of two frames": (ws_frame(0x82, hello() + join("two")), 1008),
+}
+
+
+def test_malformed_frames():
+    w = witness()
+    for k, (name, (data, code)) in enumerate(BAD_FRAMES.items()):
+        ws = Ws()
+        ws.raw(data)
+        got = ws.wait_close_frame()
+        assert got == code, f"{name}: close {got}, expected {code}"
+        still_moving(w, k + 1)
+    assert SRV.alive()
+    w.close()
+
+
+def test_bad_handshakes():
+    w = witness()
+    cases = {
+        "missing key": (upgrade_request(key=""), 400),
+        "key not 16 bytes": (upgrade_request(key=base64.b64encode(b"short").decode()), 400),
+        "wrong version": (upgrade_request(version="8"), 426),
+        "no version": (upgrade_request(version=""), 426),
+        "HTTP/1.0": (upgrade_request().replace(b"HTTP/1.1", b"HTTP/1.0"), 400),
+        "oversized headers": (upgrade_request(extra="X-Filler: " + "a" * HEAD_MAX + "\r\n"), 431),
+    }
+    for k, (name, (request, code)) in enumerate(cases.items()):
+        r = http(request)
+        assert status(r) == code, f"{name}: {r[:200]!r}"
+        if code == 426:
+            assert b"Sec-WebSocket-Version: 13" in r, r
+        still_moving(w, 100 + k)
+    # A request that never finishes: 408 once its time is up, then the close.
+    s = socket.create_connection(("127.0.0.1", PORT), timeout=REQUEST_TIMEOUT + 20)
+    s.sendall(upgrade_request()[:40])
+    still_moving(w, 200)
+    r = b""
+    while True:
+        d = s.recv(4096)
+        if not d:
+            break
+        r += d
+    s.close()
+    assert status(r) == 408, r
+    still_moving(w, 201)
+    w.close()
+
+
+def test_full_server_and_missing_root():
+    """A second server, of one client and with no web root: files are 404,
+    and a WebSocket past --max-clients gets its 101, SERVER_FULL in a
+    message and close 1013."""
+    srv = Server(A.bin, "--web", "127.0.0.1:0", "--web-root", os.path.join(ROOT, "missing"), "--max-clients", "1")
+    try:
+        port = None
+        for _ in range(50):
+            if "web on http://127.0.0.1:" in srv.logtext():
+                port = int(srv.logtext().split("web on http://127.0.0.1:")[1].split("/")[0])
+                break
+            time.sleep(0.1)
+        assert port and "every file is 404" in srv.logtext(), srv.logtext()[-2000:]
+        s = socket.create_connection(("127.0.0.1", port), timeout=10)
+        s.sendall(b"GET / HTTP/1.1\r\nHost: h\r\n\r\n")
+        assert status(s.recv(4096)) == 404
+        s.close()
+        tcp = Raw(srv.port)
+        tcp.handshake("only")
+        ws = Ws(port)
+        msgs = ws.wait_closed()
+        assert [m["type"] for m in msgs] == ["error"] and msgs[0]["code"] == 30, msgs  # SERVER_FULL
+        assert ws.close_code == 1013, ws.close_code
+        still_moving(tcp, 1)
+        tcp.close()
+        assert srv.stop() == 0
+    finally:
+        srv.proc.kill()
+
+
+def test_shutdown_close():
+    """The server's shutdown bye reaches a WebSocket client, then close 1001."""
+    ws = Ws()
+    ws.send(hello() + join("last"))
+    ws.expect("join_ok")
+    SRV.proc.send_signal(15)
+    ws.expect("bye")
+    assert ws.wait_close_frame() == 1001
+    assert SRV.proc.wait(30) == 0
+
+
+run([test_files, test_join_over_websocket, test_client_close_echoed, test_fragmented_message,
+     test_malformed_frames, test_bad_handshakes, test_full_server_and_missing_root, test_shutdown_close])
