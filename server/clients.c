@@ -277,6 +277,9 @@ void clients__unwrap(server *s, client *c)
 {
     if (!c->ws)
         return;
+    /* The frame cap in force, as for TCP (handlers.c): a message past it
+     * is refused from its header (1009), before the socket's read cap. */
+    c->ws->cap = c->state == ST_JOINED ? SRV_INBUF_CAP : SRV_INBUF_CAP_PREJOIN;
     size_t at = 0;
     while (!c->closing) {
         ws_event ev;

@@ -243,6 +243,7 @@ BAD_FRAMES = {
     "fragmented control frame": (ws_frame(0x09, b"x"), 1002),
     "control frame over 125": (ws_frame(0x89, b"x" * 126), 1002),
     "message past the cap": (ws_frame(0x82, length=1 << 20), 1009),
+    "message past the cap before join": (ws_frame(0x82, bytes(300)), 1009),
     "close code never sent": (ws_frame(0x88, struct.pack(">H", 1005)), 1002),
     "message of two frames": (ws_frame(0x82, hello() + join("two")), 1008),
 }
