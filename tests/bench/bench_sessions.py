@@ -4,7 +4,9 @@ side in one run. Bounded: each run lasts ramp + --seconds and stops itself.
 
 Prints, per avatar count: tick duration p50/p99/max, inbound moves/s,
 outbound bytes/s, server CPU %, peak RSS, disconnects, and the server's CPU
-per inbound move as a ratio to the bare server's CPU per frame."""
+per inbound move as a ratio to the bare server's CPU per frame. Then, at the
+smallest count, the bytes per second per avatar in and out with the bots'
+VR poses (--pose: a facing and a head with every move) off and on."""
 import argparse
 import json
 import os
@@ -103,7 +105,7 @@ def world_file(path, count, seed=7):
                     f"yaw {rng.choice((0, 90, 180, 270))} scale {scale}\n")
 
 
-def run_cvre(bindir, n, ramp, seconds, objects):
+def run_cvre(bindir, n, ramp, seconds, objects, bots_extra=()):
     tmp = tempfile.mkdtemp(prefix="cvre-bench-")
     stats = os.path.join(tmp, "stats.jsonl")
     extra = []
@@ -114,7 +116,7 @@ def run_cvre(bindir, n, ramp, seconds, objects):
                        "--max-clients", str(n + 100), "--world-size", "1000", "--spawn-radius", "500",
                        "--stats-file", stats, "--stats-interval", "1", "--log-level", "warn",
                        "--max-per-address", "0", "--joins-per-second", "0", *extra])
-    sw = swarm(bindir, port, n, ramp + seconds + 1)
+    sw = swarm(bindir, port, n, ramp + seconds + 1, bots_extra)
     t_start = time.time()
     cpu, wall, peak = measure_window(srv.pid, ramp, seconds)
     t_end = time.time()
@@ -130,6 +132,7 @@ def run_cvre(bindir, n, ramp, seconds, objects):
     pct = lambda q: ticks[min(len(ticks) - 1, int(q * len(ticks)))] / 1000 if ticks else float("nan")
     return dict(n=n, p50=pct(0.5), p99=pct(0.99), max=ticks[-1] / 1000 if ticks else float("nan"),
                 moves_s=moves / secs, out_s=sum(l["bytes_out"] for l in steady) / secs,
+                in_s=sum(l["bytes_in"] for l in steady) / secs,
                 cpu_pct=100 * cpu / wall, rss=peak, cpu_per_move=cpu / moves if moves else float("nan"),
                 disconnects=sm.get("disconnects", "?"), errors=sm.get("errors", "?"),
                 joined=sm.get("joined", "?"), collisions_s=sm.get("collisions", 0) / (ramp + seconds))
@@ -160,6 +163,15 @@ def main():
               f"{r['collisions_s']:.0f} | "
               f"{r['out_s'] / 1e6:.2f} | {r['cpu_pct']:.0f} | {r['rss']:.0f} | {r['disconnects']} | "
               f"{r['cpu_per_move'] * 1e6:.2f} | {r['bare_us']:.2f} | {r['ratio']:.2f}")
+    # Poses: the same swarm at the smallest count, every move carrying a
+    # facing and a head (45-byte frames instead of 22), which viewers get
+    # back as AVATAR_POSE when they changed past the server's thresholds.
+    off = min(rows, key=lambda r: r["n"])
+    on = run_cvre(a.bin, off["n"], off["n"] / 2000 + 3, a.seconds, a.objects, ["--pose"])
+    per = lambda r, k: r[k] / r["joined"] if isinstance(r["joined"], int) and r["joined"] else float("nan")
+    print(f"poses, {off['n']} avatars | in B/s per avatar | out B/s per avatar | CPU/move us")
+    for name, r in (("off", off), ("on", on)):
+        print(f"{name} | {per(r, 'in_s'):.0f} | {per(r, 'out_s'):.0f} | {r['cpu_per_move'] * 1e6:.2f}")
 
 
 if __name__ == "__main__":
