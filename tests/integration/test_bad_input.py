@@ -76,8 +76,9 @@ def test_payload_shorter_than_layout():
 
 
 def test_trailing_bytes():
-    rejected(move(1, (0, 0, 0))[:0] + frame(T["MOVE"], struct.pack("<I3f", 1, 0, 0, 0) + b"\0"),
-             E["TRAILING"], joined=True)
+    # A move's bytes past its position are a pose (protocol 2): one past a
+    # facing-only pose is trailing.
+    rejected(frame(T["MOVE"], struct.pack("<I3fffB", 1, 0, 0, 0, 0, 0, 0) + b"\0"), E["TRAILING"], joined=True)
     rejected(frame(T["PING"], struct.pack("<Q", 1) + b"zz"), E["TRAILING"], joined=True)
 
 
