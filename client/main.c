@@ -87,6 +87,7 @@ static void usage(FILE *f)
           "\n"
           "Commands (standard input, interactively on a terminal, or --script FILE):\n"
           "  move X Y Z, walk DX DZ SECONDS, wait MS, ping, quit;\n"
+          "  pose YAW PITCH (degrees about +y, and up: moves carry it from then on);\n"
           "  import FILE [--up y|z] [--scale UNITS] [--name NAME] at X Y Z\n"
           "  [--anchor origin|base] [--drop] [--yaw DEGREES] [--size S],\n"
           "  place ID X Y Z [--yaw DEGREES] [--size S], remove ID (accounts only).\n"
