@@ -579,6 +579,16 @@ static void test_pose_roundtrip(void **state)
     }
     assert_int_equal(PROTO_SIZE_MOVE_MAX, PROTO_SIZE_MOVE + 51u);
     assert_int_equal(PROTO_SIZE_AVATAR_POSE_MAX, PROTO_HEADER_SIZE + 55u);
+    /* A pose one byte short of room is not written at all. */
+    {
+        proto_writer w;
+        const proto_avatar_pose ap = {3, full};
+
+        proto_writer_init(&w, big, PROTO_SIZE_AVATAR_POSE_MAX - 1);
+        proto_put_avatar_pose(&w, &ap);
+        assert_int_equal(w.err, PROTO_ERR_FRAME_TOO_LONG);
+        assert_int_equal(w.len, 0);
+    }
 }
 
 /* Quantizing normalises the quaternion, rounds to the millimetre,
