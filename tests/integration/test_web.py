@@ -185,6 +185,18 @@ def test_files():
     assert status(http(b"POST / HTTP/1.1\r\nHost: h\r\n\r\n")) == 405
 
 
+def test_file_not_read_is_cut_off():
+    """A peer that stops reading a large file is cut off once nothing has
+    moved for the linger (HTTP_LINGER_MS, 5 s): the rest of the file is
+    never read into the server's memory for it."""
+    s = socket.create_connection(("127.0.0.1", PORT), timeout=30)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 65536)
+    s.sendall(b"GET /big.js HTTP/1.1\r\nHost: h\r\n\r\n")
+    time.sleep(REQUEST_TIMEOUT + 3)  # the linger is as long as the request's time
+    got = drain(s)
+    assert 0 < len(got) < len(BIG), f"{len(got)} bytes of {len(BIG)}"
+
+
 def test_join_over_websocket():
     """A WebSocket client and a TCP client see each other join and move."""
     tcp = Raw(SRV.port)
@@ -334,5 +346,5 @@ def test_shutdown_close():
     assert SRV.proc.wait(30) == 0
 
 
-run([test_files, test_join_over_websocket, test_client_close_echoed, test_fragmented_message,
+run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_close_echoed, test_fragmented_message,
      test_malformed_frames, test_bad_handshakes, test_full_server_and_missing_root, test_shutdown_close])
