@@ -6,6 +6,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 #include <errno.h>
+#include <string.h>
 
 #include "known.h"
 #include "le.h"
@@ -39,6 +40,8 @@ static void bounds_and_table(void **state)
     assert_int_equal(known_bounds(&in.o, lo, hi), -ENOENT);
 
     make(&in, 7, two, 2);
+    in.o.tri_count = 12;
+    memset(in.o.mesh_hash, 0xa7, sizeof in.o.mesh_hash);
     known_put(k, &in.o);
     make(&in, 3, two, 1);
     known_put(k, &in.o);
@@ -46,6 +49,10 @@ static void bounds_and_table(void **state)
     assert_non_null(e);
     assert_int_equal(e->n_boxes, 2);
     assert_true(e->yaw == 0.5f && e->scale == 2.0f && e->boxes[1][4] == 4.0f);
+    /* what a fetch asks for */
+    assert_int_equal(e->tri_count, 12);
+    for (unsigned i = 0; i < PROTO_MESH_HASH_SIZE; i++)
+        assert_int_equal(e->mesh_hash[i], 0xa7);
     /* A second OBJECT_INFO replaces the first, with fewer boxes too. */
     make(&in, 7, two + 1, 1);
     known_put(k, &in.o);
