@@ -1,8 +1,8 @@
 """The web endpoint (--web) on the real server: the web root's files over
 HTTP (a large one streamed whole, paths outside the root refused), a
 WebSocket handshake and a join from a raw socket, a WebSocket client and a
-TCP client that see each other, pings answered, the game's bye as a close
-frame; and each malformed class of the WebSocket side closes that
+TCP client that see each other, pings answered, the game's bye and a kick
+as close frames; and each malformed class of the WebSocket side closes that
 connection only while a witness TCP client keeps playing."""
 import base64
 import hashlib
@@ -12,7 +12,7 @@ import struct
 import tempfile
 import time
 
-from harness import (TEMP_DIRS, T, Raw, Server, args, drain, frame, hello, join, move, ping, run, split_frames,
+from harness import (TEMP_DIRS, T, Raw, Server, admin, args, drain, frame, hello, join, move, ping, run, split_frames,
                      still_moving)
 
 A = args()
@@ -232,6 +232,20 @@ def test_client_close_echoed():
     assert ws.wait_close_frame() == 4001
 
 
+def test_kick_closes_with_1008():
+    """cvre-admin kick: the bye (kicked), then close 1008."""
+    ws = Ws()
+    ws.send(hello() + join("kicked"))
+    session = ws.expect("welcome")["session"]
+    ws.expect("join_ok")
+    for _ in range(100):  # the session's record is written at the next tick
+        if admin("kick", session, db=SRV.db, check=None)[0] == 0:
+            break
+        time.sleep(0.1)
+    assert ws.expect("bye", timeout=15)["reason"] == 2  # PROTO_BYE_KICKED
+    assert ws.wait_close_frame() == 1008
+
+
 def test_fragmented_message():
     """A frame of the protocol in three fragments, a ping between them."""
     ws = Ws()
@@ -346,5 +360,6 @@ def test_shutdown_close():
     assert SRV.proc.wait(30) == 0
 
 
-run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_close_echoed, test_fragmented_message,
-     test_malformed_frames, test_bad_handshakes, test_full_server_and_missing_root, test_shutdown_close])
+run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_close_echoed,
+     test_kick_closes_with_1008, test_fragmented_message, test_malformed_frames, test_bad_handshakes,
+     test_full_server_and_missing_root, test_shutdown_close])
