@@ -11,6 +11,7 @@ import sqlite3
 import struct
 import subprocess
 import tempfile
+import time
 
 from harness import (E, MODELS, T, TEMP_DIRS, Client, Raw, Server, args, frame, hello, move, ping, refused, run,
                      upload)
@@ -100,8 +101,12 @@ def test_refusals_and_flood():
     witness.handshake("witness")
     prober = Raw(srv.port)
     prober.handshake("prober")  # a guest: guests may look at meshes too
-    teapot = prober.expect("object", where=lambda m: m["name"] == "teapot.obj")
-    desk_id = 3 - teapot["id"]  # the world file's two objects are 1 and 2, and the desk is out of view
+    objs = {}
+    while len(objs) < 2:  # the join's objects: the teapot and the bunny, not the far desk
+        o = prober.expect("object")
+        objs[o["name"]] = o
+    teapot, bunny = objs["teapot.obj"], objs["stanford-bunny.obj"]
+    desk_id = 2  # the world file's second object, out of view
 
     wrong = bytes([teapot["mesh"][0] ^ 1]) + teapot["mesh"][1:]
     prober.send(mesh_request(teapot["id"], wrong))
@@ -126,6 +131,17 @@ def test_refusals_and_flood():
     assert len(data) == 32 + 6 * verts + 3 * tris * isz
     idx = struct.unpack_from(f"<{3 * tris}{'H' if isz == 2 else 'I'}", data, 32 + 6 * verts)
     assert max(idx) < verts
+
+    # sixteen bunnies at once (10 MB, more than the socket buffers hold),
+    # unread for a while: sent within the output budget as the client reads,
+    # so it is never taken for a slow reader
+    prober.send(mesh_request(bunny["id"], bunny["mesh"]) * 16)
+    time.sleep(1)
+    whole = 0
+    while whole < 16:
+        c = prober.expect("mesh_chunk", timeout=30, where=lambda m: m["id"] == bunny["id"])
+        whole += c["offset"] + len(c["data"]) == c["total"]
+    assert not prober.closed and "slow" not in srv.logtext()
 
     # a flood: the first requests are served (or wait their turn), the
     # rest refused, and the connection stays
@@ -158,12 +174,12 @@ def test_refusals_and_flood():
 
 
 def world_file():
-    """A teapot near the spawn point and a desk 300 m away."""
+    """A teapot and a bunny near the spawn point, and a desk 300 m away."""
     d = tempfile.mkdtemp(prefix="cvre-it-")
     TEMP_DIRS.append(d)
     path = os.path.join(d, "mesh.world")
     with open(path, "w") as f:
-        f.write(f"object {TEAPOT} at 0 0 12\nobject {DESK} at 300 0 300\n")
+        f.write(f"object {TEAPOT} at 0 0 12\nobject {DESK} at 300 0 300\nobject {BUNNY} at 0 0 -12\n")
     return path
 
 
