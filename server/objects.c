@@ -271,41 +271,96 @@ static int knows(const client *c, uint32_t id)
     return 0;
 }
 
-/* Frees the mesh c is being sent, if any. */
-static void mesh_done(server *s, client *c)
+/* Lets go of the mesh c is being sent, if any; it stays kept. */
+static void mesh_done(client *c)
 {
     client_mesh *m = &c->mesh;
-    s->mesh_bytes -= m->len;
-    free(m->data);
-    m->data = NULL;
-    m->len = m->sent = 0;
+    if (m->blob)
+        m->blob->refs--;
+    m->blob = NULL;
+    m->sent = 0;
+}
+
+/* Makes room for need more bytes of meshes: forgets kept meshes that no
+ * client is being sent, least recently asked for first. Returns 1 when
+ * there is room. */
+static int mesh_room(server *s, size_t need)
+{
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < s->nmeshes; i++) {
+        mesh_blob *b = s->meshes[i];
+        if (s->mesh_bytes + need > SRV_MESH_MEMORY && b->refs == 0) {
+            s->mesh_bytes -= b->len;
+            free(b->data);
+            free(b);
+        } else {
+            s->meshes[kept++] = b;
+        }
+    }
+    s->nmeshes = kept;
+    return s->mesh_bytes + need <= SRV_MESH_MEMORY;
+}
+
+/* The encoded mesh of o: kept from an earlier request (any object's with
+ * the same hash), or encoded now and kept. Sets *out, or NULL when the
+ * meshes being sent leave no room (the request waits); returns 0, or
+ * proto_mesh_encode's -errno. The array is kept in the order of use, the
+ * latest last. */
+static int mesh_get(server *s, const scene_object *o, mesh_blob **out)
+{
+    *out = NULL;
+    for (uint32_t i = 0; i < s->nmeshes; i++) {
+        mesh_blob *b = s->meshes[i];
+        if (memcmp(b->hash, o->mesh_hash, PROTO_MESH_HASH_SIZE) == 0) {
+            memmove(s->meshes + i, s->meshes + i + 1, (s->nmeshes - i - 1) * sizeof *s->meshes);
+            s->meshes[s->nmeshes - 1] = b;
+            *out = b;
+            return 0;
+        }
+    }
+    if (!mesh_room(s, PROTO_MESH_HEAD_SIZE + 30ull * o->tri_count))
+        return 0;
+    mesh_blob *b = cvre_xcalloc(1, sizeof *b);
+    int rc = proto_mesh_encode(o->tris, o->tri_count, &b->data, &b->len);
+    if (rc < 0) {
+        free(b);
+        return rc;
+    }
+    memcpy(b->hash, o->mesh_hash, sizeof b->hash);
+    s->meshes = cvre_xrealloc(s->meshes, (s->nmeshes + 1) * sizeof *s->meshes);
+    s->meshes[s->nmeshes++] = b;
+    s->mesh_bytes += b->len;
+    *out = b;
+    return 0;
 }
 
 /* Starts sending the oldest waiting mesh c can still have: the object may
  * have been removed, or left c's view, since it asked. Returns 1 when one
- * is being sent, 0 when none waits or the meshes in flight are at
- * SRV_MESH_MEMORY (the request waits for the next tick). */
+ * is being sent, 0 when none waits or the meshes being sent leave no room
+ * (the request waits for the next tick). */
 static int mesh_next(server *s, client *c)
 {
     client_mesh *m = &c->mesh;
     while (m->nqueue > 0) {
         uint32_t id = m->queue[0];
         const scene_object *o = scene_get(s->scene, id);
-        if (o && knows(c, id) && s->mesh_bytes + 30ull * o->tri_count + PROTO_MESH_HEAD_SIZE > SRV_MESH_MEMORY)
+        mesh_blob *b = NULL;
+        int rc = o && knows(c, id) ? mesh_get(s, o, &b) : 0;
+        if (rc == 0 && o && knows(c, id) && !b)
             return 0;
         memmove(m->queue, m->queue + 1, --m->nqueue * sizeof *m->queue);
-        if (!o || !knows(c, id)) {
-            reject(s, c, id, PROTO_ERR_NO_OBJECT, "object %u is gone from your view", id);
-            continue;
-        }
-        int rc = proto_mesh_encode(o->tris, o->tri_count, &m->data, &m->len);
         if (rc < 0) {
             reject(s, c, id, PROTO_ERR_INTERNAL, "the mesh of object %u cannot be encoded: %s", id, strerror(-rc));
             continue;
         }
+        if (!b) {
+            reject(s, c, id, PROTO_ERR_NO_OBJECT, "object %u is gone from your view", id);
+            continue;
+        }
+        b->refs++;
+        m->blob = b;
         m->object_id = id;
         m->sent = 0;
-        s->mesh_bytes += m->len;
         return 1;
     }
     return 0;
@@ -316,18 +371,19 @@ static int mesh_next(server *s, client *c)
 static void mesh_pump(server *s, client *c)
 {
     client_mesh *m = &c->mesh;
-    while (conn_out_pending(&c->c) < SRV_OBJECT_VIEW_BUDGET && (m->data || mesh_next(s, c))) {
-        size_t k = m->len - m->sent < PROTO_MESH_CHUNK_MAX ? m->len - m->sent : PROTO_MESH_CHUNK_MAX;
+    while (conn_out_pending(&c->c) < SRV_OBJECT_VIEW_BUDGET && (m->blob || mesh_next(s, c))) {
+        const mesh_blob *b = m->blob;
+        size_t k = b->len - m->sent < PROTO_MESH_CHUNK_MAX ? b->len - m->sent : PROTO_MESH_CHUNK_MAX;
         proto_writer w;
         if (clients__out_begin(s, c, PROTO_SIZE_MESH_CHUNK(k), &w) < 0)
             return;
-        proto_mesh_chunk ch = {.object_id = m->object_id, .total = (uint32_t)m->len, .offset = (uint32_t)m->sent,
-                               .data = m->data + m->sent, .len = (uint32_t)k};
+        proto_mesh_chunk ch = {.object_id = m->object_id, .total = (uint32_t)b->len, .offset = (uint32_t)m->sent,
+                               .data = b->data + m->sent, .len = (uint32_t)k};
         proto_put_mesh_chunk(&w, &ch);
         clients__out_end(s, c, &w);
         m->sent += k;
-        if (m->sent == m->len)
-            mesh_done(s, c);
+        if (m->sent == b->len)
+            mesh_done(c);
     }
 }
 
@@ -378,7 +434,7 @@ static void drop_upload(server *s, client *c)
 
 void objects__client_gone(server *s, client *c)
 {
-    mesh_done(s, c);
+    mesh_done(c);
     free(c->objs);
     c->objs = NULL;
     c->nobjs = c->objs_cap = 0;
@@ -1027,6 +1083,9 @@ void objects__stop(server *s)
     s->scene = NULL;
     ratelimit_destroy(s->mesh_requests);
     s->mesh_requests = NULL;
+    mesh_room(s, SRV_MESH_MEMORY); /* the clients are gone: nothing is being sent */
+    free(s->meshes);
+    s->meshes = NULL;
     free(s->obj_stamp);
     free(s->obj_found);
     free(s->picks);

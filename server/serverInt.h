@@ -58,11 +58,21 @@ typedef struct client_upload {
     float unit_scale;
 } client_upload;
 
-/* Meshes a client asked for (objects.c): the encoded one being sent, and
- * the object ids waiting, oldest first. */
+/* An encoded mesh (objects.c), kept by hash for every client that asks for
+ * it, until the memory for meshes is wanted for others and no client is
+ * being sent it. */
+typedef struct mesh_blob {
+    uint8_t hash[PROTO_MESH_HASH_SIZE];
+    uint8_t *data;
+    size_t len;
+    uint32_t refs; /* clients being sent it */
+} mesh_blob;
+
+/* Meshes a client asked for (objects.c): the one being sent, and the
+ * object ids waiting, oldest first. */
 typedef struct client_mesh {
-    uint8_t *data; /* NULL: none being sent */
-    size_t len, sent;
+    mesh_blob *blob; /* NULL: none being sent */
+    size_t sent;
     uint32_t object_id;
     uint32_t queue[SRV_MESH_QUEUE];
     uint32_t nqueue;
@@ -199,7 +209,9 @@ struct server {
     int64_t admin_feed_last;  /* the last admin action applied (db/moderation.h) */
     refiner *refiner;    /* new collision maps from the online loop and the store */
     size_t upload_bytes; /* held by unfinished uploads, all clients */
-    size_t mesh_bytes;   /* held by encoded meshes being sent, all clients */
+    mesh_blob **meshes;  /* encoded meshes kept (objects.c) */
+    uint32_t nmeshes;
+    size_t mesh_bytes;   /* what they hold */
     ratelimit *mesh_requests; /* mesh requests per address */
     uint32_t scene_gen;  /* grows with every change to the scene a client may see */
     /* objects__view's scratch: a stamp per object slot, the slots a query

@@ -131,8 +131,11 @@
  * waiting behind the mesh being sent (a page asks for every object it is
  * told of); an address may ask for SRV_MESH_BURST at once and then
  * SRV_MESH_PER_SECOND a second, so a flood costs the server nothing but
- * refusals. Encoded meshes in flight, all clients together, hold at most
- * SRV_MESH_MEMORY: a request waits its turn beyond that. */
+ * refusals. A mesh is encoded once and kept for the next client that asks
+ * for it (encoding the 400,020-triangle city block takes 150 ms); the kept
+ * meshes hold at most SRV_MESH_MEMORY, the least recently asked for making
+ * room for others, and a request waits its turn while those being sent
+ * fill it. */
 #define SRV_MESH_QUEUE 16u
 #define SRV_MESH_BURST 32.0
 #define SRV_MESH_PER_SECOND 8.0
