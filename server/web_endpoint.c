@@ -62,7 +62,7 @@ static void upgrade(server *s, const http_request *req, http_reply *rep)
 static void on_request(void *data, const http_request *req, http_reply *rep)
 {
     server *s = data;
-    if (http_request_header(req, "upgrade")) {
+    if (ws_asks_upgrade(http_request_header(req, "upgrade"))) { /* h2c and the like are ignored */
         upgrade(s, req, rep);
         return;
     }

@@ -73,13 +73,15 @@ static int has_token(const char *list, const char *token)
     return 0;
 }
 
+int ws_asks_upgrade(const char *upgrade) { return upgrade && has_token(upgrade, "websocket"); }
+
 int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, size_t errlen)
 {
     if (!u->method || strcmp(u->method, "GET") != 0)
         return cvre_fail(err, errlen, -EINVAL, "a WebSocket opens with GET, not %s", u->method ? u->method : "?");
     if (u->http_minor < 1)
         return cvre_fail(err, errlen, -EINVAL, "a WebSocket needs HTTP/1.1, not HTTP/1.%d", u->http_minor);
-    if (!u->upgrade || !has_token(u->upgrade, "websocket"))
+    if (!ws_asks_upgrade(u->upgrade))
         return cvre_fail(err, errlen, -EINVAL, "no \"Upgrade: websocket\"");
     if (!u->connection || !has_token(u->connection, "upgrade"))
         return cvre_fail(err, errlen, -EINVAL, "no \"Connection: Upgrade\"");

@@ -74,6 +74,11 @@ typedef struct ws_upgrade {
  * goes to err. */
 int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, size_t errlen);
 
+/* True if an Upgrade header's value names websocket: the request asks for
+ * one (and ws_handshake decides). Another upgrade (h2c) may be ignored
+ * and the request served as plain HTTP. NULL: false. */
+int ws_asks_upgrade(const char *upgrade);
+
 /* Sec-WebSocket-Accept for a key, as sent (4.2.2): base64(SHA-1(key +
  * the RFC's GUID)). Returns 0, or -EIO if libcrypto failed. */
 int ws_accept_key(const char *key, size_t len, char accept[WS_ACCEPT_SIZE]);

@@ -183,6 +183,9 @@ def test_files():
         == 403
     assert status(http(b"GET /%2e%2e/etc/passwd HTTP/1.1\r\nHost: h\r\n\r\n")) == 403
     assert status(http(b"POST / HTTP/1.1\r\nHost: h\r\n\r\n")) == 405
+    # An upgrade to something else than a WebSocket is ignored (RFC 9110 7.8).
+    r = http(b"GET / HTTP/1.1\r\nHost: h\r\nConnection: Upgrade, HTTP2-Settings\r\nUpgrade: h2c\r\n\r\n")
+    assert status(r) == 200 and r.endswith(INDEX), r
 
 
 def test_file_not_read_is_cut_off():

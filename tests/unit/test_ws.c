@@ -57,6 +57,16 @@ static void test_handshake_tokens(void **state)
     assert_int_equal(handshake(u), 0);
 }
 
+static void test_asks_upgrade(void **state)
+{
+    (void)state;
+    assert_true(ws_asks_upgrade("websocket"));
+    assert_true(ws_asks_upgrade("h2c, WebSocket"));
+    assert_false(ws_asks_upgrade("h2c"));
+    assert_false(ws_asks_upgrade(""));
+    assert_false(ws_asks_upgrade(NULL));
+}
+
 static void test_handshake_refused(void **state)
 {
     (void)state;
@@ -429,7 +439,8 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_rfc_example), cmocka_unit_test(test_handshake_tokens),
-        cmocka_unit_test(test_handshake_refused), cmocka_unit_test(test_binary),
+        cmocka_unit_test(test_asks_upgrade), cmocka_unit_test(test_handshake_refused),
+        cmocka_unit_test(test_binary),
         cmocka_unit_test(test_too_big), cmocka_unit_test(test_fragments),
         cmocka_unit_test(test_refused), cmocka_unit_test(test_close),
         cmocka_unit_test(test_server_frames),
