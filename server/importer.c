@@ -9,6 +9,7 @@
 #include "db.h"
 #include "log.h"
 #include "import_proc.h"
+#include "proto_mesh.h"
 #include "worker.h"
 
 /* Jobs waiting at once. Each holds a whole file (up to --max-upload), so the
@@ -96,6 +97,8 @@ static void import_one(importer *im, import_job *job, import_result *r)
     r->tris = mesh.tris; /* the result takes the triangles over */
     r->tri_count = mesh.ntris;
     memcpy(r->mesh_hash, o.mesh_hash, sizeof r->mesh_hash);
+    if (proto_mesh_encode(r->tris, r->tri_count, &r->mesh, &r->mesh_len) < 0)
+        r->mesh = NULL; /* the first client to ask has it encoded then */
     memcpy(r->min, mesh.min, sizeof r->min);
     memcpy(r->max, mesh.max, sizeof r->max);
 }
@@ -175,4 +178,6 @@ void importer_result_free(import_result *r)
 {
     free(r->tris);
     r->tris = NULL;
+    free(r->mesh);
+    r->mesh = NULL;
 }

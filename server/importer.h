@@ -5,7 +5,9 @@
  * The loop thread submits a job (it gives up the file's bytes); the worker
  * has the model parsed in the isolated importer (import_proc.h), which a
  * hostile file can crash or exhaust without harm here, stores the object, its mesh and ECM version 1 (its MBR)
- * in the database through its own connection, and queues the result. The
+ * in the database through its own connection, encodes the mesh as clients
+ * fetch it (proto_mesh.h: 150 ms for the city block, kept off the tick
+ * too), and queues the result. The
  * worker signals an eventfd (importer_fd) that the loop watches; the loop
  * then takes results with importer_take.
  */
@@ -47,6 +49,8 @@ typedef struct import_result {
     float *tris;                  /* owned by the result: importer_result_free */
     uint32_t tri_count;
     uint8_t mesh_hash[DB_MESH_HASH_SIZE]; /* db_mesh_hash of tris */
+    uint8_t *mesh;                /* tris encoded (proto_mesh_encode), owned; NULL if that failed */
+    size_t mesh_len;
     float min[3], max[3];         /* the MBR: ECM version 1's only box */
 } import_result;
 

@@ -301,36 +301,48 @@ static int mesh_room(server *s, size_t need)
     return s->mesh_bytes + need <= SRV_MESH_MEMORY;
 }
 
-/* The encoded mesh of o: kept from an earlier request (any object's with
- * the same hash), or encoded now and kept. Sets *out, or NULL when the
- * meshes being sent leave no room (the request waits); returns 0, or
- * proto_mesh_encode's -errno. The array is kept in the order of use, the
- * latest last. */
-static int mesh_get(server *s, const scene_object *o, mesh_blob **out)
+/* The kept mesh of this hash, made the latest used (the array is kept in
+ * the order of use, the latest last); NULL if none. */
+static mesh_blob *mesh_find(server *s, const uint8_t hash[PROTO_MESH_HASH_SIZE])
 {
-    *out = NULL;
     for (uint32_t i = 0; i < s->nmeshes; i++) {
         mesh_blob *b = s->meshes[i];
-        if (memcmp(b->hash, o->mesh_hash, PROTO_MESH_HASH_SIZE) == 0) {
+        if (memcmp(b->hash, hash, PROTO_MESH_HASH_SIZE) == 0) {
             memmove(s->meshes + i, s->meshes + i + 1, (s->nmeshes - i - 1) * sizeof *s->meshes);
             s->meshes[s->nmeshes - 1] = b;
-            *out = b;
-            return 0;
+            return b;
         }
     }
-    if (!mesh_room(s, PROTO_MESH_HEAD_SIZE + 30ull * o->tri_count))
-        return 0;
+    return NULL;
+}
+
+/* Keeps data (len bytes, encoded, taken over) as the mesh of hash. */
+static mesh_blob *mesh_keep(server *s, const uint8_t hash[PROTO_MESH_HASH_SIZE], uint8_t *data, size_t len)
+{
     mesh_blob *b = cvre_xcalloc(1, sizeof *b);
-    int rc = proto_mesh_encode(o->tris, o->tri_count, &b->data, &b->len);
-    if (rc < 0) {
-        free(b);
-        return rc;
-    }
-    memcpy(b->hash, o->mesh_hash, sizeof b->hash);
+    memcpy(b->hash, hash, sizeof b->hash);
+    b->data = data;
+    b->len = len;
     s->meshes = cvre_xrealloc(s->meshes, (s->nmeshes + 1) * sizeof *s->meshes);
     s->meshes[s->nmeshes++] = b;
-    s->mesh_bytes += b->len;
-    *out = b;
+    s->mesh_bytes += len;
+    return b;
+}
+
+/* The encoded mesh of o: kept from an earlier request or import (any
+ * object's with the same hash), or encoded now and kept. Sets *out, or
+ * NULL when the meshes being sent leave no room (the request waits);
+ * returns 0, or proto_mesh_encode's -errno. */
+static int mesh_get(server *s, const scene_object *o, mesh_blob **out)
+{
+    uint8_t *data;
+    size_t len;
+    if ((*out = mesh_find(s, o->mesh_hash)) || !mesh_room(s, PROTO_MESH_HEAD_SIZE + 30ull * o->tri_count))
+        return 0;
+    int rc = proto_mesh_encode(o->tris, o->tri_count, &data, &len);
+    if (rc < 0)
+        return rc;
+    *out = mesh_keep(s, o->mesh_hash, data, len);
     return 0;
 }
 
@@ -542,6 +554,12 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
                                 .tri_count = r.tri_count, .tris = r.tris, .mesh_hash = r.mesh_hash,
                                 .box_count = 1, .boxes = &mbr};
         int rc = scene_add(s->scene, &def);
+        /* Its mesh, encoded on the importer's thread, is kept for the
+         * clients near it, who are about to ask for it. */
+        if (rc == 0 && r.mesh && !mesh_find(s, r.mesh_hash) && mesh_room(s, r.mesh_len)) {
+            mesh_keep(s, r.mesh_hash, r.mesh, r.mesh_len);
+            r.mesh = NULL;
+        }
         importer_result_free(&r);
         if (rc < 0) {
             s->st.imports_failed++;
