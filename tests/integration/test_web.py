@@ -275,6 +275,10 @@ BAD_FRAMES = {
     "message past the cap before join": (ws_frame(0x82, bytes(300)), 1009),
     "close code never sent": (ws_frame(0x88, struct.pack(">H", 1005)), 1002),
     "message of two frames": (ws_frame(0x82, hello() + join("two")), 1008),
+    # The TCP side's classes, inside a well-formed message: an ERROR, then 1008.
+    "frame length below 2": (ws_frame(0x82, struct.pack("<I", 1) + b"\0"), 1008),
+    "unknown message type": (ws_frame(0x82, frame(200, bytes(4))), 1008),
+    "bad hello": (ws_frame(0x82, frame(T["HELLO"], bytes(6))), 1008),
 }
 
 
@@ -283,8 +287,10 @@ def test_malformed_frames():
     for k, (name, (data, code)) in enumerate(BAD_FRAMES.items()):
         ws = Ws()
         ws.raw(data)
-        got = ws.wait_close_frame()
-        assert got == code, f"{name}: close {got}, expected {code}"
+        msgs = ws.wait_closed(10)
+        assert ws.close_code == code, f"{name}: close {ws.close_code}, expected {code}"
+        if code == 1008:  # the game's refusal says why first
+            assert [m["type"] for m in msgs] == ["error"], f"{name}: {msgs}"
         still_moving(w, k + 1)
     assert SRV.alive()
     w.close()
