@@ -8,6 +8,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "num.h"
+
 /* Reads from `least` to `most` decimal digits at *p into *value, advancing
  * *p; -1 if there are fewer. */
 static int digits_at(const char **p, int least, int most, int *value)
@@ -21,21 +23,9 @@ static int digits_at(const char **p, int least, int most, int *value)
     return n >= least ? 0 : -1;
 }
 
-/* A whole finite strtod number, nothing after it. */
-static int parse_seconds(const char *text, double *t)
-{
-    char *end;
-    errno = 0;
-    double v = strtod(text, &end);
-    if (errno || end == text || *end || !isfinite(v))
-        return -EINVAL;
-    *t = v;
-    return 0;
-}
-
 int timefmt_parse(const char *text, double *t)
 {
-    if (parse_seconds(text, t) == 0)
+    if (num_parse_real(text, -INFINITY, INFINITY, t) == 0)
         return 0;
     int y, mo, d, h = 0, mi = 0, s = 0, zh = 0, zm = 0, sign = 0;
     double frac = 0;

@@ -20,6 +20,7 @@
 #include "bots.h"
 #include "ev.h"
 #include "log.h"
+#include "num.h"
 #include "proto.h"
 #include "script.h"
 
@@ -123,9 +124,8 @@ static int bad(const char *flag, const char *value, const char *want)
 /* The flag value parsers: 0, or -EINVAL when s is not a value in range. */
 static int parse_double(const char *s, double lo, double hi, int lo_open, double *out)
 {
-    char *end;
-    double v = strtod(s, &end);
-    if (end == s || *end != '\0' || !isfinite(v) || v > hi || v < lo || (lo_open && v == lo))
+    double v;
+    if (num_parse_real(s, lo, hi, &v) < 0 || (lo_open && v == lo))
         return -EINVAL;
     *out = v;
     return 0;
@@ -133,14 +133,10 @@ static int parse_double(const char *s, double lo, double hi, int lo_open, double
 
 static int parse_unsigned(const char *s, unsigned long lo, unsigned long hi, unsigned long *out)
 {
-    char *end;
-    if (*s < '0' || *s > '9')
+    long long v;
+    if (num_parse_int(s, (long long)lo, (long long)hi, &v) < 0)
         return -EINVAL;
-    errno = 0;
-    unsigned long v = strtoul(s, &end, 10);
-    if (*end != '\0' || errno || v < lo || v > hi)
-        return -EINVAL;
-    *out = v;
+    *out = (unsigned long)v;
     return 0;
 }
 

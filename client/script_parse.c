@@ -14,6 +14,7 @@
 
 #include "alloc.h"
 #include "err.h"
+#include "num.h"
 #include "utf8.h"
 
 /* Argument bounds: a day of waiting or walking keeps every derived time far
@@ -65,28 +66,12 @@ const char *script_op_name(int op)
     return "?";
 }
 
-/* Parses a whole token as a number within [lo, hi]; strtod alone would take
- * "nan", "inf" and trailing junk. Returns 0 or -EINVAL. */
-static int parse_number(const char *tok, double lo, double hi, double *out)
-{
-    char *end;
-    double v = strtod(tok, &end);
-    if (end == tok || *end != '\0' || !isfinite(v) || v < lo || v > hi)
-        return -EINVAL;
-    *out = v;
-    return 0;
-}
-
 /* An object id: decimal digits only, 1..2^32-1 (0 means "none" on the
  * wire). Returns 0 or -EINVAL. */
 static int parse_id(const char *tok, uint32_t *out)
 {
-    if (*tok < '0' || *tok > '9')
-        return -EINVAL;
-    char *end;
-    errno = 0;
-    unsigned long long v = strtoull(tok, &end, 10);
-    if (*end != '\0' || errno || v == 0 || v > UINT32_MAX)
+    long long v;
+    if (num_parse_int(tok, 1, UINT32_MAX, &v) < 0)
         return -EINVAL;
     *out = (uint32_t)v;
     return 0;
@@ -191,7 +176,7 @@ static int parse_object_opts(char **w, int n, const char *usage, script_cmd *cmd
             hi = COORD_MAX;
             for (int k = 0; k < 3 && ok; k++) {
                 v = w[i + 1 + k];
-                ok = parse_number(v, lo, hi, &cmd->arg[k]) == 0;
+                ok = num_parse_real(v, lo, hi, &cmd->arg[k]) == 0;
             }
             break;
         case OPT_UP:
@@ -225,14 +210,14 @@ static int parse_object_opts(char **w, int n, const char *usage, script_cmd *cmd
         case OPT_YAW:
             lo = -YAW_MAX_DEG;
             hi = YAW_MAX_DEG;
-            ok = parse_number(v, lo, hi, &cmd->yaw_deg) == 0;
+            ok = num_parse_real(v, lo, hi, &cmd->yaw_deg) == 0;
             cmd->has_yaw = 1;
             break;
         case OPT_SCALE:
-            ok = parse_number(v, lo, hi, &cmd->unit_scale) == 0;
+            ok = num_parse_real(v, lo, hi, &cmd->unit_scale) == 0;
             break;
         default: /* OPT_SIZE */
-            ok = parse_number(v, lo, hi, &cmd->size) == 0;
+            ok = num_parse_real(v, lo, hi, &cmd->size) == 0;
             cmd->has_size = 1;
             break;
         }
@@ -282,7 +267,7 @@ static int parse_object_cmd(char **w, int n, const char *usage, script_cmd *cmd,
     if (cmd->op == SCRIPT_REMOVE)
         return 0;
     for (int k = 0; k < 3; k++)
-        if (parse_number(w[2 + k], -COORD_MAX, COORD_MAX, &cmd->arg[k]) < 0)
+        if (num_parse_real(w[2 + k], -COORD_MAX, COORD_MAX, &cmd->arg[k]) < 0)
             return cvre_fail(err, errlen, -EINVAL, "place: bad number '%.40s' (want a finite number in [%g, %g]): %s",
                              w[2 + k], -COORD_MAX, COORD_MAX, usage);
     return parse_object_opts(w + 5, n - 5, usage, cmd, err, errlen);
@@ -327,7 +312,7 @@ int script_parse_line(const char *line, script_cmd *cmd, char *err, size_t errle
             hi = i == 0 ? YAW_MAX_DEG : PITCH_MAX_DEG;
             lo = -hi;
         }
-        if (parse_number(tok[i + 1], lo, hi, &cmd->arg[i]) < 0)
+        if (num_parse_real(tok[i + 1], lo, hi, &cmd->arg[i]) < 0)
             return cvre_fail(err, errlen, -EINVAL, "%s: bad number '%.40s' (want a finite number in [%g, %g]): %s",
                              commands[k].name, tok[i + 1], lo, hi, commands[k].usage);
     }

@@ -8,6 +8,7 @@
 #include <sys/resource.h>
 
 #include "log.h"
+#include "num.h"
 #include "refine.h"
 #include "srv_limits.h"
 #include "server.h"
@@ -94,10 +95,8 @@ static const char usage[] =
 /* Parses a number in [lo, hi] or exits with a message naming the flag. */
 static double number(const char *flag, const char *text, double lo, double hi)
 {
-    char *end;
-    errno = 0;
-    double v = strtod(text, &end);
-    if (errno || end == text || *end || !isfinite(v) || v < lo || v > hi) {
+    double v;
+    if (num_parse_real(text, lo, hi, &v) < 0) {
         fprintf(stderr, "cvre-server: --%s wants a number from %g to %g, not \"%s\"\n", flag, lo, hi, text);
         exit(2);
     }

@@ -19,6 +19,7 @@
 #include "maintain.h"
 #include "map.h"
 #include "moderate.h"
+#include "num.h"
 #include "out.h"
 #include "query.h"
 #include "timefmt.h"
@@ -361,29 +362,6 @@ static int usage_error(const char *cmd, const char *fmt, ...)
     return EXIT_USAGE;
 }
 
-/* Parses a whole decimal number in [lo, hi]. */
-static int parse_int(const char *text, long long lo, long long hi, long long *value)
-{
-    char *end;
-    errno = 0;
-    long long v = strtoll(text, &end, 10);
-    if (errno || end == text || *end || v < lo || v > hi)
-        return -EINVAL;
-    *value = v;
-    return 0;
-}
-
-static int parse_real(const char *text, double *value)
-{
-    char *end;
-    errno = 0;
-    double v = strtod(text, &end);
-    if (errno || end == text || *end || !isfinite(v))
-        return -EINVAL;
-    *value = v;
-    return 0;
-}
-
 /* X0,Y0,Z0,X1,Y1,Z1 with X0 <= X1, Y0 <= Y1, Z0 <= Z1. */
 static int parse_region(const char *text, double box[6])
 {
@@ -395,7 +373,7 @@ static int parse_region(const char *text, double box[6])
             return -EINVAL;
         memcpy(buf, p, n);
         buf[n] = 0;
-        if (parse_real(buf, &box[i]) < 0)
+        if (num_parse_real(buf, -INFINITY, INFINITY, &box[i]) < 0)
             return -EINVAL;
         p += n + (i < 5);
     }
@@ -482,7 +460,7 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
         case O_HELP: a->help = 1; break;
         case O_VERSION: a->version = 1; break;
         case O_OBJECT:
-            if (parse_int(optarg, 1, INT64_MAX, &n) < 0)
+            if (num_parse_int(optarg, 1, INT64_MAX, &n) < 0)
                 return usage_error(where, "--object wants a positive whole number, not \"%s\"", optarg);
             a->f.has_object = 1;
             a->f.object = n;
@@ -506,7 +484,7 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
             a->f.has_region = 1;
             break;
         case O_LIMIT:
-            if (parse_int(optarg, 0, ADMIN_LIMIT_MAX, &n) < 0)
+            if (num_parse_int(optarg, 0, ADMIN_LIMIT_MAX, &n) < 0)
                 return usage_error(where, "--limit wants a whole number from 0 to 100000000, not \"%s\"", optarg);
             a->f.limit = n;
             break;
@@ -516,7 +494,7 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
             a->svg = optarg;
             break;
         case O_MAPVERSION:
-            if (parse_int(optarg, 1, UINT32_MAX, &n) < 0)
+            if (num_parse_int(optarg, 1, UINT32_MAX, &n) < 0)
                 return usage_error(where, "--version wants a version number from 1 to %u, not \"%s\"", UINT32_MAX,
                                    optarg);
             a->map_version = (uint32_t)n;
@@ -524,14 +502,14 @@ static int parse_options(int argc, char **argv, const struct command *cmd, struc
         case O_ADMIN: a->user.admin = 1; break;
         case O_PASSWORD_STDIN: a->user.password_stdin = 1; break;
         case O_MINUTES:
-            if (parse_int(optarg, 1, MODERATE_MINUTES_MAX, &n) < 0)
+            if (num_parse_int(optarg, 1, MODERATE_MINUTES_MAX, &n) < 0)
                 return usage_error(where, "--minutes wants a whole number from 1 to %lld, not \"%s\"",
                                    MODERATE_MINUTES_MAX, optarg);
             a->mod.minutes = n;
             break;
         case O_VACUUM: a->maint.vacuum = 1; break;
         case O_OLDER_THAN:
-            if (parse_int(optarg, 1, MAINTAIN_DAYS_MAX, &n) < 0)
+            if (num_parse_int(optarg, 1, MAINTAIN_DAYS_MAX, &n) < 0)
                 return usage_error(where, "--older-than wants a whole number of days from 1 to %lld, not \"%s\"",
                                    MAINTAIN_DAYS_MAX, optarg);
             a->maint.days = n;
@@ -621,7 +599,7 @@ static int moderate_arguments(const char *cmd, int argc, char **argv, struct arg
         return usage_error(cmd, "unexpected argument \"%s\"", argv[want]);
     if (argc < want)
         return usage_error(cmd, "%s", r->verb == MODERATE_KICK ? "wants a session number" : "wants a name");
-    if (r->verb == MODERATE_KICK && parse_int(argv[0], 1, INT64_MAX, &n) < 0)
+    if (r->verb == MODERATE_KICK && num_parse_int(argv[0], 1, INT64_MAX, &n) < 0)
         return usage_error(cmd, "wants a positive whole number as the session, not \"%s\"", argv[0]);
     if (r->verb == MODERATE_KICK)
         r->session = n;
@@ -735,9 +713,9 @@ int main(int argc, char **argv)
     for (int i = 0; i < cmd->npos; i++) {
         long long n;
         const char *text = sub_argv[optind + i];
-        if (i == 0 && parse_int(text, 1, INT64_MAX, &n) < 0)
+        if (i == 0 && num_parse_int(text, 1, INT64_MAX, &n) < 0)
             return usage_error(cmd->name, "wants a positive whole number as the object id, not \"%s\"", text);
-        if (i > 0 && parse_int(text, 1, UINT32_MAX, &n) < 0)
+        if (i > 0 && num_parse_int(text, 1, UINT32_MAX, &n) < 0)
             return usage_error(cmd->name, "wants a version number from 1 to %u, not \"%s\"", UINT32_MAX, text);
         pos[i] = n;
     }

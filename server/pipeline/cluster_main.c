@@ -21,6 +21,7 @@
 #include "apply.h"
 #include "db.h"
 #include "dbscan.h"
+#include "num.h"
 #include "record.h"
 #include "timefmt.h"
 
@@ -117,27 +118,25 @@ int main(int argc, char **argv)
     int json = 0, has_since = 0, has_until = 0, o;
     int64_t only[MAX_OBJECT_FLAGS];
     int nonly = 0;
-    char *end;
     while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
         switch (o) {
         case O_DB: path = optarg; break;
         case O_EPS:
-            prm.eps = strtod(optarg, &end);
-            if (end == optarg || *end || !(prm.eps > 0) || !(prm.eps < 1e6))
+            if (num_parse_real(optarg, 0, 1e6, &prm.eps) < 0 || prm.eps == 0 || prm.eps == 1e6)
                 return fail_usage("--eps wants a distance in metres above 0, not \"%s\"", optarg);
             break;
         case O_MINP:
         case O_MINU: {
-            long v = strtol(optarg, &end, 10);
-            if (end == optarg || *end || v < 1 || v > 1000000)
+            long long v;
+            if (num_parse_int(optarg, 1, 1000000, &v) < 0)
                 return fail_usage("--%s wants a whole number from 1, not \"%s\"",
                                   o == O_MINP ? "min-points" : "min-users", optarg);
             *(o == O_MINP ? &prm.min_points : &prm.min_users) = (uint32_t)v;
             break;
         }
         case O_OBJ: {
-            long long v = strtoll(optarg, &end, 10);
-            if (end == optarg || *end || v < 1)
+            long long v;
+            if (num_parse_int(optarg, 1, INT64_MAX, &v) < 0)
                 return fail_usage("--object wants an object id, not \"%s\"", optarg);
             if (nonly == MAX_OBJECT_FLAGS)
                 return fail_usage("too many --object flags (%s)", "256 at most");
@@ -155,17 +154,16 @@ int main(int argc, char **argv)
         case O_APPLY: apply = 1; break;
         case O_DEPTH:
         case O_BOXES: {
-            long v = strtol(optarg, &end, 10);
+            long long v;
             long lo = o == O_DEPTH ? ECM_DEPTH_MIN : 1, hi = o == O_DEPTH ? ECM_DEPTH_MAX : ECM_MAX_BOXES_LIMIT;
-            if (end == optarg || *end || v < lo || v > hi)
+            if (num_parse_int(optarg, lo, hi, &v) < 0)
                 return fail_usage("--%s wants a whole number from %ld to %ld, not \"%s\"",
                                   o == O_DEPTH ? "depth" : "max-boxes", lo, hi, optarg);
             *(o == O_DEPTH ? &ep.depth : &ep.max_boxes) = (uint32_t)v;
             break;
         }
         case O_EMPTY:
-            ep.max_empty = strtod(optarg, &end);
-            if (end == optarg || *end || !(ep.max_empty >= 0 && ep.max_empty <= 1))
+            if (num_parse_real(optarg, 0, 1, &ep.max_empty) < 0)
                 return fail_usage("--max-empty wants a share from 0 to 1, not \"%s\"", optarg);
             break;
         case O_HELP: fputs(usage, stdout); return EXIT_OK;
