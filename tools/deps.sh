@@ -9,6 +9,10 @@
 # (libopenvdb-dev, with TBB) for bench-voxel; and libFuzzer
 # (libclang-rt-14-dev), which fuzz-long links its targets with.
 # --coverage installs gcovr, which tools/coverage.sh reads gcc's counts with.
+# Node.js and npm (Debian's, unless a node is already on the PATH) install
+# the JavaScript the lockfiles name: three.js for the browser client
+# (client/web) and puppeteer-core for its test (tests/browser), from npm's
+# registry with `npm ci`, only when a lockfile changed since the last time.
 set -euo pipefail
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
           libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev libhttp-parser-dev libssl-dev chromium)
@@ -20,6 +24,7 @@ for arg in "$@"; do
   esac
 done
 missing=()
+command -v npm >/dev/null || packages+=(nodejs npm)
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
@@ -29,3 +34,11 @@ if ((${#missing[@]})); then
   apt-get update -qq
   apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
+for dir in client/web tests/browser; do
+  lock=$dir/package-lock.json
+  [ -f "$lock" ] || continue
+  if ! [ "$dir/node_modules/.package-lock.json" -nt "$lock" ]; then
+    echo "deps: npm ci in $dir" >&2
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+  fi
+done
