@@ -14,6 +14,7 @@
 # (client/web) and puppeteer-core for its test (tests/browser), from npm's
 # registry with `npm ci`, only when a lockfile changed since the last time.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 packages=(build-essential cmake pkg-config clang libsqlite3-dev sqlite3 libcmocka-dev python3
           libflann-dev python3-sklearn python3-numpy time libassimp-dev libjansson-dev libsodium-dev libseccomp-dev libhttp-parser-dev libssl-dev chromium)
 for arg in "$@"; do
