@@ -2,7 +2,7 @@
  * web_endpoint.h: `--web HOST:PORT`, the browser's way in (web_endpoint.c):
  * an HTTP endpoint (net/http_server.h) that serves the web client's files
  * from --web-root (net/web_files.h) and upgrades a request for a WebSocket
- * (net/ws.h) into a game client, which admission.h then admits like a TCP
+ * (protocol/ws.h) into a game client, which admission.h then admits like a TCP
  * one. Calls admission.h; reads the server's configuration.
  */
 #ifndef CVRE_WEB_ENDPOINT_H

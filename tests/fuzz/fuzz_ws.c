@@ -1,6 +1,6 @@
 /*
  * fuzz_ws.c: structure-aware fuzz target for the WebSocket frame reader
- * (server/net/ws.c), which the web endpoint feeds with a browser's, or a
+ * (protocol/ws.c), which the web endpoint feeds with a browser's, or a
  * stranger's, bytes once the handshake is done.
  *
  * Inputs are streams of client frames. The generator writes frames of

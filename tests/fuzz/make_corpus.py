@@ -557,7 +557,7 @@ def ws_frame(b0, payload=b'', form=None, masked=True, length=None):
 
 def ws_corpus(out):
     """WebSocket client frames (fuzz_ws): what browsers send, and one of
-    each class server/net/ws.c refuses."""
+    each class protocol/ws.c refuses."""
     FIN, BIN, CONT, TEXT, CLOSE, PING, PONG = 0x80, 0x2, 0x0, 0x1, 0x8, 0x9, 0xA
     proto = frame(3, bytes([4]) + b'anna' + struct.pack('<3f', 1, 1, 1))  # a JOIN, as one message
     seeds = {

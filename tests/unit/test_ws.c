@@ -1,4 +1,4 @@
-/* The WebSocket codec (server/net/ws.c): the handshake's checks and RFC
+/* The WebSocket codec (protocol/ws.c): the handshake's checks and RFC
  * 6455's own example, every refusal of a client frame with its close code,
  * fragments put together up to the cap, frames read whole and a byte short,
  * and the server's frames. */
