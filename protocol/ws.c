@@ -2,11 +2,14 @@
 #include "ws.h"
 
 #include <errno.h>
+#include <limits.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
 
 #include <openssl/evp.h>
+#include <openssl/rand.h>
 #include <openssl/sha.h>
 
 #include "alloc.h"
@@ -98,14 +101,68 @@ int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, si
     return 0;
 }
 
-/* ---- client frames --------------------------------------------------------- */
+/* ---- reading frames -------------------------------------------------------- */
 
 void ws_reader_init(ws_reader *r, size_t cap) { *r = (ws_reader){.cap = cap}; }
+
+void ws_reader_init_client(ws_reader *r, size_t cap) { *r = (ws_reader){.cap = cap, .of_server = 1}; }
 
 void ws_reader_free(ws_reader *r)
 {
     free(r->msg);
-    *r = (ws_reader){.cap = r->cap};
+    *r = (ws_reader){.cap = r->cap, .of_server = r->of_server};
+}
+
+/* XORs p[0..n) with the 4-byte key (5.3), 8 bytes at a time: a move is
+ * 22 to 45 bytes, and this runs on every message both ways. */
+static void apply_mask(uint8_t *p, size_t n, const uint8_t key[4])
+{
+    uint8_t k8[8];
+    uint64_t k, v;
+    memcpy(k8, key, 4);
+    memcpy(k8 + 4, key, 4);
+    memcpy(&k, k8, sizeof k);
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        memcpy(&v, p + i, sizeof v);
+        v ^= k;
+        memcpy(p + i, &v, sizeof v);
+    }
+    for (; i < n; i++) /* i is a multiple of 8 here: the key starts over */
+        p[i] ^= key[i & 3];
+}
+
+/* The payload length a frame's header writes and where its mask (or its
+ * payload) starts; 0 while the length is not all there, 1 once read. */
+static int frame_length(const uint8_t *data, size_t len, size_t *at, uint64_t *plen)
+{
+    if (len < 2)
+        return 0;
+    *plen = data[1] & 0x7F;
+    *at = 2;
+    if (*plen == 126) {
+        if (len < 4)
+            return 0;
+        *plen = (uint64_t)data[2] << 8 | data[3];
+        *at = 4;
+    } else if (*plen == 127) {
+        if (len < 10)
+            return 0;
+        *plen = 0;
+        for (int i = 2; i < 10; i++)
+            *plen = *plen << 8 | data[i];
+        *at = 10;
+    }
+    return 1;
+}
+
+size_t ws_frame_size(const uint8_t *data, size_t len)
+{
+    size_t at;
+    uint64_t plen;
+    if (!frame_length(data, len, &at, &plen))
+        return 0;
+    return at + (data[1] & 0x80 ? 4u : 0u) + (size_t)plen;
 }
 
 static ssize_t refuse(ws_reader *r, uint16_t code, int rc, char *err, size_t errlen, const char *what)
@@ -138,7 +195,9 @@ static ssize_t read_close(ws_reader *r, const uint8_t *p, size_t n, ws_event *ev
     if (n == 1)
         return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a close frame of one byte");
     unsigned code = (unsigned)p[0] << 8 | p[1];
-    if (!ws_close_code_valid(code)) {
+    /* A server may also say 1012-1014 (IANA's registry); this one says
+     * 1013 when it is full. */
+    if (!ws_close_code_valid(code) && !(r->of_server && code >= 1012 && code <= 1014)) {
         r->close_code = WS_CLOSE_PROTOCOL;
         return cvre_fail(err, errlen, -EPROTO, "close code %u is never sent", code);
     }
@@ -185,8 +244,9 @@ ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err
         r->close_code = WS_CLOSE_PROTOCOL;
         return cvre_fail(err, errlen, -EPROTO, "unknown opcode %#x", op);
     }
-    if (!masked)
-        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a client frame that is not masked");
+    if (masked == (unsigned)r->of_server)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen,
+                      masked ? "a server frame that is masked" : "a client frame that is not masked");
     if (control && !fin)
         return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a fragmented control frame");
     if (control && plen > WS_CONTROL_MAX)
@@ -197,26 +257,15 @@ ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err
         return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a continuation with no message under way");
     if (op == WS_OP_BINARY && r->fragmented)
         return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a new message inside a fragmented one");
-    size_t at = 2;
-    if (plen == 126) {
-        if (len < 4)
-            return 0;
-        plen = (uint64_t)data[2] << 8 | data[3];
-        if (plen < 126)
-            return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 16-bit length under 126");
-        at = 4;
-    } else if (plen == 127) {
-        if (len < 10)
-            return 0;
-        if (data[2] & 0x80)
-            return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 64-bit length with its top bit set");
-        plen = 0;
-        for (int i = 2; i < 10; i++)
-            plen = plen << 8 | data[i];
-        if (plen <= 0xFFFF)
-            return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 64-bit length under 65536");
-        at = 10;
-    }
+    size_t at;
+    if (!frame_length(data, len, &at, &plen))
+        return 0;
+    if (at == 4 && plen < 126)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 16-bit length under 126");
+    if (at == 10 && plen >> 63)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 64-bit length with its top bit set");
+    if (at == 10 && plen <= 0xFFFF)
+        return refuse(r, WS_CLOSE_PROTOCOL, -EPROTO, err, errlen, "a 64-bit length under 65536");
     /* The cap, from the header alone: nothing waits for or keeps more. */
     size_t so_far = r->fragmented ? r->msg_len : 0;
     if (!control && plen > r->cap - so_far) {
@@ -224,13 +273,13 @@ ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err
         return cvre_fail(err, errlen, -EMSGSIZE, "a message of at least %llu bytes, at most %zu",
                          (unsigned long long)(so_far + plen), r->cap);
     }
-    if (len - at < 4 || len - at - 4 < plen)
+    size_t key = masked ? 4 : 0;
+    if (len - at < key || len - at - key < plen)
         return 0;
-    const uint8_t *mask = data + at;
-    uint8_t *p = data + at + 4;
-    for (size_t i = 0; i < plen; i++)
-        p[i] ^= mask[i & 3];
-    size_t n = (size_t)plen, took = at + 4 + n;
+    uint8_t *p = data + at + key;
+    if (masked)
+        apply_mask(p, (size_t)plen, data + at);
+    size_t n = (size_t)plen, took = at + key + n;
     switch (op) {
     case WS_OP_CLOSE: {
         ssize_t rc = read_close(r, p, n, ev, err, errlen);
@@ -256,25 +305,33 @@ ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err
     }
 }
 
-/* ---- server frames --------------------------------------------------------- */
+/* ---- the server's frames ----------------------------------------------------- */
 
-size_t ws_header(uint8_t out[WS_SERVER_HEADER_MAX], unsigned opcode, uint64_t len)
+/* The header of a frame with a payload of len bytes, without its mask: 2,
+ * 4 or 10 bytes; the mask bit is set when masked. */
+static size_t put_header(uint8_t out[WS_SERVER_HEADER_MAX], unsigned opcode, uint64_t len, int masked)
 {
+    uint8_t m = masked ? 0x80 : 0;
     out[0] = (uint8_t)(0x80 | (opcode & 0xF));
     if (len < 126) {
-        out[1] = (uint8_t)len;
+        out[1] = (uint8_t)(m | len);
         return 2;
     }
     if (len <= 0xFFFF) {
-        out[1] = 126;
+        out[1] = m | 126;
         out[2] = (uint8_t)(len >> 8);
         out[3] = (uint8_t)len;
         return 4;
     }
-    out[1] = 127;
+    out[1] = m | 127;
     for (int i = 0; i < 8; i++)
         out[2 + i] = (uint8_t)(len >> (56 - 8 * i));
     return 10;
+}
+
+size_t ws_header(uint8_t out[WS_SERVER_HEADER_MAX], unsigned opcode, uint64_t len)
+{
+    return put_header(out, opcode, len, 0);
 }
 
 int ws_control(uint8_t *out, size_t cap, unsigned opcode, const uint8_t *payload, size_t len)
@@ -289,9 +346,10 @@ int ws_control(uint8_t *out, size_t cap, unsigned opcode, const uint8_t *payload
     return (int)(h + len);
 }
 
-int ws_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason)
+/* A close frame's payload: code and reason (cut to fit, at a character
+ * boundary), or nothing for code 0. Returns its length. */
+static size_t close_body(uint8_t body[WS_CONTROL_MAX], uint16_t code, const char *reason)
 {
-    uint8_t body[WS_CONTROL_MAX];
     size_t n = 0;
     if (code) {
         body[n++] = (uint8_t)(code >> 8);
@@ -300,10 +358,114 @@ int ws_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason)
         const uint8_t *s = (const uint8_t *)(reason ? reason : "");
         size_t left = strlen((const char *)s);
         uint32_t cp;
-        for (size_t k; left > 0 && (k = utf8_next(s, left, &cp)) > 0 && n + k <= sizeof body; s += k, left -= k) {
+        for (size_t k; left > 0 && (k = utf8_next(s, left, &cp)) > 0 && n + k <= WS_CONTROL_MAX; s += k, left -= k) {
             memcpy(body + n, s, k);
             n += k;
         }
     }
-    return ws_control(out, cap, WS_OP_CLOSE, body, n);
+    return n;
+}
+
+int ws_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason)
+{
+    uint8_t body[WS_CONTROL_MAX];
+    return ws_control(out, cap, WS_OP_CLOSE, body, close_body(body, code, reason));
+}
+
+/* ---- the client's side ------------------------------------------------------ */
+
+int ws_client_request(char *out, size_t cap, const char *host, const char *path, char key[WS_KEY_SIZE])
+{
+    uint8_t nonce[16];
+    if (RAND_bytes(nonce, sizeof nonce) != 1)
+        return -EIO; /* GCOVR_EXCL_LINE: libcrypto's random source failed */
+    _Static_assert(4 * ((sizeof nonce + 2) / 3) + 1 == WS_KEY_SIZE, "the key's size");
+    EVP_EncodeBlock((unsigned char *)key, nonce, sizeof nonce);
+    int n = snprintf(out, cap,
+                     "GET %s HTTP/1.1\r\nHost: %s\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                     "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\n\r\n",
+                     path, host, key);
+    return n >= 0 && (size_t)n < cap ? n : -ENOSPC;
+}
+
+/* The end of the head in data[0..len): the bytes up to and including its
+ * blank line, or 0 if it has none. */
+static size_t head_end(const uint8_t *data, size_t len)
+{
+    for (size_t i = 3; i < len; i++)
+        if (data[i] == '\n' && data[i - 1] == '\r' && data[i - 2] == '\n' && data[i - 3] == '\r')
+            return i + 1;
+    return 0;
+}
+
+int ws_client_response(const uint8_t *data, size_t len, const char *key, char *err, size_t errlen)
+{
+    size_t head = head_end(data, len < WS_RESPONSE_MAX ? len : WS_RESPONSE_MAX);
+    if (head == 0)
+        return len >= WS_RESPONSE_MAX
+                   ? cvre_fail(err, errlen, -EMSGSIZE, "a response head of %u bytes or more", WS_RESPONSE_MAX)
+                   : 0;
+    if (memchr(data, 0, head))
+        return cvre_fail(err, errlen, -EPROTO, "a NUL in the response head");
+    char buf[WS_RESPONSE_MAX];
+    memcpy(buf, data, head - 2); /* the lines, each with its CRLF, without the blank one */
+    buf[head - 2] = 0;
+    char *line = buf, *eol = strstr(line, "\r\n");
+    *eol = 0;
+    if (strncmp(line, "HTTP/1.1 101", 12) != 0 || (line[12] != ' ' && line[12] != 0))
+        return cvre_fail(err, errlen, -EPROTO, "the server answered \"%.80s\", not 101", line);
+    const char *upgrade = NULL, *connection = NULL, *accept = NULL;
+    for (line = eol + 2; *line; line = eol + 2) {
+        eol = strstr(line, "\r\n");
+        *eol = 0;
+        char *colon = strchr(line, ':');
+        if (!colon)
+            return cvre_fail(err, errlen, -EPROTO, "a header line without a colon: \"%.80s\"", line);
+        *colon = 0;
+        char *value = colon + 1 + strspn(colon + 1, " \t");
+        for (char *t = value + strlen(value); t > value && (t[-1] == ' ' || t[-1] == '\t');)
+            *--t = 0;
+        if (strcasecmp(line, "upgrade") == 0)
+            upgrade = value;
+        else if (strcasecmp(line, "connection") == 0)
+            connection = value;
+        else if (strcasecmp(line, "sec-websocket-accept") == 0)
+            accept = value;
+        else if (strcasecmp(line, "sec-websocket-extensions") == 0 || strcasecmp(line, "sec-websocket-protocol") == 0)
+            return cvre_fail(err, errlen, -EPROTO, "%s, which the client did not ask for", line);
+    }
+    if (!ws_asks_upgrade(upgrade))
+        return cvre_fail(err, errlen, -EPROTO, "no \"Upgrade: websocket\" in the 101");
+    if (!connection || !has_token(connection, "upgrade"))
+        return cvre_fail(err, errlen, -EPROTO, "no \"Connection: Upgrade\" in the 101");
+    char want[WS_ACCEPT_SIZE];
+    if (ws_accept_key(key, strlen(key), want) < 0)
+        return cvre_fail(err, errlen, -EIO, "libcrypto could not hash the key"); /* GCOVR_EXCL_LINE */
+    if (!accept || strcmp(accept, want) != 0)
+        return cvre_fail(err, errlen, -EPROTO, "Sec-WebSocket-Accept %.40s, not %s", accept ? accept : "missing",
+                         want);
+    return (int)head;
+}
+
+int ws_client_frame(uint8_t *out, size_t cap, unsigned opcode, const uint8_t *payload, size_t len)
+{
+    if (opcode >= WS_OP_CLOSE && len > WS_CONTROL_MAX)
+        return -EINVAL;
+    size_t h = len < 126 ? 2 : len <= 0xFFFF ? 4 : 10;
+    if (cap < h + 4 || cap - h - 4 < len || len > (size_t)INT_MAX - 14)
+        return -ENOSPC;
+    put_header(out, opcode, len, 1);
+    uint8_t *key = out + h;
+    if (RAND_bytes(key, 4) != 1)
+        return -EIO; /* GCOVR_EXCL_LINE: libcrypto's random source failed */
+    if (len)
+        memcpy(key + 4, payload, len);
+    apply_mask(key + 4, len, key);
+    return (int)(h + 4 + len);
+}
+
+int ws_client_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason)
+{
+    uint8_t body[WS_CONTROL_MAX];
+    return ws_client_frame(out, cap, WS_OP_CLOSE, body, close_body(body, code, reason));
 }

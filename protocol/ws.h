@@ -1,19 +1,21 @@
 /*
- * ws.h: the WebSocket protocol (RFC 6455) as bytes, with no socket: the
- * opening handshake's checks and its Sec-WebSocket-Accept (SHA-1 and base64
- * from OpenSSL's libcrypto), client frames read from a buffer the caller
- * filled, and server frames written into one. The endpoint reads, writes
- * and decides what a message means; this file decides what is a valid
- * frame and which close code a refusal earns.
+ * ws.h: the WebSocket protocol (RFC 6455) as bytes, with no socket, from
+ * both sides: the server's web endpoint (server/web_endpoint.c) and
+ * cvre-client --ws (client/session.c). The opening handshake's checks and
+ * its Sec-WebSocket-Accept (SHA-1 and base64 from OpenSSL's libcrypto),
+ * frames read from a buffer the caller filled, and frames written into
+ * one. The caller reads, writes and decides what a message means; this
+ * file decides what is a valid frame and which close code a refusal earns.
  *
- * Only what a server of binary messages needs: client frames must be
- * masked (5.3), RSV1-3 are 0 (no extension is ever agreed), text messages
- * are refused with 1003 (the endpoint carries binary only), a data message
- * may come in fragments and is put together up to a cap the caller gives
- * (checked against each frame's header, before its payload is waited for
- * or anything is allocated), control frames carry at most 125 bytes and are
- * never fragmented (5.5), and a close frame's code and reason are checked
- * (7.4, 5.5.1). Server frames are unmasked and never fragmented.
+ * Only what a peer of binary messages needs: a client's frames are masked
+ * and a server's are not (5.1, 5.3), RSV1-3 are 0 (no extension is ever
+ * agreed), text messages are refused with 1003 (binary only), a data
+ * message may come in fragments and is put together up to a cap the
+ * caller gives (checked against each frame's header, before its payload
+ * is waited for or anything is allocated), control frames carry at most
+ * 125 bytes and are never fragmented (5.5), and a close frame's code and
+ * reason are checked (7.4, 5.5.1). Frames written are never fragmented; a
+ * client's are masked with a fresh key from libcrypto's random source.
  */
 #ifndef CVRE_WS_H
 #define CVRE_WS_H
@@ -53,6 +55,11 @@ enum {
 #define WS_SERVER_HEADER_MAX 10u
 /* Sec-WebSocket-Accept: base64 of a 20-byte SHA-1, and its NUL. */
 #define WS_ACCEPT_SIZE 29u
+/* Sec-WebSocket-Key: base64 of 16 bytes, and its NUL. */
+#define WS_KEY_SIZE 25u
+/* The longest response head a client waits for: the server's 101 is under
+ * 200 bytes; a refusal's head (426, 503) is short too. */
+#define WS_RESPONSE_MAX 2048u
 
 /* ---- the opening handshake (4.2.1) --------------------------------------- */
 
@@ -83,7 +90,7 @@ int ws_asks_upgrade(const char *upgrade);
  * the RFC's GUID)). Returns 0, or -EIO if libcrypto failed. */
 int ws_accept_key(const char *key, size_t len, char accept[WS_ACCEPT_SIZE]);
 
-/* ---- client frames --------------------------------------------------------- */
+/* ---- reading frames -------------------------------------------------------- */
 
 /* What one call of ws_read took in. */
 typedef enum {
@@ -104,22 +111,29 @@ typedef struct ws_event {
 /* One connection's reading state. */
 typedef struct ws_reader {
     size_t cap;      /* a message's largest size */
+    int of_server;   /* reads a server's frames (unmasked), on a client */
     int fragmented;  /* a message's first fragment came, its last not yet */
     uint8_t *msg;    /* the fragments so far (cvre_malloc'd, grown to fit) */
     size_t msg_len, msg_alloc;
     uint16_t close_code; /* what the last refusal earns */
 } ws_reader;
 
-/* A reader of messages of at most cap bytes. Nothing is allocated until a
- * fragmented message comes. */
+/* A reader of a client's messages (on the server) of at most cap bytes.
+ * Nothing is allocated until a fragmented message comes. */
 void ws_reader_init(ws_reader *r, size_t cap);
+/* The same for a client reading a server's messages: frames must not be
+ * masked, and a close may also carry IANA's 1012-1014 (1013: the server
+ * is full). */
+void ws_reader_init_client(ws_reader *r, size_t cap);
 void ws_reader_free(ws_reader *r);
 
-/* Takes the first frame in data[0..len), unmasking its payload in place.
+/* Takes the first frame in data[0..len), unmasking a client's payload in
+ * place.
  * Returns the bytes it took (> 0) with *ev saying what they completed, 0
  * if the frame is not all there yet, or a refusal with r->close_code set
  * and a reason in err:
- *   -EPROTO       a frame that breaks RFC 6455: unmasked, RSV bits, an
+ *   -EPROTO       a frame that breaks RFC 6455: a client's unmasked or a
+ *                 server's masked, RSV bits, an
  *                 unknown opcode, a 64-bit length with its top bit set or
  *                 not in its shortest form, a control frame fragmented or
  *                 over 125 bytes, a continuation with no message under
@@ -139,7 +153,13 @@ ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err
  * 3000-4999. */
 int ws_close_code_valid(unsigned code);
 
-/* ---- server frames --------------------------------------------------------- */
+/* Bytes a frame whose start is in data[0..len) takes in all, header and
+ * payload, or 0 while its header is not all there. Call it after ws_read
+ * returned 0: the header is then known to be valid and within the cap, so
+ * that the caller may wait for exactly the rest. */
+size_t ws_frame_size(const uint8_t *data, size_t len);
+
+/* ---- the server's frames ----------------------------------------------------- */
 
 /* Writes the header of an unfragmented, unmasked frame of opcode with a
  * payload of len bytes; returns its length (2, 4 or 10). */
@@ -154,5 +174,34 @@ int ws_control(uint8_t *out, size_t cap, unsigned opcode, const uint8_t *payload
  * at a character boundary); code 0 sends none. Returns its length or
  * -ENOSPC. */
 int ws_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason);
+
+/* ---- the client's side ------------------------------------------------------ */
+
+/* Writes the opening handshake's request for path on host ("host:port",
+ * the Host header) with a fresh key from libcrypto's random source, which
+ * goes to key for ws_client_response. Returns its length, -ENOSPC if
+ * out[0..cap) is short, or -EIO if libcrypto had no random bytes. */
+int ws_client_request(char *out, size_t cap, const char *host, const char *path, char key[WS_KEY_SIZE]);
+
+/* Reads the server's answer to the request that sent key, from the start
+ * of data[0..len). Returns the length of its head (the blank line
+ * included: what follows is frames) once it is all there and says 101
+ * with "Upgrade: websocket", "Connection: Upgrade" and the accept of key,
+ * and no extension or subprotocol (none was asked for); 0 while the head
+ * is not all there; or -EPROTO with a reason (the status line of a
+ * refusal, the header that is missing or wrong), -EMSGSIZE for a head of
+ * WS_RESPONSE_MAX bytes or more. */
+int ws_client_response(const uint8_t *data, size_t len, const char *key, char *err, size_t errlen);
+
+/* Writes a whole client frame of opcode (unfragmented): the header, a
+ * fresh mask from libcrypto's random source and payload[0..len) masked.
+ * Returns its length, -EINVAL for a control frame over WS_CONTROL_MAX,
+ * -ENOSPC if out[0..cap) is short, or -EIO if libcrypto had no random
+ * bytes. */
+int ws_client_frame(uint8_t *out, size_t cap, unsigned opcode, const uint8_t *payload, size_t len);
+
+/* A client's close frame with code and reason, as ws_close_frame. Returns
+ * its length, -ENOSPC or -EIO. */
+int ws_client_close_frame(uint8_t *out, size_t cap, uint16_t code, const char *reason);
 
 #endif

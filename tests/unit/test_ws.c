@@ -1,7 +1,9 @@
 /* The WebSocket codec (protocol/ws.c): the handshake's checks and RFC
  * 6455's own example, every refusal of a client frame with its close code,
  * fragments put together up to the cap, frames read whole and a byte short,
- * and the server's frames. */
+ * and the server's frames; the client's side: its request and the check of
+ * the answer, and frames both ways through the one codec (a client's read
+ * by the server's reader, a server's by the client's). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -435,6 +437,220 @@ static void test_server_frames(void **state)
     ws_reader_free(&r);
 }
 
+/* ---- the client's side ------------------------------------------------------ */
+
+/* The server's 101 for a key, as server/web_endpoint.c writes it, and
+ * extra header lines. */
+static size_t answer(char *out, size_t cap, const char *key, const char *extra)
+{
+    char accept[WS_ACCEPT_SIZE];
+    assert_int_equal(ws_accept_key(key, strlen(key), accept), 0);
+    int n = snprintf(out, cap,
+                     "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                     "Sec-WebSocket-Accept: %s\r\n%s\r\n",
+                     accept, extra);
+    assert_true(n > 0 && (size_t)n < cap);
+    return (size_t)n;
+}
+
+static int response(const char *head, const char *key)
+{
+    char err[128] = "";
+    int rc = ws_client_response((const uint8_t *)head, strlen(head), key, err, sizeof err);
+    if (rc < 0)
+        assert_true(err[0]);
+    return rc;
+}
+
+static void test_client_handshake(void **state)
+{
+    (void)state;
+    char req[512], key[WS_KEY_SIZE], other[WS_KEY_SIZE];
+    int n = ws_client_request(req, sizeof req, "127.0.0.1:8080", "/", key);
+    assert_true(n > 0);
+    assert_int_equal((size_t)n, strlen(req));
+    assert_memory_equal(req, "GET / HTTP/1.1\r\n", 16);
+    assert_non_null(strstr(req, "\r\nHost: 127.0.0.1:8080\r\n"));
+    assert_non_null(strstr(req, "\r\nSec-WebSocket-Version: 13\r\n"));
+    assert_string_equal(req + n - 4, "\r\n\r\n");
+    /* The key is what the server's check wants, and each request's own. */
+    ws_upgrade u = good;
+    u.key = key;
+    char accept[WS_ACCEPT_SIZE];
+    assert_int_equal(ws_handshake(&u, accept, NULL, 0), 0);
+    assert_int_equal(ws_client_request(req, sizeof req, "h:1", "/", other), n - 11);
+    assert_string_not_equal(key, other);
+    assert_int_equal(ws_client_request(req, (size_t)n - 11, "h:1", "/", other), -ENOSPC);
+
+    /* The answer: its head's length, with frames behind it; 0 at every
+     * shorter prefix. */
+    char head[600];
+    size_t h = answer(head, sizeof head, key, "");
+    memcpy(head + h, "\x82\x00", 3);
+    assert_int_equal(ws_client_response((const uint8_t *)head, h + 2, key, NULL, 0), (int)h);
+    for (size_t cut = 0; cut < h; cut++)
+        assert_int_equal(ws_client_response((const uint8_t *)head, cut, key, NULL, 0), 0);
+    /* RFC 6455's example, names and tokens in any case. */
+    const char *rfc = "HTTP/1.1 101 OK\r\nupgrade: WebSocket\r\nCONNECTION: keep-alive, upgrade \r\n"
+                      "Sec-Websocket-Accept:s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\t\r\n\r\n";
+    assert_int_equal(response(rfc, "dGhlIHNhbXBsZSBub25jZQ=="), (int)strlen(rfc));
+}
+
+static void test_client_handshake_refused(void **state)
+{
+    (void)state;
+    const char *key = "dGhlIHNhbXBsZSBub25jZQ==";
+    char head[WS_RESPONSE_MAX + 100];
+    assert_int_equal(response("HTTP/1.1 426 Upgrade Required\r\nSec-WebSocket-Version: 13\r\n\r\n", key), -EPROTO);
+    assert_int_equal(response("HTTP/1.1 1010 x\r\n\r\n", key), -EPROTO);
+    assert_int_equal(response("HTTP/1.0 101 x\r\n\r\n", key), -EPROTO);
+    assert_int_equal(response("\r\n\r\n", key), -EPROTO);
+    assert_int_equal(response("HTTP/1.1 101 x\r\nConnection: Upgrade\r\n"
+                              "Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n\r\n", key),
+                     -EPROTO); /* no Upgrade */
+    assert_int_equal(response("HTTP/1.1 101 x\r\nUpgrade: websocket\r\nConnection: close\r\n"
+                              "Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n\r\n", key),
+                     -EPROTO);
+    assert_int_equal(response("HTTP/1.1 101 x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n", key),
+                     -EPROTO); /* no accept */
+    answer(head, sizeof head, "AAAAAAAAAAAAAAAAAAAAAA==", ""); /* another key's accept */
+    assert_int_equal(response(head, key), -EPROTO);
+    answer(head, sizeof head, key, "Sec-WebSocket-Extensions: permessage-deflate\r\n");
+    assert_int_equal(response(head, key), -EPROTO);
+    answer(head, sizeof head, key, "Sec-WebSocket-Protocol: chat\r\n");
+    assert_int_equal(response(head, key), -EPROTO);
+    answer(head, sizeof head, key, "no colon here\r\n");
+    assert_int_equal(response(head, key), -EPROTO);
+    answer(head, sizeof head, key, "X-Other: fine\r\n");
+    assert_int_equal(response(head, key), (int)strlen(head));
+    /* A NUL inside the head. */
+    size_t h = answer(head, sizeof head, key, "X: a\r\n");
+    head[h - 5] = 0;
+    assert_int_equal(ws_client_response((const uint8_t *)head, h, key, NULL, 0), -EPROTO);
+    /* A head that never ends: waited for up to the bound, refused at it. */
+    memset(head, 'a', sizeof head);
+    assert_int_equal(ws_client_response((const uint8_t *)head, WS_RESPONSE_MAX - 1, key, NULL, 0), 0);
+    assert_int_equal(ws_client_response((const uint8_t *)head, WS_RESPONSE_MAX, key, NULL, 0), -EMSGSIZE);
+    assert_int_equal(ws_client_response((const uint8_t *)head, sizeof head, key, NULL, 0), -EMSGSIZE);
+}
+
+/* A payload of n bytes, every one different from its neighbours. */
+static void fill(uint8_t *p, size_t n, unsigned seed)
+{
+    for (size_t i = 0; i < n; i++)
+        p[i] = (uint8_t)(i * 31 + seed);
+}
+
+static void test_client_to_server(void **state)
+{
+    (void)state;
+    static uint8_t payload[70000], buf[70100];
+    fill(payload, sizeof payload, 5);
+    ws_reader r;
+    ws_reader_init(&r, sizeof payload);
+    const size_t sizes[] = {0, 1, 7, 8, 9, 22, 45, 125, 126, 1000, 65535, 65536, 70000};
+    for (size_t k = 0; k < sizeof sizes / sizeof *sizes; k++) {
+        size_t n = sizes[k];
+        int len = ws_client_frame(buf, sizeof buf, WS_OP_BINARY, payload, n);
+        size_t h = n < 126 ? 2 : n <= 0xFFFF ? 4 : 10;
+        assert_int_equal(len, (int)(h + 4 + n));
+        assert_int_equal(buf[0], FIN | WS_OP_BINARY);
+        assert_true(buf[1] & 0x80);
+        if (n >= 8) /* masked: not the payload as it was */
+            assert_memory_not_equal(buf + h + 4, payload, n);
+        for (size_t cut = 0; cut < h; cut++)
+            assert_int_equal(ws_frame_size(buf, cut), 0);
+        assert_int_equal(ws_frame_size(buf, h), (size_t)len);
+        ws_event ev;
+        assert_int_equal(ws_read(&r, buf, (size_t)len - 1, &ev, NULL, 0), 0);
+        assert_int_equal(ws_read(&r, buf, (size_t)len, &ev, NULL, 0), len);
+        assert_int_equal(ev.type, WS_EV_MESSAGE);
+        assert_int_equal(ev.len, n);
+        assert_memory_equal(ev.data, payload, n);
+    }
+    /* Control frames: a pong and a close with its reason. */
+    ws_event ev;
+    int len = ws_client_frame(buf, sizeof buf, WS_OP_PONG, payload, 125);
+    assert_int_equal(ws_read(&r, buf, (size_t)len, &ev, NULL, 0), len);
+    assert_int_equal(ev.type, WS_EV_PONG);
+    assert_memory_equal(ev.data, payload, 125);
+    assert_int_equal(ws_client_frame(buf, sizeof buf, WS_OP_PING, payload, 126), -EINVAL);
+    len = ws_client_close_frame(buf, sizeof buf, WS_CLOSE_GOING_AWAY, "quit");
+    assert_int_equal(len, 2 + 4 + 2 + 4);
+    assert_int_equal(ws_read(&r, buf, (size_t)len, &ev, NULL, 0), len);
+    assert_int_equal(ev.type, WS_EV_CLOSE);
+    assert_int_equal(ev.code, WS_CLOSE_GOING_AWAY);
+    assert_int_equal(ev.len, 4);
+    assert_memory_equal(ev.data, "quit", 4);
+    ws_reader_free(&r);
+    /* Short of room, by one byte. */
+    assert_int_equal(ws_client_frame(buf, 2 + 4 + 9, WS_OP_BINARY, payload, 10), -ENOSPC);
+    assert_int_equal(ws_client_frame(buf, 2 + 4 + 10, WS_OP_BINARY, payload, 10), 16);
+    assert_int_equal(ws_client_close_frame(buf, 5, WS_CLOSE_NORMAL, NULL), -ENOSPC);
+    /* Each frame its own key: eight in a row are not all the same. */
+    uint8_t first[4];
+    int differ = 0;
+    for (int i = 0; i < 8; i++) {
+        ws_client_frame(buf, sizeof buf, WS_OP_BINARY, payload, 1);
+        if (i == 0)
+            memcpy(first, buf + 2, 4);
+        differ |= memcmp(first, buf + 2, 4) != 0;
+    }
+    assert_true(differ);
+}
+
+static void test_server_to_client(void **state)
+{
+    (void)state;
+    static uint8_t payload[70000], buf[70100];
+    fill(payload, sizeof payload, 9);
+    ws_reader r;
+    ws_reader_init_client(&r, sizeof payload);
+    const size_t sizes[] = {0, 1, 22, 125, 126, 65535, 65536, 70000};
+    for (size_t k = 0; k < sizeof sizes / sizeof *sizes; k++) {
+        size_t n = sizes[k], h = ws_header(buf, WS_OP_BINARY, n);
+        memcpy(buf + h, payload, n);
+        assert_int_equal(ws_frame_size(buf, h), h + n);
+        ws_event ev;
+        assert_int_equal(ws_read(&r, buf, h + n - (n > 0), &ev, NULL, 0), n > 0 ? 0 : (ssize_t)h);
+        assert_int_equal(ws_read(&r, buf, h + n, &ev, NULL, 0), (ssize_t)(h + n));
+        assert_int_equal(ev.type, WS_EV_MESSAGE);
+        assert_int_equal(ev.len, n);
+        assert_memory_equal(ev.data, payload, n); /* not unmasked: read as it is */
+    }
+    /* The server's ping, and its close 1013 (full), which only a client
+     * may receive. */
+    ws_event ev;
+    int len = ws_control(buf, sizeof buf, WS_OP_PING, payload, 3);
+    assert_int_equal(ws_read(&r, buf, (size_t)len, &ev, NULL, 0), len);
+    assert_int_equal(ev.type, WS_EV_PING);
+    len = ws_close_frame(buf, sizeof buf, WS_CLOSE_TRY_AGAIN, "full");
+    assert_int_equal(ws_read(&r, buf, (size_t)len, &ev, NULL, 0), len);
+    assert_int_equal(ev.type, WS_EV_CLOSE);
+    assert_int_equal(ev.code, WS_CLOSE_TRY_AGAIN);
+    ws_reader_free(&r);
+    assert_true(r.of_server); /* freeing keeps which side it reads */
+    ws_reader srv;
+    ws_reader_init(&srv, 100);
+    uint8_t masked[100];
+    len = ws_client_close_frame(masked, sizeof masked, WS_CLOSE_TRY_AGAIN, "full");
+    assert_int_equal(ws_read(&srv, masked, (size_t)len, &ev, NULL, 0), -EPROTO);
+    /* A client refuses a masked frame and a close code never sent. */
+    char err[128] = "";
+    ws_reader_init_client(&r, 100);
+    len = ws_client_frame(masked, sizeof masked, WS_OP_BINARY, payload, 5);
+    assert_int_equal(ws_read(&r, masked, (size_t)len, &ev, err, sizeof err), -EPROTO);
+    assert_int_equal(r.close_code, WS_CLOSE_PROTOCOL);
+    assert_non_null(strstr(err, "masked"));
+    ws_reader_init_client(&r, 100);
+    len = ws_close_frame(buf, sizeof buf, 1015, NULL);
+    assert_int_equal(ws_read(&r, buf, (size_t)len, &ev, NULL, 0), -EPROTO);
+    /* Past the cap: refused from the header. */
+    ws_reader_init_client(&r, 100);
+    size_t h = ws_header(buf, WS_OP_BINARY, 101);
+    assert_int_equal(ws_read(&r, buf, h, &ev, NULL, 0), -EMSGSIZE);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -443,7 +659,9 @@ int main(void)
         cmocka_unit_test(test_binary),
         cmocka_unit_test(test_too_big), cmocka_unit_test(test_fragments),
         cmocka_unit_test(test_refused), cmocka_unit_test(test_close),
-        cmocka_unit_test(test_server_frames),
+        cmocka_unit_test(test_server_frames), cmocka_unit_test(test_client_handshake),
+        cmocka_unit_test(test_client_handshake_refused), cmocka_unit_test(test_client_to_server),
+        cmocka_unit_test(test_server_to_client),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
