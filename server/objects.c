@@ -282,14 +282,14 @@ static void mesh_done(client *c)
 }
 
 /* Makes room for need more bytes of meshes: forgets kept meshes that no
- * client is being sent, least recently asked for first. Returns 1 when
- * there is room. */
+ * client is being sent and that are not being encoded, least recently
+ * asked for first. Returns 1 when there is room. */
 static int mesh_room(server *s, size_t need)
 {
     uint32_t kept = 0;
     for (uint32_t i = 0; i < s->nmeshes; i++) {
         mesh_blob *b = s->meshes[i];
-        if (s->mesh_bytes + need > SRV_MESH_MEMORY && b->refs == 0) {
+        if (s->mesh_bytes + need > SRV_MESH_MEMORY && b->refs == 0 && b->data) {
             s->mesh_bytes -= b->len;
             free(b->data);
             free(b);
@@ -329,51 +329,50 @@ static mesh_blob *mesh_keep(server *s, const uint8_t hash[PROTO_MESH_HASH_SIZE],
     return b;
 }
 
-/* The encoded mesh of o: kept from an earlier request or import (any
- * object's with the same hash), or encoded now and kept. Sets *out, or
- * NULL when the meshes being sent leave no room (the request waits);
- * returns 0, or proto_mesh_encode's -errno. */
-static int mesh_get(server *s, const scene_object *o, mesh_blob **out)
+/* The encoded mesh of o, kept from an earlier request or import (any
+ * object's with the same hash), in *out. Otherwise *out is NULL and the
+ * request waits: the mesher encodes it (queued here when there is room for
+ * it among the meshes being sent and in the mesher's queue), and a later
+ * tick finds it kept. */
+static void mesh_get(server *s, const scene_object *o, mesh_blob **out)
 {
-    uint8_t *data;
-    size_t len;
-    if ((*out = mesh_find(s, o->mesh_hash)) || !mesh_room(s, PROTO_MESH_HEAD_SIZE + 30ull * o->tri_count))
-        return 0;
-    int rc = proto_mesh_encode(o->tris, o->tri_count, &data, &len);
-    if (rc < 0)
-        return rc;
-    *out = mesh_keep(s, o->mesh_hash, data, len);
-    return 0;
+    size_t most = PROTO_MESH_HEAD_SIZE + 30ull * o->tri_count;
+    mesh_blob *b = mesh_find(s, o->mesh_hash);
+    *out = b && b->data ? b : NULL;
+    if (b || !mesh_room(s, most))
+        return;
+    int rc = mesher_submit(s->mesher, o->mesh_hash, o->tris, o->tri_count);
+    if (rc == 0)
+        mesh_keep(s, o->mesh_hash, NULL, most); /* held while it is encoded */
+    else if (rc != -EBUSY)
+        log_warn("object %u: its mesh cannot be queued for encoding: %s; asked again next tick", o->id,
+                 strerror(-rc));
 }
 
 /* Starts sending the oldest waiting mesh c can still have: the object may
  * have been removed, or left c's view, since it asked. Returns 1 when one
- * is being sent, 0 when none waits or the meshes being sent leave no room
- * (the request waits for the next tick). */
+ * is being sent, 0 when none waits or the oldest is not encoded yet (it
+ * waits for a later tick). */
 static int mesh_next(server *s, client *c)
 {
     client_mesh *m = &c->mesh;
     while (m->nqueue > 0) {
         uint32_t id = m->queue[0];
         const scene_object *o = scene_get(s->scene, id);
-        mesh_blob *b = NULL;
-        int rc = o && knows(c, id) ? mesh_get(s, o, &b) : 0;
-        if (rc == 0 && o && knows(c, id) && !b)
-            return 0;
+        if (o && knows(c, id)) {
+            mesh_blob *b;
+            mesh_get(s, o, &b);
+            if (!b)
+                return 0;
+            memmove(m->queue, m->queue + 1, --m->nqueue * sizeof *m->queue);
+            b->refs++;
+            m->blob = b;
+            m->object_id = id;
+            m->sent = 0;
+            return 1;
+        }
         memmove(m->queue, m->queue + 1, --m->nqueue * sizeof *m->queue);
-        if (rc < 0) {
-            reject(s, c, id, PROTO_ERR_INTERNAL, "the mesh of object %u cannot be encoded: %s", id, strerror(-rc));
-            continue;
-        }
-        if (!b) {
-            reject(s, c, id, PROTO_ERR_NO_OBJECT, "object %u is gone from your view", id);
-            continue;
-        }
-        b->refs++;
-        m->blob = b;
-        m->object_id = id;
-        m->sent = 0;
-        return 1;
+        reject(s, c, id, PROTO_ERR_NO_OBJECT, "object %u is gone from your view", id);
     }
     return 0;
 }
@@ -396,6 +395,49 @@ static void mesh_pump(server *s, client *c)
         m->sent += k;
         if (m->sent == b->len)
             mesh_done(c);
+    }
+}
+
+/* Takes the mesher's encoded meshes: each is kept for the clients waiting
+ * for it, who are sent it at once. A mesh that cannot be encoded is
+ * refused to every client waiting for it. */
+static void on_mesher_results(ev_loop *loop, int fd, unsigned events, void *data)
+{
+    (void)loop;
+    (void)fd;
+    (void)events;
+    server *s = data;
+    mesher_result r;
+    while (mesher_take(s->mesher, &r) == 0) {
+        mesh_blob *b = mesh_find(s, r.hash);
+        if (r.rc == 0) {
+            s->mesh_bytes = s->mesh_bytes - b->len + r.len;
+            b->data = r.data;
+            b->len = r.len;
+        } else {
+            log_error("a mesh cannot be encoded: %s", strerror(-r.rc));
+            s->mesh_bytes -= b->len;
+            s->nmeshes--; /* mesh_find made it the last */
+            free(b);
+        }
+        for (uint32_t i = 0; i < s->nclients; i++) {
+            client *c = s->clients[i];
+            client_mesh *m = &c->mesh;
+            if (c->state != ST_JOINED || c->closing)
+                continue;
+            uint32_t kept = 0;
+            for (uint32_t k = 0; k < m->nqueue; k++) {
+                const scene_object *o = scene_get(s->scene, m->queue[k]);
+                if (r.rc < 0 && o && memcmp(o->mesh_hash, r.hash, PROTO_MESH_HASH_SIZE) == 0)
+                    reject(s, c, m->queue[k], PROTO_ERR_INTERNAL, "the mesh of object %u cannot be encoded: %s",
+                           m->queue[k], strerror(-r.rc));
+                else
+                    m->queue[kept++] = m->queue[k];
+            }
+            m->nqueue = kept;
+            if (!m->blob && m->nqueue)
+                mesh_pump(s, c);
+        }
     }
 }
 
@@ -1063,6 +1105,12 @@ int objects__start(server *s, char *err, size_t errlen)
     rc = ev_io_add(s->loop, importer_fd(s->importer), EV_READ, on_import_results, s);
     if (rc < 0)
         return cvre_fail(err, errlen, rc, "event loop: %s", strerror(-rc));
+    s->mesher = mesher_start(err, errlen);
+    if (!s->mesher)
+        return -EIO; /* mesher_start said why in err */
+    rc = ev_io_add(s->loop, mesher_fd(s->mesher), EV_READ, on_mesher_results, s);
+    if (rc < 0)
+        return cvre_fail(err, errlen, rc, "event loop: %s", strerror(-rc));
     const server_config *c = &s->cfg;
     refiner_config rcfg = {.db_path = c->db_path, .feed_after = feed_head, .interval_s = c->refine_interval_s,
                          .cluster = {.eps = c->refine_eps, .min_points = c->refine_min_points,
@@ -1099,9 +1147,17 @@ void objects__stop(server *s)
     }
     scene_destroy(s->scene);
     s->scene = NULL;
+    if (s->mesher) {
+        ev_io_del(s->loop, mesher_fd(s->mesher));
+        mesher_stop(s->mesher);
+        s->mesher = NULL;
+    }
     ratelimit_destroy(s->mesh_requests);
     s->mesh_requests = NULL;
-    mesh_room(s, SRV_MESH_MEMORY); /* the clients are gone: nothing is being sent */
+    for (uint32_t i = 0; i < s->nmeshes; i++) { /* the clients are gone: nothing is being sent */
+        free(s->meshes[i]->data);
+        free(s->meshes[i]);
+    }
     free(s->meshes);
     s->meshes = NULL;
     free(s->obj_stamp);

@@ -31,6 +31,7 @@
 #include "http_server.h"
 #include "auth.h"
 #include "importer.h"
+#include "mesher.h"
 #include "listener.h"
 #include "metrics.h"
 #include "proto.h"
@@ -60,10 +61,11 @@ typedef struct client_upload {
 
 /* An encoded mesh (objects.c), kept by hash for every client that asks for
  * it, until the memory for meshes is wanted for others and no client is
- * being sent it. */
+ * being sent it. While the mesher encodes it, it has no data yet and len
+ * is the most it can take (held for it). */
 typedef struct mesh_blob {
     uint8_t hash[PROTO_MESH_HASH_SIZE];
-    uint8_t *data;
+    uint8_t *data; /* NULL: being encoded */
     size_t len;
     uint32_t refs; /* clients being sent it */
 } mesh_blob;
@@ -209,6 +211,7 @@ struct server {
     int64_t admin_feed_last;  /* the last admin action applied (db/moderation.h) */
     refiner *refiner;    /* new collision maps from the online loop and the store */
     size_t upload_bytes; /* held by unfinished uploads, all clients */
+    mesher *mesher;      /* encodes the meshes no upload brought encoded */
     mesh_blob **meshes;  /* encoded meshes kept (objects.c) */
     uint32_t nmeshes;
     size_t mesh_bytes;   /* what they hold */
