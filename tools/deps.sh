@@ -25,7 +25,8 @@ for arg in "$@"; do
   esac
 done
 missing=()
-command -v npm >/dev/null || packages+=(nodejs npm)
+node_packages=(nodejs npm)
+command -v npm >/dev/null || packages+=("${node_packages[@]}")
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done

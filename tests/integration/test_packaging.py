@@ -2,7 +2,9 @@
 a temporary prefix yields the five programs, each with its --help, the
 systemd unit (valid for systemd-analyze where it is installed) and the
 sysusers entry, and the installed server imports a world through the
-cvre-import installed beside it. docker/Dockerfile builds with
+cvre-import installed beside it, and serves the installed browser client
+(every file its page loads, found by following its imports).
+docker/Dockerfile builds with
 tools/deps.sh's packages, installs at run time exactly the Debian packages
 whose libraries the built programs link (ldd, dpkg -S; what those link in
 turn must come with them through the packages' dependencies), copies
@@ -11,6 +13,8 @@ where the image puts them. The package relations are this machine's: the
 Debian 12 that tools/deps.sh provisions."""
 import json
 import os
+import urllib.error
+import urllib.request
 import posixpath
 import re
 import shlex
@@ -68,10 +72,15 @@ def apt_packages(text):
 
 
 def deps_sh_packages():
+    """tools/deps.sh's packages: its list, and Node.js with npm (which it
+    installs from Debian where no npm is on the PATH; the image has none)."""
     text = open(os.path.join(ROOT, "tools", "deps.sh")).read()
-    m = re.search(r"^packages=\((.*?)\)", text, re.S | re.M)
-    assert m, "tools/deps.sh has no packages=(...) list"
-    return set(m.group(1).split())
+    found = set()
+    for name in ("packages", "node_packages"):
+        m = re.search(r"^" + name + r"=\((.*?)\)", text, re.S | re.M)
+        assert m, f"tools/deps.sh has no {name}=(...) list"
+        found |= set(m.group(1).split())
+    return found
 
 
 class Dockerfile:
@@ -166,6 +175,46 @@ def closure(start, pkgs):
     return seen
 
 
+# ---- the browser client ------------------------------------------------------------
+
+# A static import (import x from '...', import '...') or re-export (export
+# * from '...', export { a } from '...').
+IMPORT = re.compile(r"""^\s*(?:import\s+(?:[\w*{}\s,$]+\s+from\s*)?|export\s+(?:\*|\{[^}]*\})\s*from\s*)['"]([^'"]+)['"]""",
+                    re.M)
+
+
+def page_files(base):
+    """Every path the web client's page at base loads: index.html, its
+    stylesheet and script, and each module's static imports in turn (bare
+    names through the page's import map), with the status and content type
+    each was served with."""
+    html = urllib.request.urlopen(base + "/", timeout=10).read().decode()
+    imap = json.loads(re.search(r'<script type="importmap">(.*?)</script>', html, re.S).group(1))["imports"]
+    todo = ["/" + p for p in re.findall(r'(?:href|src)="([^":]+)"', html)]
+    seen = {}
+    while todo:
+        path = posixpath.normpath(todo.pop())
+        if path in seen:
+            continue
+        try:
+            r = urllib.request.urlopen(base + path, timeout=10)
+            seen[path] = (r.status, r.headers.get("Content-Type", ""))
+            body = r.read().decode()
+        except urllib.error.HTTPError as e:
+            seen[path] = (e.code, "")
+            continue
+        if not path.endswith(".js"):
+            continue
+        for spec in IMPORT.findall(body):
+            bare = next((k for k in sorted(imap, key=len, reverse=True)
+                         if spec == k or (k.endswith("/") and spec.startswith(k))), None)
+            if bare:
+                todo.append(posixpath.join("/", imap[bare].lstrip("./") + spec[len(bare):]))
+            else:
+                todo.append(posixpath.join(posixpath.dirname(path), spec))
+    return seen
+
+
 # ---- tests -----------------------------------------------------------------------
 
 def install(prefix):
@@ -199,7 +248,17 @@ def test_install_yields_the_programs_the_unit_and_a_working_layout():
     else:
         print("     (systemd-analyze not installed: the unit's syntax is not verified)")
     # The installed server finds the installed cvre-import beside it.
-    srv = Server(bindir, "--world", WORLD, "--refine-interval", "0")
+    # ... and serves the installed browser client: everything its page loads.
+    webroot = os.path.join(prefix, "share", "cvre", "web")
+    srv = Server(bindir, "--world", WORLD, "--refine-interval", "0", "--web", "127.0.0.1:0", "--web-root", webroot)
+    m = re.search(r"web on (http://127\.0\.0\.1:\d+)/", srv.logtext())
+    assert m, srv.logtext()
+    files = page_files(m.group(1))
+    types = {".html": "text/html", ".js": "text/javascript", ".css": "text/css"}
+    for path, (status, ctype) in files.items():
+        assert status == 200 and ctype.startswith(types[posixpath.splitext(path)[1]]), (path, status, ctype)
+    for want in ("/src/main.js", "/node_modules/three/build/three.module.js", "/node_modules/three/build/three.core.js"):
+        assert want in files, (want, sorted(files))
     assert srv.stop() == 0
     assert "1 objects loaded from 1 model files" in srv.logtext(), srv.logtext()
 
@@ -304,7 +363,11 @@ def test_docker_runtime_stage_has_programs_world_and_health():
     assert any(flags["--db"].startswith(v.rstrip("/") + "/") for v in volumes), (flags, volumes)
     exposed = " ".join(d.of(1, "EXPOSE")).split()
     metrics_port = flags["--metrics"].rsplit(":", 1)[1]
-    assert flags["--port"] in exposed and metrics_port in exposed, (flags, exposed)
+    web_port = flags["--web"].rsplit(":", 1)[1]
+    assert flags["--port"] in exposed and metrics_port in exposed and web_port in exposed, (flags, exposed)
+    webroot = host_path(paths, flags["--web-root"])
+    assert webroot and os.path.samefile(webroot, os.path.join(prefix, "share", "cvre", "web")), \
+        f"--web-root {flags['--web-root']} is not the installed browser client: {paths}"
     health = d.of(1, "HEALTHCHECK")
     assert health and f"/dev/tcp/127.0.0.1/{metrics_port}" in health[0], f"the health check asks another port: {health}"
     # The check itself, against this build's server: healthy while it runs, not once it stopped.
