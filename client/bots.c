@@ -384,7 +384,7 @@ static void on_duration(ev_loop *loop, void *data)
 bots *bots_create(ev_loop *loop, const bots_opts *o, int *exit_code)
 {
     char err[512];
-    session_ctx *ctx = session_ctx_create(loop, o->net.host, o->net.port, err, sizeof err);
+    session_ctx *ctx = session_ctx_create(loop, &o->net, err, sizeof err);
     if (!ctx) {
         fprintf(stderr, "cvre-client: %s\n", err);
         *exit_code = 1;

@@ -317,6 +317,9 @@ int events_conn_end(int bot, const session_end *end, const char *peer)
         snprintf(text, sizeof text, "client: bad frame from server: %s", proto_strerror(end->code));
         code = (unsigned)end->code;
         break;
+    case SESSION_END_WEBSOCKET:
+        snprintf(text, sizeof text, "client: %s: %s", peer, end->why);
+        break;
     default:
         return 0;
     }

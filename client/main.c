@@ -35,10 +35,13 @@
 #define RAMP_MAX 1e6
 /* Descriptors besides the bots' sockets: stdio, the signalfd, epoll. */
 #define SPARE_FDS 64
+/* --ws's port when none is given: tools/demo.sh's --web. */
+#define WS_PORT_DEFAULT 8080
 
 typedef struct options {
     session_params net;
     int name_given;
+    int port_given;
     double rate;
     const char *script;
     unsigned bots;
@@ -53,10 +56,11 @@ typedef struct options {
 
 static void usage(FILE *f)
 {
-    fputs("usage: cvre-client [--host H] [--port P] [--name NAME] [--login] [--box X,Y,Z] [--rate HZ]\n"
-          "                   [--script FILE] [--json]\n"
+    fputs("usage: cvre-client [--host H] [--port P] [--ws] [--name NAME] [--login] [--box X,Y,Z]\n"
+          "                   [--rate HZ] [--script FILE] [--json]\n"
           "       cvre-client --bots N [--pattern random-walk|circle] [--duration S] [--ramp N]\n"
-          "                   [--no-handshake] [--pose] [--host H] [--port P] [--name PREFIX] [--rate HZ]\n"
+          "                   [--no-handshake] [--pose] [--host H] [--port P] [--ws] [--name PREFIX]\n"
+          "                   [--rate HZ]\n"
           "       cvre-client --help | --version\n"
           "\n"
           "The thin client of a cvre-server: one user driven by hand or by a script, or a\n"
@@ -68,7 +72,9 @@ static void usage(FILE *f)
           "\n"
           "Options:\n"
           "  --host H           server address (default 127.0.0.1; IPv4, IPv6 or a name)\n"
-          "  --port P           server port (default 7878)\n"
+          "  --port P           server port (default 7878, or 8080 with --ws)\n"
+          "  --ws               over a WebSocket to the server's --web port instead of raw\n"
+          "                     TCP (the same frames, one per binary message)\n"
           "  --name NAME        display name (default user); for bots the prefix of <NAME>-<i>\n"
           "  --login            join as the account --name; the password comes from\n"
           "                     CVRE_PASSWORD, else it is asked for on the terminal\n"
@@ -216,6 +222,10 @@ static int parse_args(int argc, char **argv, options *o)
             o->json = 1;
             continue;
         }
+        if (strcmp(arg, "--ws") == 0) {
+            o->net.ws = 1;
+            continue;
+        }
         /* Every other flag takes a value: --flag VALUE or --flag=VALUE. */
         char flag[32];
         const char *eq = strchr(arg, '='), *val;
@@ -253,6 +263,7 @@ static int parse_args(int argc, char **argv, options *o)
             if (parse_unsigned(val, 1, 65535, &u) < 0)
                 return bad(flag, val, "a port number 1..65535");
             o->net.port = (uint16_t)u;
+            o->port_given = 1;
         } else if (strcmp(flag, "--name") == 0) {
             if (!name_ok(val, PROTO_NAME_MAX))
                 return bad(flag, val, "1 to 32 bytes, no control characters");
@@ -285,6 +296,8 @@ static int parse_args(int argc, char **argv, options *o)
                 return bad(flag, val, "connections per second, more than 0 and at most 1000000");
         }
     }
+    if (o->net.ws && !o->port_given)
+        o->net.port = WS_PORT_DEFAULT;
     if (o->login && o->bots) {
         fprintf(stderr, "cvre-client: --login is for one user, not --bots (bots are guests)\n");
         return -EINVAL;

@@ -624,7 +624,7 @@ script *script_create(ev_loop *loop, const script_opts *o, int *exit_code)
     }
 
     char err[512];
-    s->ctx = session_ctx_create(loop, o->net.host, o->net.port, err, sizeof err);
+    s->ctx = session_ctx_create(loop, &o->net, err, sizeof err);
     if (!s->ctx) {
         fprintf(stderr, "cvre-client: %s\n", err);
         *exit_code = 1;

@@ -15,6 +15,7 @@
 #include "alloc.h"
 #include "log.h"
 #include "le.h"
+#include "ws.h"
 
 /* One read buffer shared by every session of the process: a read lands here
  * and is parsed in place, and only the unfinished tail of a frame is copied
@@ -35,14 +36,24 @@ _Static_assert(SESSION_SCRATCH_SIZE >= PROTO_HEADER_SIZE, "a read holds at least
  * and the first may be the one the server does not listen on. */
 #define SESSION_ADDRS_MAX 4
 
-/* The largest frame a server may send us, header included. */
+/* The largest frame a server may send us, header included; over a
+ * WebSocket, the largest message. */
 #define SESSION_IN_MAX (4u + PROTO_MAX_LEN)
+/* The unfinished input a session keeps, at most: a frame, or a WebSocket
+ * frame with its header, or the upgrade's answer. */
+#define SESSION_IN_BUF_MAX (SESSION_IN_MAX + WS_SERVER_HEADER_MAX)
+_Static_assert(WS_RESPONSE_MAX <= SESSION_IN_BUF_MAX, "the upgrade's answer fits the input buffer");
+/* The largest frame the client sends, which a WebSocket message wraps. */
+_Static_assert(PROTO_SIZE_JOIN_MAX <= SESSION_SIZE_CHUNK_MAX, "a join is not the largest frame sent");
+/* The path the upgrade asks for: the server takes any. */
+#define SESSION_WS_PATH "/"
 
 struct session_ctx {
     ev_loop *loop;
     struct sockaddr_storage addrs[SESSION_ADDRS_MAX];
     socklen_t addr_lens[SESSION_ADDRS_MAX];
     int naddrs;
+    int ws; /* sessions speak over a WebSocket */
     char peer[300];
     session *closing; /* ended, waiting for the before-sleep hook */
     uint64_t opened, frames_in, bytes_in;
@@ -65,6 +76,10 @@ struct session {
     int want_writable; /* the owner asked for an on_writable call */
     int ended;
     session_end end;
+    char why[256]; /* end.why */
+    ws_reader wsr;   /* over a WebSocket: the server's frames */
+    int ws_closed;   /* the server's close frame came: what follows is ignored */
+    char ws_key[WS_KEY_SIZE]; /* of the upgrade, to check the 101 */
     uint32_t seq;
     int has_pose;    /* session_set_facing was called: moves carry pose */
     proto_pose pose;
@@ -104,8 +119,10 @@ static void reap(ev_loop *loop, void *data)
     }
 }
 
-session_ctx *session_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *err, size_t errlen)
+session_ctx *session_ctx_create(ev_loop *loop, const session_params *net, char *err, size_t errlen)
 {
+    const char *host = net->host;
+    uint16_t port = net->port;
     struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
                              .ai_flags = AI_NUMERICSERV};
     struct addrinfo *res = NULL;
@@ -119,6 +136,7 @@ session_ctx *session_ctx_create(ev_loop *loop, const char *host, uint16_t port, 
     }
     session_ctx *ctx = cvre_xcalloc(1, sizeof *ctx);
     ctx->loop = loop;
+    ctx->ws = net->ws;
     for (struct addrinfo *ai = res; ai && ctx->naddrs < SESSION_ADDRS_MAX; ai = ai->ai_next) {
         if (ai->ai_addrlen > sizeof ctx->addrs[0])
             continue;
@@ -163,7 +181,7 @@ static void end_conn(session *c, int kind, int code)
         return;
     c->ended = 1;
     c->end = (session_end){.kind = kind, .code = code, .after_bye = c->bye_sent,
-                        .was_open = c->state != SESSION_CONNECTING};
+                        .was_open = c->state != SESSION_CONNECTING, .why = c->why};
     c->state = SESSION_CLOSED;
     if (c->armed) {
         ev_io_del(c->ctx->loop, c->fd);
@@ -175,6 +193,13 @@ static void end_conn(session *c, int kind, int code)
 }
 
 void session_close(session *c) { end_conn(c, SESSION_END_LOCAL, 0); }
+
+/* The upgrade refused, or a WebSocket frame that breaks RFC 6455. */
+static void end_ws(session *c, const char *why)
+{
+    snprintf(c->why, sizeof c->why, "%s", why);
+    end_conn(c, SESSION_END_WEBSOCKET, 0);
+}
 
 /* Registers or re-arms the fd. Returns 0 or -errno, which the caller turns
  * into the end that fits its stage (the loop refuses an fd past its size). */
@@ -235,13 +260,14 @@ static void maybe_shutdown(session *c)
 }
 
 /*
- * Sends one whole frame: directly when nothing is queued, the unsent rest
- * into the backlog (EV_WRITE armed). A frame that would push the backlog
- * past SESSION_OUT_MAX is dropped whole, so the stream never holds half a
- * frame. Returns 0, -ENOBUFS when dropped, -ENOTCONN when the session cannot
- * send any more. Only called on an established connection.
+ * Sends bytes that belong together (a frame, a message, the upgrade):
+ * directly when nothing is queued, the unsent rest into the backlog
+ * (EV_WRITE armed). What would push the backlog past SESSION_OUT_MAX is
+ * dropped whole, so the stream never holds half a frame. Returns 0,
+ * -ENOBUFS when dropped, -ENOTCONN when the session cannot send any more.
+ * Only called on an established connection.
  */
-static int send_frame(session *c, const uint8_t *p, size_t n)
+static int send_bytes(session *c, const uint8_t *p, size_t n)
 {
     if (c->ended || c->write_dead || c->bye_sent)
         return -ENOTCONN;
@@ -263,6 +289,26 @@ static int send_frame(session *c, const uint8_t *p, size_t n)
             rearm(c, EV_READ | EV_WRITE);
     }
     return 0;
+}
+
+/* A WebSocket message of the client's: opcode and payload in a masked
+ * frame, sent as send_bytes does. */
+static int send_ws(session *c, unsigned opcode, const uint8_t *p, size_t n)
+{
+    uint8_t msg[WS_CLIENT_HEADER_MAX + SESSION_SIZE_CHUNK_MAX];
+    int len = ws_client_frame(msg, sizeof msg, opcode, p, n);
+    if (len < 0) { /* no random bytes for the mask (a frame too large is a bug) */
+        end_ws(c, "no random bytes for a frame's mask");
+        return -ENOTCONN;
+    }
+    return send_bytes(c, msg, (size_t)len);
+}
+
+/* Sends one whole frame of the protocol: as it is over TCP, in a binary
+ * message of its own over a WebSocket. */
+static int send_frame(session *c, const uint8_t *p, size_t n)
+{
+    return c->ctx->ws ? send_ws(c, WS_OP_BINARY, p, n) : send_bytes(c, p, n);
 }
 
 /* Writes the backlog when the socket has room again; once it is empty,
@@ -427,10 +473,16 @@ static void dispatch(session *c, const proto_frame *f)
     c->h->on_msg(c, &m, c->data);
 }
 
-/* Bytes the unfinished frame in c->in needs in all: a header until one is
- * there, then what its length field says (checked by proto_frame_parse). */
+/* Bytes the unfinished input in c->in needs in all. A frame: a header
+ * until one is there, then what its length field says (checked by
+ * proto_frame_parse). A WebSocket frame: what ws_frame_need says (checked
+ * by ws_read). The upgrade's answer: as much as its head may take. */
 static size_t pending_need(const session *c)
 {
+    if (c->state == SESSION_UPGRADING)
+        return WS_RESPONSE_MAX;
+    if (c->ctx->ws)
+        return ws_frame_need(c->in, c->in_len);
     if (c->in_len < PROTO_HEADER_SIZE)
         return PROTO_HEADER_SIZE;
     return 4u + (size_t)le_get_u32(c->in);
@@ -443,17 +495,91 @@ static void in_reserve(session *c, size_t need)
     size_t cap = 256;
     while (cap < need)
         cap *= 2;
-    if (cap > SESSION_IN_MAX)
-        cap = SESSION_IN_MAX;
+    if (cap > SESSION_IN_BUF_MAX)
+        cap = SESSION_IN_BUF_MAX;
     c->in = cvre_xrealloc(c->in, cap);
     c->in_cap = cap;
 }
 
+/* Keeps the unfinished tail of a read in the session. */
+static void keep_tail(session *c, const uint8_t *p, size_t n)
+{
+    in_reserve(c, n);
+    memcpy(c->in, p, n);
+    c->in_len = n;
+}
+
+/* One message of the server's: exactly one frame (PROTOCOL.md,
+ * "WebSocket transport"), dispatched as if it had come over TCP. */
+static void ws_message(session *c, const uint8_t *p, size_t n)
+{
+    proto_frame f;
+    int st = proto_frame_parse(p, n, PROTO_MAX_LEN, &f);
+    if (st == PROTO_INCOMPLETE || (st == PROTO_OK && f.size != n))
+        st = PROTO_ERR_TRUNCATED;
+    if (st != PROTO_OK) {
+        end_conn(c, SESSION_END_PROTO, st);
+        return;
+    }
+    dispatch(c, &f);
+}
+
+/* Takes the first WebSocket frame of p[0..n) and acts on what it
+ * completed. Returns the bytes taken, 0 if the frame is not all there, or
+ * -1 once the session ended. */
+static ssize_t take_ws(session *c, uint8_t *p, size_t n)
+{
+    if (c->ws_closed)
+        return (ssize_t)n; /* after the close nothing more is read */
+    ws_event ev;
+    char err[128];
+    ssize_t k = ws_read(&c->wsr, p, n, &ev, err, sizeof err);
+    if (k < 0) {
+        char why[sizeof c->why];
+        snprintf(why, sizeof why, "a bad WebSocket frame from the server: %s", err);
+        end_ws(c, why);
+        return -1;
+    }
+    if (k == 0)
+        return 0;
+    switch (ev.type) {
+    case WS_EV_MESSAGE:
+        ws_message(c, ev.data, ev.len);
+        break;
+    case WS_EV_PING:
+        send_ws(c, WS_OP_PONG, ev.data, ev.len);
+        break;
+    case WS_EV_CLOSE: { /* answered with its code (5.5.1) unless our bye went first and shut our half;
+                         * the server then closes the TCP connection */
+        c->ws_closed = 1;
+        uint8_t frame[WS_CLIENT_HEADER_MAX + 2];
+        int len = ws_client_close_frame(frame, sizeof frame, ev.code, NULL);
+        if (len > 0)
+            send_bytes(c, frame, (size_t)len);
+        break;
+    }
+    default: /* a pong, a fragment */
+        break;
+    }
+    return c->ended ? -1 : k;
+}
+
 /* Parses the frames of a read that landed in the shared buffer; keeps the
  * unfinished tail in the session. */
-static void parse_scratch(session *c, const uint8_t *buf, size_t n)
+static void parse_scratch(session *c, uint8_t *buf, size_t n)
 {
     size_t off = 0;
+    if (c->ctx->ws) {
+        while (off < n && !c->ended) {
+            ssize_t k = take_ws(c, buf + off, n - off);
+            if (k == 0)
+                keep_tail(c, buf + off, n - off);
+            if (k <= 0)
+                return;
+            off += (size_t)k;
+        }
+        return;
+    }
     while (off < n && !c->ended) {
         proto_frame f;
         int st = proto_frame_parse(buf + off, n - off, PROTO_MAX_LEN, &f);
@@ -461,9 +587,7 @@ static void parse_scratch(session *c, const uint8_t *buf, size_t n)
             dispatch(c, &f);
             off += f.size;
         } else if (st == PROTO_INCOMPLETE) {
-            in_reserve(c, n - off);
-            memcpy(c->in, buf + off, n - off);
-            c->in_len = n - off;
+            keep_tail(c, buf + off, n - off);
             return;
         } else {
             end_conn(c, SESSION_END_PROTO, st);
@@ -471,9 +595,45 @@ static void parse_scratch(session *c, const uint8_t *buf, size_t n)
     }
 }
 
-/* Called after bytes were added to the unfinished frame. */
+static void start_protocol(session *c);
+
+/* The upgrade's answer, in c->in: once its head is all there and says
+ * 101, the protocol starts, and whatever came behind the head is read as
+ * frames. */
+static void upgrade_answer(session *c)
+{
+    char err[128], why[sizeof c->why];
+    int head = ws_client_response(c->in, c->in_len, c->ws_key, err, sizeof err);
+    if (head == 0)
+        return;
+    if (head < 0) {
+        snprintf(why, sizeof why, "the WebSocket upgrade failed: %s", err);
+        end_ws(c, why);
+        return;
+    }
+    size_t rest = c->in_len - (size_t)head;
+    uint8_t *scratch = c->ctx->scratch; /* free: this read went to c->in */
+    memcpy(scratch, c->in + head, rest);
+    c->in_len = 0;
+    ws_reader_init_client(&c->wsr, SESSION_IN_MAX);
+    start_protocol(c);
+    if (!c->ended)
+        parse_scratch(c, scratch, rest);
+}
+
+/* Called after bytes were added to the unfinished input. */
 static void parse_pending(session *c)
 {
+    if (c->state == SESSION_UPGRADING) {
+        upgrade_answer(c);
+        return;
+    }
+    if (c->ctx->ws) {
+        /* Reads never go past the frame: taken whole, it is all of c->in. */
+        if (take_ws(c, c->in, c->in_len) > 0)
+            c->in_len = 0;
+        return;
+    }
     proto_frame f;
     int st = proto_frame_parse(c->in, c->in_len, PROTO_MAX_LEN, &f);
     if (st == PROTO_OK) {
@@ -486,7 +646,8 @@ static void parse_pending(session *c)
 
 /*
  * Reads what the socket has, up to SESSION_READS_PER_WAKEUP calls. Without an
- * unfinished frame a read goes to the shared buffer; with one, the read asks
+ * unfinished frame a read goes to the shared buffer; with one (or the
+ * upgrade's answer, always read into the session), the read asks
  * for exactly the rest of that frame, so the session's own buffer never holds
  * more than one frame and a finished frame is parsed where it lies. A short
  * read normally means the socket is drained and saves the call that would
@@ -499,7 +660,7 @@ static int read_some(session *c, int drain)
     for (int i = 0; i < SESSION_READS_PER_WAKEUP && !c->ended; i++) {
         uint8_t *dst = ctx->scratch;
         size_t want = sizeof ctx->scratch;
-        if (c->in_len > 0) {
+        if (c->in_len > 0 || c->state == SESSION_UPGRADING) {
             size_t need = pending_need(c);
             in_reserve(c, need);
             dst = c->in + c->in_len;
@@ -515,7 +676,9 @@ static int read_some(session *c, int drain)
             return 0;
         }
         if (n == 0) {
-            if (c->in_len > 0)
+            if (c->state == SESSION_UPGRADING) {
+                end_ws(c, "the server closed during the WebSocket upgrade (is this its --web port?)");
+            } else if (c->in_len > 0)
                 end_conn(c, SESSION_END_PROTO, PROTO_ERR_TRUNCATED);
             else
                 end_conn(c, SESSION_END_EOF, 0);
@@ -545,14 +708,30 @@ static void send_hello(session *c)
     send_frame(c, buf, w.len);
 }
 
+/* The protocol proper: hello, or nothing for a raw session. */
+static void start_protocol(session *c)
+{
+    c->state = c->raw ? SESSION_RAW : SESSION_HELLO_SENT;
+    if (!c->raw && !c->ended)
+        send_hello(c);
+}
+
 static void connected(session *c)
 {
     c->ctx->opened++;
-    c->state = c->raw ? SESSION_RAW : SESSION_HELLO_SENT;
     c->last_send = ev_now(c->ctx->loop);
     rearm(c, EV_READ);
-    if (!c->raw && !c->ended)
-        send_hello(c);
+    if (!c->ctx->ws) {
+        start_protocol(c);
+        return;
+    }
+    char req[512];
+    int n = ws_client_request(req, sizeof req, c->ctx->peer, SESSION_WS_PATH, c->ws_key);
+    c->state = SESSION_UPGRADING;
+    if (n < 0)
+        end_ws(c, n == -ENOSPC ? "the host name is too long for the upgrade" : "no random bytes for the upgrade's key");
+    else if (!c->ended)
+        send_bytes(c, (const uint8_t *)req, (size_t)n);
 }
 
 /* Tries the resolved addresses from c->addr_i on; ends the session with the
@@ -673,6 +852,7 @@ void session_free(session *c)
         ev_io_del(c->ctx->loop, c->fd);
     if (c->fd >= 0)
         close(c->fd);
+    ws_reader_free(&c->wsr);
     free(c->in);
     free(c->out);
     free(c);
@@ -815,7 +995,7 @@ int session_bye(session *c, uint8_t reason)
 {
     if (c->ended || c->bye_sent)
         return 0;
-    if (c->state == SESSION_CONNECTING) {
+    if (c->state == SESSION_CONNECTING || c->state == SESSION_UPGRADING) {
         session_close(c);
         return 0;
     }

@@ -3,7 +3,10 @@
  * client and the bot swarm.
  *
  * A session owns a non-blocking TCP socket registered with an ev loop, a bounded
- * input remainder and a bounded output backlog. It runs the handshake itself
+ * input remainder and a bounded output backlog. Over a WebSocket (the
+ * server's --web port; protocol/ws.h) it opens with the HTTP upgrade and
+ * then carries each frame in a binary message of its own, both ways;
+ * everything above the frames is the same. It runs the handshake itself
  * (hello on connect, join on welcome), answers pings, tracks what the server
  * said about the own avatar (session_view) and hands every decoded message to
  * the owner's on_msg callback. A connection ends exactly once: the end is
@@ -49,6 +52,7 @@ typedef struct session session;
 typedef struct session_params {
     const char *host;
     uint16_t port;
+    int ws; /* over a WebSocket: port is the server's --web port */
     const char *name;
     float box[3];
 } session_params;
@@ -63,6 +67,7 @@ typedef struct session_credential {
 
 enum session_state {
     SESSION_CONNECTING, /* TCP connect in progress */
+    SESSION_UPGRADING,  /* WebSocket: the upgrade sent, waiting for the 101 */
     SESSION_HELLO_SENT, /* waiting for welcome */
     SESSION_JOIN_SENT,  /* waiting for join_ok */
     SESSION_JOINED,
@@ -77,6 +82,7 @@ enum session_end_kind {
     SESSION_END_CONNECT, /* could not connect; code is the errno */
     SESSION_END_SOCKET,  /* send/recv failed; code is the errno */
     SESSION_END_PROTO,   /* the server sent a bad frame; code is the proto status */
+    SESSION_END_WEBSOCKET, /* the upgrade was refused or a WebSocket frame broke RFC 6455; why says which */
 };
 
 typedef struct session_end {
@@ -84,6 +90,7 @@ typedef struct session_end {
     int code;      /* errno or proto status, as kind says; 0 otherwise */
     int after_bye; /* we had sent bye: the end was asked for */
     int was_open;  /* the TCP connection had been established */
+    const char *why; /* SESSION_END_WEBSOCKET: the reason; valid during on_close */
 } session_end;
 
 /* What the server told us about our own avatar. Updated before on_msg sees
@@ -112,12 +119,13 @@ typedef struct session_handler {
 } session_handler;
 
 /*
- * Resolves host and port (numeric IPv4 or IPv6, or a name such as localhost)
- * and takes over the loop's before-sleep hook, where ended connections are
- * reaped. Returns NULL and a message in err on failure. The loop must
- * outlive the ctx.
+ * Resolves net's host and port (numeric IPv4 or IPv6, or a name such as
+ * localhost), notes whether its sessions speak over a WebSocket, and takes
+ * over the loop's before-sleep hook, where ended connections are reaped.
+ * Returns NULL and a message in err on failure. The loop must outlive the
+ * ctx.
  */
-session_ctx *session_ctx_create(ev_loop *loop, const char *host, uint16_t port, char *err, size_t errlen);
+session_ctx *session_ctx_create(ev_loop *loop, const session_params *net, char *err, size_t errlen);
 /* Frees the ctx; every session must have been freed first. */
 void session_ctx_free(session_ctx *ctx);
 /* Totals over all conns since the ctx was created. */

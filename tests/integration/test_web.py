@@ -3,17 +3,21 @@ HTTP (a large one streamed whole, paths outside the root refused), a
 WebSocket handshake and a join from a raw socket, a WebSocket client and a
 TCP client that see each other, pings answered, the game's bye and a kick
 as close frames; and each malformed class of the WebSocket side closes that
-connection only while a witness TCP client keeps playing."""
+connection only while a witness TCP client keeps playing. cvre-client --ws,
+a swarm and a single user, plays beside a TCP witness."""
 import base64
 import hashlib
+import json
+import math
 import os
 import socket
 import struct
+import subprocess
 import tempfile
 import time
 
-from harness import (TEMP_DIRS, T, Raw, Server, admin, args, drain, frame, hello, join, move, ping, run, split_frames,
-                     still_moving)
+from harness import (TEMP_DIRS, T, Client, Raw, Server, admin, args, drain, frame, hello, join, move, ping, run,
+                     split_frames, still_moving)
 
 A = args()
 GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"  # RFC 6455 4.2.2
@@ -227,6 +231,74 @@ def test_join_over_websocket():
     tcp.close()
 
 
+def moved(w, ids, dist, timeout=15):
+    """Reads w's snapshots (which carry the avatars that moved) until each
+    of ids has been seen at two points dist apart or more."""
+    seen, end = {i: [] for i in ids}, time.time() + timeout
+    while any(not pts or max(math.dist(pts[0], p) for p in pts) < dist for pts in seen.values()):
+        m = w.expect("snapshot", timeout=max(0.1, end - time.time()))
+        for i in ids:
+            if i in m["avatars"]:
+                seen[i].append(m["avatars"][i])
+
+
+def test_client_over_websocket():
+    """cvre-client --ws: three bots with poses and a scripted user, over
+    WebSockets, and a TCP witness see each other join and move; everyone
+    leaves cleanly."""
+    w = Raw(SRV.port)
+    _, wok = w.handshake("tcp-witness")
+    bots = subprocess.Popen([os.path.join(A.bin, "cvre-client"), "--ws", "--port", str(PORT), "--bots", "3",
+                             "--name", "wsbot", "--pose", "--rate", "10", "--duration", "4"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    solo = Client(A.bin, PORT, "ws-solo", None, "--ws", "--json")
+    try:
+        # The witness sees each of them join, the bots walk and turn their heads.
+        names = {}
+        while len(names) < 4:
+            m = w.expect("joined", timeout=15)
+            names[m["id"]] = m["name"]
+        assert sorted(names.values()) == ["ws-solo", "wsbot-0", "wsbot-1", "wsbot-2"], names
+        bot_ids = [i for i, n in names.items() if n.startswith("wsbot")]
+        moved(w, bot_ids, 0.2)
+        w.expect("pose", timeout=10, where=lambda m: m["id"] in bot_ids)
+        # The user over a WebSocket sees the witness move.
+        solo.until("the witness", lambda e: e["event"] == "joined" and e["name"] == "tcp-witness")
+        x, y, z = wok["pos"]
+        for seq in range(1, 6):
+            w.send(move(seq, (x + 0.2 * seq, y, z)))
+        solo.until("the witness moved", lambda e: e["event"] == "snapshot" and any(
+            a["id"] == wok["id"] and a["pos"][0] > x + 0.5 for a in e["avatars"]))
+        # And the witness sees the user walk.
+        solo.send("walk 1 0 0.5\n")
+        moved(w, [i for i, n in names.items() if n == "ws-solo"], 0.5)
+        solo.send("quit\n")
+        assert solo.wait() == 0, solo.stderr
+        out, err = bots.communicate(timeout=30)
+        assert bots.returncode == 0, (out[-2000:], err)
+        summary = [json.loads(line) for line in out.splitlines()][-1]
+        assert summary["event"] == "summary" and summary["joined"] == 3 and summary["errors"] == 0, summary
+        assert summary["disconnects"] == 0 and summary["frames_in"] > 0, summary
+        left = set()
+        while len(left) < 4:
+            left.add(w.expect("left", timeout=10)["id"])
+        assert left == set(names), (left, names)
+        still_moving(w, 6)
+    finally:
+        bots.kill()
+        solo.proc.kill()
+        w.close()
+
+
+def test_client_websocket_refused():
+    """cvre-client --ws on the raw TCP port: the upgrade is never answered
+    with a 101, and the client says which port it wanted."""
+    c = Client(A.bin, SRV.port, "lost", "quit\n", "--ws", "--json")
+    assert c.wait() == 1
+    errors = c.of("error")
+    assert errors and "--web port" in errors[0]["message"], c.events
+
+
 def test_client_close_echoed():
     ws = Ws()
     ws.send(hello() + join("closer"))
@@ -369,6 +441,7 @@ def test_shutdown_close():
     assert SRV.proc.wait(30) == 0
 
 
-run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_close_echoed,
+run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_over_websocket,
+     test_client_websocket_refused, test_client_close_echoed,
      test_kick_closes_with_1008, test_fragmented_message, test_malformed_frames, test_bad_handshakes,
      test_full_server_and_missing_root, test_shutdown_close])
