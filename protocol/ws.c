@@ -156,12 +156,14 @@ static int frame_length(const uint8_t *data, size_t len, size_t *at, uint64_t *p
     return 1;
 }
 
-size_t ws_frame_size(const uint8_t *data, size_t len)
+size_t ws_frame_need(const uint8_t *data, size_t len)
 {
     size_t at;
     uint64_t plen;
+    if (len < 2)
+        return 2;
     if (!frame_length(data, len, &at, &plen))
-        return 0;
+        return (data[1] & 0x7F) == 126 ? 4 : 10;
     return at + (data[1] & 0x80 ? 4u : 0u) + (size_t)plen;
 }
 

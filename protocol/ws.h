@@ -153,11 +153,13 @@ ssize_t ws_read(ws_reader *r, uint8_t *data, size_t len, ws_event *ev, char *err
  * 3000-4999. */
 int ws_close_code_valid(unsigned code);
 
-/* Bytes a frame whose start is in data[0..len) takes in all, header and
- * payload, or 0 while its header is not all there. Call it after ws_read
- * returned 0: the header is then known to be valid and within the cap, so
- * that the caller may wait for exactly the rest. */
-size_t ws_frame_size(const uint8_t *data, size_t len);
+/* Bytes the frame whose start is in data[0..len) needs before it can be
+ * read whole: while its header is not all there, the header's length as
+ * far as it is known (2, then 4 or 10); then all of it, header, mask and
+ * payload. More than len while the frame is not all there. Call it after
+ * ws_read returned 0: what the header says is then known to be valid and
+ * within the cap, so that the caller may wait for exactly the rest. */
+size_t ws_frame_need(const uint8_t *data, size_t len);
 
 /* ---- the server's frames ----------------------------------------------------- */
 
