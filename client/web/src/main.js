@@ -10,9 +10,9 @@ import * as proto from './proto.js';
 import { session_open, session_send, session_buffered, session_quit } from './session.js';
 import { world_new, world_welcome, world_joined, world_frame, world_prune } from './world.js';
 import { input_new, control_new, control_step, control_correct, control_move } from './input.js';
-import { view_new, view_set_bounds, view_sync, view_place_camera, view_render, view_pick,
+import { view_new, view_set_bounds, view_sync, view_sync_objects, view_place_camera, view_render, view_pick,
     view_drawn_triangles, VIEW_EYE_HEIGHT } from './view.js';
-import { xr_new, xr_presenting, xr_pose, xr_set_override, xr_facing, xr_stick } from './xr.js';
+import { xr_new, xr_presenting, xr_track, xr_pose, xr_set_override, xr_facing, xr_stick } from './xr.js';
 import { upload_new, upload_start, upload_place, upload_object, upload_rejected } from './upload.js';
 import { ui_new, ui_form, ui_status, ui_error, ui_users, ui_show_boxes, ui_show_collisions, ui_hud } from './ui.js';
 
@@ -25,6 +25,7 @@ const page = {
     world: null,
     control: null,
     upload: null,
+    ticker: 0,
 };
 
 const canvas = document.getElementById('view');
@@ -72,11 +73,17 @@ function join(name, password) {
             world_joined(world, name, j);
             page.control = control_new(j.pos);
             page.status = 'joined';
+            page.ticker = setInterval(tick, 1000 / world.welcome.tick_hz);
             ui_status(ui, `joined as ${name}${password ? '' : ' (guest)'}, avatar ${j.avatar_id}`);
         },
-        on_frame: (type, m) => world_frame(world, type, m),
+        on_frame: (type, m) => {
+            world_frame(world, type, m);
+            wake();
+        },
         on_end: (words, is_error) => {
             page.status = 'closed';
+            clearInterval(page.ticker);
+            wake();
             if (is_error)
                 ui_error(ui, words);
             ui_status(ui, `session ended: ${words}`);
@@ -85,34 +92,68 @@ function join(name, password) {
     });
 }
 
-/* One frame: the pose (from XR or setXRPose), the walk, the MOVE if one is
- * due, then the scene. */
-let last = performance.now();
+/* A frame is drawn while something may change on screen: for this long
+ * after the last frame from the server, input or change of the panel's
+ * toggles (avatars glide and markers fade meanwhile), and always in VR.
+ * An idle page draws nothing, which a software renderer feels. */
+const MAIN_RENDER_AFTER_MS = 1000;
+/* The longest step of the walk: a page that was not run for a while (a
+ * tab in the background) does not jump. */
+const MAIN_STEP_MAX_S = 0.25;
+
+let last_step = performance.now();
+let render_until = 0;
+
+function wake() {
+    render_until = performance.now() + MAIN_RENDER_AFTER_MS;
+}
+
+/*
+ * Walks and sends: advances the prediction by the time since the last
+ * call, with the facing from the tracked head (VR or setXRPose) if there
+ * is one, and sends the MOVE if one is due. Called from each animation
+ * frame, and from a timer at the server's tick rate so that a page that
+ * gets no animation frames (a background tab) still sends its moves.
+ */
+function tick() {
+    const now = performance.now();
+    const dt = Math.min(MAIN_STEP_MAX_S, (now - last_step) / 1000);
+    last_step = now;
+    if (page.status !== 'joined')
+        return;
+    const w = page.world;
+    const parts = xr_pose(xr, view);
+    if (parts && parts.head)
+        Object.assign(input, xr_facing(parts.head.q));
+    control_step(page.control, input, dt, w.welcome.max_speed, xr_stick(view));
+    const pose = proto.proto_pose_fit(input.yaw, input.pitch, parts);
+    const move = control_move(page.control, now, 1000 / w.welcome.tick_hz, pose);
+    if (move) {
+        session_send(page.session, move);
+        wake();
+    }
+}
+
+/* One animation frame: the XR poses of this frame, the walk, then the
+ * scene, drawn if anything may have changed. */
 function frame() {
     const now = performance.now();
-    const dt = Math.min(0.1, (now - last) / 1000);
-    last = now;
-    const w = page.world, joined = page.status === 'joined';
     const in_xr = xr_presenting(view);
-    if (joined) {
-        const parts = xr_pose(xr, view);
-        if (in_xr && parts && parts.head)
-            Object.assign(input, xr_facing(parts.head.q));
-        control_step(page.control, input, dt, w.welcome.max_speed, xr_stick(view));
-        const pose = proto.proto_pose_fit(input.yaw, input.pitch, parts);
-        const move = control_move(page.control, now, 1000 / w.welcome.tick_hz, pose);
-        if (move)
-            session_send(page.session, move);
-    }
+    if (in_xr)
+        xr_track(xr, view);
+    tick();
+    const w = page.world, joined = page.status === 'joined';
     if (w)
         world_prune(w, now);
+    if (!in_xr && now >= render_until)
+        return;
     const me = page.control ? page.control.pred : [0, 0, 0];
     const box = w && w.self ? w.self.box : MAIN_AVATAR_BOX;
     view_place_camera(view, me, VIEW_EYE_HEIGHT * box[1], input.yaw, input.pitch, in_xr);
     if (w) {
         view_sync(view, w, {
             show_boxes: ui_show_boxes(), show_collisions: ui_show_collisions(),
-            pose_of: proto.proto_pose_metres, dt, self_pos: me, now,
+            pose_of: proto.proto_pose_metres, dt: frame_dt(now), self_pos: me, now,
         });
         ui_users(ui, joined ? w.self.name : null, joined ? [...w.avatars.values()] : []);
         const rtt = page.session && page.session.rtt_ms !== null ? `, round trip ${page.session.rtt_ms.toFixed(0)} ms` : '';
@@ -121,7 +162,17 @@ function frame() {
     }
     view_render(view);
 }
+
+let last_frame = performance.now();
+function frame_dt(now) {
+    const dt = Math.min(MAIN_STEP_MAX_S, (now - last_frame) / 1000);
+    last_frame = now;
+    return dt;
+}
+
 view.renderer.setAnimationLoop(frame);
+for (const ev of ['keydown', 'keyup', 'mousemove', 'mousedown', 'wheel', 'resize', 'change'])
+    window.addEventListener(ev, wake);
 
 window.addEventListener('dragover', (e) => {
     e.preventDefault();
@@ -147,9 +198,13 @@ window.addEventListener('pagehide', () => {
 });
 
 /* A plain, JSON-able picture of the page for tests and the console
- * (client/web/README.md gives the fields). */
+ * (client/web/README.md gives the fields). The scene's objects are first
+ * brought in line with the world, as the next frame would, so that a page
+ * that gets no animation frames (a background tab) tells what it draws. */
 function state() {
     const w = page.world, joined = page.status === 'joined';
+    if (w)
+        view_sync_objects(view, w, ui_show_boxes());
     const vec = (p) => [p[0], p[1], p[2]];
     return {
         status: page.status,
@@ -169,9 +224,13 @@ function state() {
 
 window.cvre = {
     state,
-    setXRPose: (pose) => xr_set_override(xr, pose),
+    setXRPose: (pose) => {
+        xr_set_override(xr, pose);
+        tick();
+    },
 };
 
+wake();
 const params = new URLSearchParams(location.search);
 ui_form(ui, true, params.get('name') ?? '');
 if (params.has('name'))

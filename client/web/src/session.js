@@ -20,10 +20,12 @@ const SESSION_KEEPALIVE_FRACTION = 4;
 /* What a BYE from the server means, in words. */
 const BYE_WORDS = ['the server ended the session', 'the server is shutting down', 'you were removed from the server (kicked)'];
 
-/* Words for an ERROR, the code's meaning and the server's own text. */
+/* Words for an ERROR: the server's own text (or the code's meaning when
+ * it sent none), and the code's name, which a person can look up in
+ * PROTOCOL.md, section 8. */
 function error_words(code, message) {
-    const what = proto.proto_strerror(code);
-    return message && message !== what ? `${what}: ${message}` : what;
+    const name = Object.keys(S).find((k) => S[k] === code);
+    return `${message || proto.proto_strerror(code)} (${name || 'code ' + code})`;
 }
 
 /*
@@ -115,7 +117,7 @@ function on_message(s, data, name, password, box) {
     }
     const m = d.m;
     if (d.type === T.ERROR) {
-        session_end(s, `server error ${m.code}: ${error_words(m.code, m.message)}`, true);
+        session_end(s, `the server refused: ${error_words(m.code, m.message)}`, true);
         return;
     }
     if (d.type === T.BYE) {

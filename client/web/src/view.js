@@ -145,7 +145,9 @@ function object_drop(v, id) {
     v.object_entries.delete(id);
 }
 
-function objects_sync(v, world, show_boxes) {
+/* Brings the scene's objects in line with world: new, moved and removed
+ * objects, meshes as they arrive, the boxes shown when show_boxes. */
+export function view_sync_objects(v, world, show_boxes) {
     for (const id of [...v.object_entries.keys()])
         if (!world.objects.has(id))
             object_drop(v, id);
@@ -335,7 +337,7 @@ function markers_sync(v, world, show, self_pos, now) {
  * self_pos is where the user's avatar is drawn (the predicted position).
  */
 export function view_sync(v, world, opts) {
-    objects_sync(v, world, opts.show_boxes);
+    view_sync_objects(v, world, opts.show_boxes);
     avatars_sync(v, world, opts.pose_of, opts.dt);
     markers_sync(v, world, opts.show_collisions, opts.self_pos, opts.now);
 }

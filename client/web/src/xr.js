@@ -35,7 +35,7 @@ export function xr_new(v, parent) {
         grip.add(controller_shape());
         v.rig.add(grip);
     }
-    return { override: null };
+    return { override: null, tracked: null };
 }
 
 export function xr_presenting(v) {
@@ -69,22 +69,29 @@ function part_of(pose) {
     return { p: [t.position.x, t.position.y, t.position.z], q: [t.orientation.x, t.orientation.y, t.orientation.z, t.orientation.w] };
 }
 
-/* The tracked parts this frame: from the XR session while one runs, else
- * the override; null when there is neither. */
-export function xr_pose(x, v) {
-    if (!xr_presenting(v))
-        return x.override;
+/* Reads the viewer's and the controllers' poses of this XR frame, in the
+ * floor-level reference space (the rig's, whose origin is the avatar's
+ * position); call from the animation loop while presenting. */
+export function xr_track(x, v) {
     const frame = v.renderer.xr.getFrame(), space = v.renderer.xr.getReferenceSpace();
     const viewer = frame && space ? frame.getViewerPose(space) : null;
-    if (!viewer)
-        return null;
+    if (!viewer) {
+        x.tracked = null;
+        return;
+    }
     const parts = { head: part_of(viewer), left: null, right: null };
     for (const src of frame.session.inputSources) {
         const p = src.gripSpace ? frame.getPose(src.gripSpace, space) : null;
         if (p && (src.handedness === 'left' || src.handedness === 'right'))
             parts[src.handedness] = part_of(p);
     }
-    return parts;
+    x.tracked = parts;
+}
+
+/* The tracked parts to send: the XR frame's while a session runs, else
+ * the override; null when there is neither. */
+export function xr_pose(x, v) {
+    return xr_presenting(v) ? x.tracked : x.override;
 }
 
 /* Yaw and pitch of a head quaternion (three's YXZ order: yaw about +y,
