@@ -79,20 +79,38 @@ export function view_new(canvas) {
     return v;
 }
 
-/* The ground at y = 0 over the world's bounds, with a grid of 2 m. */
+/* A tile of the ground's texture: one 2 m cell with its edge drawn, so
+ * distance and motion show on the plain. */
+function ground_texture(renderer, repeat_x, repeat_z) {
+    const c = document.createElement('canvas');
+    c.width = c.height = 128;
+    const ctx = c.getContext('2d');
+    ctx.fillStyle = '#7d8c6c';
+    ctx.fillRect(0, 0, 128, 128);
+    ctx.strokeStyle = '#66735a';
+    ctx.lineWidth = 6;
+    ctx.strokeRect(0, 0, 128, 128);
+    const tex = new THREE.CanvasTexture(c);
+    tex.colorSpace = THREE.SRGBColorSpace;
+    tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
+    tex.repeat.set(repeat_x, repeat_z);
+    tex.anisotropy = renderer.capabilities.getMaxAnisotropy();
+    return tex;
+}
+
+/* The ground at y = 0 over the world's bounds, in cells of 2 m. */
 export function view_set_bounds(v, min, max) {
-    if (v.ground)
+    if (v.ground) {
         v.scene.remove(v.ground);
+        v.ground.material.map.dispose();
+        v.ground.material.dispose();
+        v.ground.geometry.dispose();
+    }
     const sx = Math.max(1, max[0] - min[0]), sz = Math.max(1, max[2] - min[2]);
-    const g = new THREE.Group();
-    const plane = new THREE.Mesh(new THREE.PlaneGeometry(sx, sz),
-        new THREE.MeshStandardMaterial({ color: 0x7d8c6c, roughness: 1 }));
-    plane.rotation.x = -Math.PI / 2;
-    g.add(plane);
-    const size = Math.max(sx, sz);
-    const grid = new THREE.GridHelper(size, Math.min(512, Math.round(size / 2)), 0x56624a, 0x6c7a5c);
-    grid.position.y = 0.005;
-    g.add(grid);
+    const g = new THREE.Mesh(new THREE.PlaneGeometry(sx, sz), new THREE.MeshStandardMaterial({
+        map: ground_texture(v.renderer, sx / 2, sz / 2), roughness: 1,
+    }));
+    g.rotation.x = -Math.PI / 2;
     g.position.set((min[0] + max[0]) / 2, 0, (min[2] + max[2]) / 2);
     v.ground = g;
     v.scene.add(g);
@@ -305,28 +323,44 @@ function avatars_sync(v, world, pose_of, dt) {
 
 /* ---- collisions -------------------------------------------------------- */
 
+/* A collision marker: a dot at the contact point and a line above it,
+ * the height of the avatar, so that a contact at one's feet shows at eye
+ * level too without hiding the view. Red, fading as it ages. */
+function marker_new(v, c, height) {
+    const mat = new THREE.MeshBasicMaterial({ color: 0xff2a1a, transparent: true, depthTest: false });
+    const line_mat = new THREE.LineBasicMaterial({ color: 0xff2a1a, transparent: true, depthTest: false });
+    const m = new THREE.Group();
+    const dot = new THREE.Mesh(v.marker_dot || (v.marker_dot = new THREE.SphereGeometry(0.05, 12, 8)), mat);
+    const post = new THREE.Line(v.marker_post || (v.marker_post = new THREE.BufferGeometry().setFromPoints(
+        [new THREE.Vector3(0, 0, 0), new THREE.Vector3(0, 1, 0)])), line_mat);
+    post.scale.y = height;
+    dot.renderOrder = post.renderOrder = 2;
+    m.add(dot, post);
+    m.position.fromArray(c.point);
+    m.userData.materials = [mat, line_mat];
+    return m;
+}
+
 function markers_sync(v, world, show, self_pos, now) {
     const keep = new Set(show ? world.collisions : []);
     for (const [c, m] of v.marker_entries) {
         if (!keep.has(c)) {
             v.markers.remove(m);
-            m.material.dispose();
+            m.userData.materials.forEach((x) => x.dispose());
             v.marker_entries.delete(c);
         }
     }
+    const height = world.self ? world.self.box[1] : 1.8;
     for (const c of keep) {
         const near = Math.hypot(c.point[0] - self_pos[0], c.point[2] - self_pos[2]) <= VIEW_COLLISION_NEAR;
         let m = v.marker_entries.get(c);
         if (!m && near) {
-            m = new THREE.Mesh(v.marker_geometry || (v.marker_geometry = new THREE.SphereGeometry(0.07, 12, 8)),
-                new THREE.MeshBasicMaterial({ color: 0xff2a1a, transparent: true, depthTest: false }));
-            m.position.fromArray(c.point);
-            m.renderOrder = 2;
+            m = marker_new(v, c, height);
             v.markers.add(m);
             v.marker_entries.set(c, m);
         }
         if (m)
-            m.material.opacity = Math.max(0, 1 - (now - c.t) / WORLD_COLLISION_SHOW_MS);
+            m.userData.materials.forEach((x) => { x.opacity = Math.max(0, 1 - (now - c.t) / WORLD_COLLISION_SHOW_MS); });
     }
 }
 
