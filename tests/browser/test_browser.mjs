@@ -55,6 +55,7 @@ for (const [file, what] of [
   [path.join(WEB_ROOT, 'node_modules', 'three', 'build', 'three.module.js'), `three.js is not installed in ${WEB_ROOT}/node_modules: ${DEPS}`],
   [CHROMIUM, `${CHROMIUM} is missing: ${DEPS}`],
   [MODEL, `the model ${MODEL} is missing (../shared beside the repository)`],
+  ...['cvre-server', 'cvre-client', 'cvre-admin', 'cvre-import'].map((b) => [path.join(BIN, b), `${BIN} has no ${b}: build it first`]),
 ]) {
   if (!fs.existsSync(file)) {
     console.log(`FAIL setup: ${what}`);
@@ -220,6 +221,11 @@ function decodePng(buf) {
   }
   return { width, height, px };
 }
+
+/** Resolves after the page drew two more frames. */
+const nextFrames = (page) => page.evaluate(() => new Promise((resolve) => {
+  requestAnimationFrame(() => requestAnimationFrame(resolve));
+}));
 
 /** A page's canvas as its WebGL left it (preserveDrawingBuffer), also
  * written to the temporary directory as FILE. */
@@ -400,7 +406,18 @@ check('walk', async () => {
 
 check('drop_model', async () => {
   const [p1, p2] = w.pages;
-  w.before = await canvasImage(p2, 'before-drop.png'); // the scene without the object, for the screenshot check
+  // The scene without the object, for the screenshot check: page 2's view
+  // once it is still (two frames alike), so that what changes after the
+  // drop is the object.
+  let prev = null;
+  w.before = await until('page 2\'s view stands still before the drop', async () => {
+    await nextFrames(p2);
+    const img = await canvasImage(p2, 'before-drop.png');
+    const moved = prev ? changed(prev, img).n : -1;
+    prev = img;
+    return [moved === 0, moved === 0 ? img : `${moved} pixels changed between two frames`];
+  });
+  w.avatarsBefore = JSON.stringify((await state(p2)).avatars.map((a) => [a.id, a.pos]));
   const bytes = fs.readFileSync(MODEL);
   const name = path.basename(MODEL);
   // Right of centre and below the horizon: onto the ground, right of ahead.
@@ -446,8 +463,10 @@ check('drop_model', async () => {
 
 check('screenshot', async () => {
   const p2 = w.pages[1];
-  await p2.evaluate(() => new Promise((resolve) => requestAnimationFrame(() => requestAnimationFrame(resolve))));
+  await nextFrames(p2);
   const img = await canvasImage(p2, 'after-drop.png');
+  const avatars = JSON.stringify((await state(p2)).avatars.map((a) => [a.id, a.pos]));
+  if (avatars !== w.avatarsBefore) throw new Error(`the avatars moved during the drop: ${w.avatarsBefore}, then ${avatars}`);
   const all = img.width * img.height;
   const { bg, other } = backgroundStats(img);
   if (other < all * 0.01) throw new Error(`page 2's canvas is blank: ${other} of ${all} pixels differ from its colour #${bg}`);
@@ -455,8 +474,8 @@ check('screenshot', async () => {
   const { n, box } = changed(w.before, img);
   const area = (box[2] - box[0] + 1) * (box[3] - box[1] + 1);
   if (n < 200 || area > all / 2) {
-    throw new Error(`the object in page 2's view: ${n} pixels changed when it came (at least 200 wanted), `
-      + `within x ${box[0]}..${box[2]}, y ${box[1]}..${box[3]} (at most half the canvas wanted)`);
+    const where = n ? `, within x ${box[0]}..${box[2]}, y ${box[1]}..${box[3]} (at most half the canvas wanted)` : '';
+    throw new Error(`the object in page 2's view: ${n} pixels changed when it came (at least 200 wanted)${where}`);
   }
   w.shot = img;
 });
