@@ -1,7 +1,9 @@
 /*
  * fuzz_ws.c: structure-aware fuzz target for the WebSocket frame reader
  * (protocol/ws.c), which the web endpoint feeds with a browser's, or a
- * stranger's, bytes once the handshake is done.
+ * stranger's, bytes once the handshake is done; and for the client's side
+ * of the same codec (cvre-client --ws), which reads a server's answer to
+ * its upgrade and then the server's frames.
  *
  * Inputs are streams of client frames. The generator writes frames of
  * every opcode (the six known and reserved ones), FIN set or not, RSV bits
@@ -20,6 +22,14 @@
  * close code, or the same bytes left over). Every message is within the
  * cap, every control payload within 125 bytes, every close code one a
  * peer may send, and every refusal names a close code the server sends.
+ *
+ * Every input is also read as a client reads a server: a third of the
+ * generated ones are a server's stream (an answer to the upgrade, its
+ * header lines shuffled, now and then wrong, then unmasked frames). The
+ * answer's check takes no more than the input and agrees with itself on
+ * the head alone; what follows the head (or the whole input, when there is
+ * no valid head) is read by a client's reader, whole and in pieces, with
+ * the same checks.
  */
 #include <errno.h>
 #include <stdio.h>
@@ -31,6 +41,9 @@
 
 /* The message cap under test: small, so that fragments reach it. */
 #define FUZZ_WS_CAP 3000u
+/* The client's upgrade key and its accept: RFC 6455's example (1.3). */
+#define FUZZ_WS_KEY "dGhlIHNhbXBsZSBub25jZQ=="
+#define FUZZ_WS_ACCEPT "s3pPLMBiTxaQ9kYGzzhZRbK+xOo="
 
 /* ---- generator --------------------------------------------------------------- */
 
@@ -92,6 +105,9 @@ static void put_frame(fz_buf *b, uint8_t b0, uint64_t len, int form, int unmaske
     }
 }
 
+/* Generating a server's stream: frames unmasked, as a server sends them. */
+static int server_stream;
+
 static uint8_t pick_b0(void)
 {
     static const uint8_t ops[] = {WS_OP_BINARY, WS_OP_BINARY, WS_OP_CONTINUATION, WS_OP_PING, WS_OP_PONG,
@@ -115,20 +131,58 @@ static void put_any(fz_buf *b)
     if ((b0 & 0xF) >= 0x8 && !fz_one_in(10))
         len = fz_below(WS_CONTROL_MAX + 2);
     int form = fz_one_in(12) ? (int)"\1\2\10"[fz_below(3)] : 0;
-    put_frame(b, b0, len, form, fz_one_in(30));
+    put_frame(b, b0, len, form, server_stream ? !fz_one_in(30) : fz_one_in(30));
     if ((b0 & 0xF) == WS_OP_BINARY && !(b0 & 0x80)) {
         for (uint32_t k = fz_below(4); k > 0; k--) {
             if (fz_one_in(2))
-                put_frame(b, 0x80 | (uint8_t)(WS_OP_PING + fz_below(2)), fz_below(10), 0, 0);
-            put_frame(b, WS_OP_CONTINUATION, pick_length(), 0, 0);
+                put_frame(b, 0x80 | (uint8_t)(WS_OP_PING + fz_below(2)), fz_below(10), 0, server_stream);
+            put_frame(b, WS_OP_CONTINUATION, pick_length(), 0, server_stream);
         }
-        put_frame(b, 0x80 | WS_OP_CONTINUATION, pick_length(), 0, 0);
+        put_frame(b, 0x80 | WS_OP_CONTINUATION, pick_length(), 0, server_stream);
     }
+}
+
+/* A server's answer to the upgrade: a status line, the three headers it
+ * needs in any order, each now and then wrong or left out, now and then a
+ * header it must not send or a line without a colon. */
+static void put_answer(fz_buf *b)
+{
+    static const char *const status[] = {"HTTP/1.1 101 Switching Protocols", "HTTP/1.1 101",
+                                         "HTTP/1.1 426 Upgrade Required", "HTTP/1.0 101 OK", "HTTP/1.1 1010 x"};
+    static const char *const lines[][2] = {
+        {"Upgrade: websocket", "Upgrade: h2c"},
+        {"Connection: keep-alive, Upgrade", "Connection: close"},
+        {"Sec-WebSocket-Accept: " FUZZ_WS_ACCEPT, "Sec-WebSocket-Accept: AAAAAAAAAAAAAAAAAAAAAAAAAAA="},
+        {"Sec-WebSocket-Extensions: permessage-deflate", "no colon here"},
+        {"Server: cvre", "X-Padding:\t  spaces  \t"},
+    };
+    const char *st = status[fz_one_in(4) ? fz_below(5) : 0];
+    fz_put(b, st, strlen(st));
+    fz_put(b, "\r\n", 2);
+    int order[5] = {0, 1, 2, 3, 4};
+    for (int i = 4; i > 0; i--) {
+        int j = (int)fz_below((uint32_t)i + 1), t = order[i];
+        order[i] = order[j];
+        order[j] = t;
+    }
+    for (int i = 0; i < 5; i++) {
+        int k = order[i];
+        if (k >= 3 ? !fz_one_in(8) : fz_one_in(20))
+            continue; /* the needed ones mostly there, the others seldom */
+        const char *line = lines[k][fz_one_in(10)];
+        fz_put(b, line, strlen(line));
+        fz_put(b, "\r\n", 2);
+    }
+    if (!fz_one_in(20))
+        fz_put(b, "\r\n", 2);
 }
 
 static size_t ws_generate(uint8_t *out, size_t max)
 {
     fz_buf b = {out, 0, max < 16384 ? max : 16384};
+    server_stream = fz_one_in(3);
+    if (server_stream)
+        put_answer(&b);
     for (uint32_t k = 1 + fz_below(8); k > 0 && b.len < b.cap; k--)
         put_any(&b);
     return b.len;
@@ -209,7 +263,7 @@ typedef struct seen {
     size_t left;      /* bytes not taken */
 } seen;
 
-static void see(seen *s, const ws_event *ev, size_t cap)
+static void see(seen *s, const ws_event *ev, size_t cap, int of_server)
 {
     FZ_CHECK(ev->type == WS_EV_NONE || ev->type == WS_EV_MESSAGE || ev->type == WS_EV_PING ||
              ev->type == WS_EV_PONG || ev->type == WS_EV_CLOSE);
@@ -218,7 +272,8 @@ static void see(seen *s, const ws_event *ev, size_t cap)
     if (ev->type == WS_EV_PING || ev->type == WS_EV_PONG)
         FZ_CHECK(ev->len <= WS_CONTROL_MAX);
     if (ev->type == WS_EV_CLOSE) {
-        FZ_CHECK(ev->code == 0 ? ev->len == 0 : ws_close_code_valid(ev->code));
+        FZ_CHECK(ev->code == 0 ? ev->len == 0
+                               : ws_close_code_valid(ev->code) || (of_server && ev->code >= 1012 && ev->code <= 1014));
         FZ_CHECK(ev->len <= WS_CONTROL_MAX - 2);
     }
     if (ev->type == WS_EV_NONE)
@@ -239,12 +294,16 @@ static void check_refusal(ssize_t rc, uint16_t code)
 
 /* Reads data[0..size) as it would arrive in pieces: 0 pieces of step
  * bytes (step 0: all at once), taking frames after each, as the endpoint
- * does with conn's input. */
-static void read_stream(const uint8_t *data, size_t size, size_t step, seen *s)
+ * does with conn's input; as a client reads a server's frames when
+ * of_server. */
+static void read_stream(const uint8_t *data, size_t size, size_t step, seen *s, int of_server)
 {
     static uint8_t buf[FZ_INPUT_MAX];
     ws_reader r;
-    ws_reader_init(&r, FUZZ_WS_CAP);
+    if (of_server)
+        ws_reader_init_client(&r, FUZZ_WS_CAP);
+    else
+        ws_reader_init(&r, FUZZ_WS_CAP);
     *s = (seen){.hash = 14695981039346656037u};
     size_t have = 0, fed = 0;
     while (fed < size) {
@@ -270,7 +329,7 @@ static void read_stream(const uint8_t *data, size_t size, size_t step, seen *s)
                 break;
             FZ_CHECK((size_t)rc <= have);
             FZ_CHECK(r.msg_len <= FUZZ_WS_CAP && r.msg_alloc <= FUZZ_WS_CAP);
-            see(s, &ev, FUZZ_WS_CAP);
+            see(s, &ev, FUZZ_WS_CAP, of_server);
             memmove(buf, buf + rc, have - (size_t)rc);
             have -= (size_t)rc;
         }
@@ -279,15 +338,39 @@ static void read_stream(const uint8_t *data, size_t size, size_t step, seen *s)
     ws_reader_free(&r);
 }
 
-static unsigned long n_inputs, n_events, n_refused[5];
+static unsigned long n_inputs, n_events, n_refused[5], n_heads, n_client_events;
+
+/* Reads data whole and in pieces of a size the input decides; the two
+ * must agree. Returns the whole reading. */
+static seen read_both(const uint8_t *data, size_t size, int of_server)
+{
+    seen whole, pieces;
+    read_stream(data, size, 0, &whole, of_server);
+    read_stream(data, size, size ? 1u + data[size / 2] % 97u : 1u, &pieces, of_server);
+    FZ_CHECK(whole.events == pieces.events && whole.bytes == pieces.bytes && whole.hash == pieces.hash);
+    FZ_CHECK(whole.end == pieces.end && whole.code == pieces.code && whole.left == pieces.left);
+    return whole;
+}
+
+/* The client's side: the answer to the upgrade, then the server's frames. */
+static void client_side(const uint8_t *data, size_t size)
+{
+    char err[128] = "";
+    int head = ws_client_response(data, size, FUZZ_WS_KEY, err, sizeof err);
+    FZ_CHECK(head <= (int)size && (head >= 0 || err[0]));
+    if (head > 0) {
+        FZ_CHECK(memcmp(data + head - 4, "\r\n\r\n", 4) == 0);
+        FZ_CHECK(ws_client_response(data, (size_t)head, FUZZ_WS_KEY, NULL, 0) == head);
+        n_heads++;
+    }
+    size_t skip = head > 0 ? (size_t)head : 0;
+    n_client_events += read_both(data + skip, size - skip, 1).events;
+}
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    seen whole, pieces;
-    read_stream(data, size, 0, &whole);
-    read_stream(data, size, size ? 1u + data[size / 2] % 97u : 1u, &pieces);
-    FZ_CHECK(whole.events == pieces.events && whole.bytes == pieces.bytes && whole.hash == pieces.hash);
-    FZ_CHECK(whole.end == pieces.end && whole.code == pieces.code && whole.left == pieces.left);
+    seen whole = read_both(data, size, 0);
+    client_side(data, size);
     n_inputs++;
     n_events += whole.events;
     if (whole.end) {
@@ -303,8 +386,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 /* If events drop to near zero, inputs no longer get past the first header. */
 static void ws_report(void)
 {
-    fprintf(stderr, "fuzz_ws: %lu streams, %lu events, closed 1002 %lu, 1007 %lu, 1003 %lu, 1009 %lu, 1011 %lu\n",
-            n_inputs, n_events, n_refused[0], n_refused[1], n_refused[2], n_refused[3], n_refused[4]);
+    fprintf(stderr, "fuzz_ws: %lu streams, %lu events, closed 1002 %lu, 1007 %lu, 1003 %lu, 1009 %lu, 1011 %lu; "
+            "as a client: %lu answers taken, %lu events\n",
+            n_inputs, n_events, n_refused[0], n_refused[1], n_refused[2], n_refused[3], n_refused[4], n_heads,
+            n_client_events);
 }
 
 const fz_target fz_self = {"fuzz_ws", NULL, ws_generate, ws_mutate, NULL, ws_report, NULL};

@@ -9,7 +9,8 @@ shared children, 2^31-1 STL triangles, 4e9 PLY vertices, 1e39 and 1e38
 coordinates, indices out of range... For fuzz_proto, the seeds that
 `fuzz_proto --write-seeds` writes plus hostile frames; for fuzz_http,
 requests as clients send them and one of each class refused; for fuzz_ws,
-client frames as browsers send them and one of each class refused. Files named known-*
+client frames as browsers send them and one of each class refused, and
+servers' answers to cvre-client --ws with their frames. Files named known-*
 trigger bugs reported and not yet fixed (each target's known() skips them).
 
 Deterministic: the same models make the same files. Existing files of the
@@ -555,9 +556,15 @@ def ws_frame(b0, payload=b'', form=None, masked=True, length=None):
     return head + key + bytes(c ^ key[i % 4] for i, c in enumerate(payload))
 
 
+# The answer to fuzz_ws.c's FUZZ_WS_KEY (RFC 6455's example), as the server writes it.
+WS_ANSWER = (b'HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n'
+             b'Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n\r\n')
+
+
 def ws_corpus(out):
     """WebSocket client frames (fuzz_ws): what browsers send, and one of
-    each class protocol/ws.c refuses."""
+    each class protocol/ws.c refuses; and a server's answers and frames
+    as cvre-client --ws reads them."""
     FIN, BIN, CONT, TEXT, CLOSE, PING, PONG = 0x80, 0x2, 0x0, 0x1, 0x8, 0x9, 0xA
     proto = frame(3, bytes([4]) + b'anna' + struct.pack('<3f', 1, 1, 1))  # a JOIN, as one message
     seeds = {
@@ -588,6 +595,13 @@ def ws_corpus(out):
         'too-big': ws_frame(FIN | BIN, form=8, length=1 << 40),
         'too-big-fragments': ws_frame(BIN, b'a' * 2000) + ws_frame(FIN | CONT, b'b' * 1001),
         'unfinished': ws_frame(FIN | BIN, proto)[:-3],
+        'server-answer-and-frames': WS_ANSWER + ws_frame(FIN | BIN, proto, masked=False) +
+        ws_frame(FIN | PING, b'p', masked=False) + ws_frame(FIN | CLOSE, struct.pack('>H', 1013) + b'full',
+                                                           masked=False),
+        'server-answer-cut': WS_ANSWER[:-3],
+        'server-refusal-426': b'HTTP/1.1 426 Upgrade Required\r\nSec-WebSocket-Version: 13\r\n\r\n',
+        'server-wrong-accept': WS_ANSWER.replace(b's3pP', b'AAAA') + ws_frame(FIN | BIN, proto, masked=False),
+        'server-bad-masked': WS_ANSWER + ws_frame(FIN | BIN, proto),
     }
     for name, data in seeds.items():
         write(out, 'fuzz_ws', name, data)
