@@ -34,6 +34,12 @@
 #define BOTS_RAW_SPEED 4.0
 #define BOTS_RAW_HALF 500.0
 
+/* Over a WebSocket, upgrades in flight at once, at most: the server's web
+ * endpoint answers 16 HTTP connections at a time and refuses more with 503
+ * (server/net/http_server.h), so that two swarms side by side stay within
+ * it. The ramp waits for a place. */
+#define BOTS_UPGRADES_MAX 8u
+
 /* Moves remembered per bot to reconcile with the server: 32 at 20 Hz is
  * 1.6 s in flight, far beyond a healthy round trip; past it a bot simply
  * jumps to the authoritative position. A power of two. */
@@ -66,6 +72,8 @@ struct bots {
     bot *bot;
     unsigned started;
     unsigned open; /* started and not yet closed */
+    unsigned upgrading[BOTS_UPGRADES_MAX]; /* --ws: bots whose upgrade may be in flight */
+    unsigned nupgrading;
     uint64_t t0;
     uint64_t period_ns;
     /* The next due move is bot[cursor]'s in the period that began at
@@ -278,8 +286,25 @@ static void start_bot(bots *b, bot *t)
 
 /* ---- timers ------------------------------------------------------------ */
 
-/* Starts what the ramp allows by now, then sends every move whose slot has
- * come. A loop that fell more than a period behind skips the missed
+/* Over a WebSocket: forgets the bots whose upgrade is over (answered,
+ * refused or never begun); returns 1 if another may start. */
+static int upgrade_room(bots *b)
+{
+    if (!b->o.net.ws)
+        return 1;
+    unsigned k = 0;
+    for (unsigned i = 0; i < b->nupgrading; i++) {
+        session *c = b->bot[b->upgrading[i]].c;
+        if (c && (session_state(c) == SESSION_CONNECTING || session_state(c) == SESSION_UPGRADING))
+            b->upgrading[k++] = b->upgrading[i];
+    }
+    b->nupgrading = k;
+    return k < BOTS_UPGRADES_MAX;
+}
+
+/* Starts what the ramp allows by now (over a WebSocket, no more than
+ * BOTS_UPGRADES_MAX upgrades at once), then sends every move whose slot
+ * has come. A loop that fell more than a period behind skips the missed
  * periods rather than sending them in a burst. */
 static void on_tick(ev_loop *loop, void *data)
 {
@@ -287,8 +312,10 @@ static void on_tick(ev_loop *loop, void *data)
     uint64_t now = ev_now(loop);
     double due = (double)(now - b->t0) / (double)NS_PER_S * b->o.ramp + 1.0;
     unsigned target = due >= (double)b->o.count ? b->o.count : (unsigned)due;
-    while (b->started < target) {
+    while (b->started < target && upgrade_room(b)) {
         bot *t = &b->bot[b->started++];
+        if (b->o.net.ws)
+            b->upgrading[b->nupgrading++] = t->idx;
         start_bot(b, t);
     }
     for (unsigned budget = b->o.count; budget > 0; budget--) {

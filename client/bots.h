@@ -1,7 +1,8 @@
 /*
  * bots.h: a swarm of simulated users on one event loop, for load tests.
  *
- * Bots connect at a fixed ramp, join as "<prefix>-<i>" and then each sends
+ * Bots connect at a fixed ramp (over a WebSocket, with at most
+ * BOTS_UPGRADES_MAX upgrades in flight), join as "<prefix>-<i>" and then each sends
  * a move at the rate, spread evenly over the period so the server sees a
  * steady stream rather than bursts. Only totals are printed (a stats line a
  * second and a summary), plus each error, each bye and each unexpected close
