@@ -591,6 +591,15 @@ export function proto_put_upload_end(upload_id, pos, yaw, scale) {
     return w.end();
 }
 
+export function proto_put_object_place(object_id, pos, yaw, scale) {
+    const w = new writer(T.OBJECT_PLACE, 24);
+    w.u32(object_id);
+    w.vec3(pos);
+    w.f32(yaw);
+    w.f32(scale);
+    return w.end();
+}
+
 /* hash: the 64 hex digits of OBJECT_INFO's mesh_hash. */
 export function proto_put_mesh_request(object_id, hash) {
     const w = new writer(T.MESH_REQUEST, 4 + PROTO_MESH_HASH_SIZE);

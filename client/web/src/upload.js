@@ -2,7 +2,8 @@
  * upload.js: a model file dropped on the page becomes an object where the
  * user points. The file goes up as OBJECT_UPLOAD_BEGIN, CHUNKs of
  * PROTO_CHUNK_MAX bytes and END (PROTOCOL.md, section 5), y up at unit
- * scale, with the extension as the format hint; the chunks are paced by
+ * scale, with the extension as the format hint, and then stood on the
+ * spot by its boxes (upload_object); the chunks are paced by
  * the socket's send buffer so that moves keep flowing beside a large
  * file. One upload at a time, as the server allows.
  */
@@ -27,7 +28,7 @@ const UPLOAD_AHEAD = 3;
  * queued on the socket, status(words), problem(words).
  */
 export function upload_new(io) {
-    return { io, next_id: UPLOAD_ID_BASE, cur: null };
+    return { io, next_id: UPLOAD_ID_BASE, cur: null, placing: null };
 }
 
 /* Where a drop places an object: the picked point, else UPLOAD_AHEAD in
@@ -111,19 +112,50 @@ function upload_finish(u, cur) {
         u.cur = null;
 }
 
-/* OBJECT_INFO with our upload id: the upload became an object. */
+/* The bottom centre of the box around an OBJECT_INFO's boxes. */
+function base_of(info) {
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (const b of info.boxes)
+        for (let k = 0; k < 3; k++) {
+            lo[k] = Math.min(lo[k], b.min[k]);
+            hi[k] = Math.max(hi[k], b.max[k]);
+        }
+    return [(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2];
+}
+
+/*
+ * OBJECT_INFO with our upload id: the upload became an object, its origin
+ * where the user pointed. Many models do not sit on their origin (a desk
+ * beside it, a statue below it), so one OBJECT_PLACE then moves the
+ * object by the difference between that point and the bottom centre of
+ * its boxes, as cvre-client's `import --anchor base` does: the model
+ * stands where it was dropped.
+ */
 export function upload_object(u, info) {
     const cur = u.cur;
     if (!cur || info.upload_id !== cur.id)
         return;
     upload_finish(u, cur);
+    const base = info.boxes.length ? base_of(info) : cur.pos;
+    const d = cur.pos.map((c, k) => c - base[k]);
+    const at = info.at.pos.map((c, k) => c + d[k]);
     u.io.status(`${cur.name} is object ${info.object_id} (${info.tri_count} triangles), ` +
-        `at (${info.at.pos.map((c) => c.toFixed(2)).join(', ')})`);
+        `at (${cur.pos.map((c) => c.toFixed(2)).join(', ')})`);
+    if (Math.hypot(d[0], d[1], d[2]) > 0.001 &&
+        u.io.send(proto.proto_put_object_place(info.object_id, at, info.at.yaw, info.at.scale)))
+        u.placing = { object_id: info.object_id, name: cur.name };
 }
 
-/* OBJECT_REJECTED of our upload: told once, in words; the refusals of
- * the chunks still on their way after it are dropped. */
+/* OBJECT_REJECTED of our upload, or of the placement after it: told
+ * once, in words; the refusals of the chunks still on their way after
+ * the first are dropped. */
 export function upload_rejected(u, m) {
+    if (u.placing && m.request_id === u.placing.object_id) {
+        u.io.problem(`${u.placing.name} (object ${m.request_id}) stays at its origin: ` +
+            `${proto.proto_strerror(m.code)}${m.message ? ' (' + m.message + ')' : ''}`);
+        u.placing = null;
+        return;
+    }
     const cur = u.cur;
     if (!cur || m.request_id !== cur.id)
         return;
