@@ -74,15 +74,19 @@ function join(name, password) {
             page.control = control_new(j.pos);
             page.status = 'joined';
             page.ticker = setInterval(tick, 1000 / world.welcome.tick_hz);
+            users();
             ui_status(ui, `joined as ${name}${password ? '' : ' (guest)'}, avatar ${j.avatar_id}`);
         },
         on_frame: (type, m) => {
             world_frame(world, type, m);
+            if (type === proto.T.AVATAR_JOINED || type === proto.T.AVATAR_LEFT)
+                users();
             wake();
         },
         on_end: (words, is_error) => {
             page.status = 'closed';
             clearInterval(page.ticker);
+            users();
             wake();
             if (is_error)
                 ui_error(ui, words);
@@ -90,6 +94,13 @@ function join(name, password) {
             ui_form(ui, true, name);
         },
     });
+}
+
+/* The list of users present, kept by the frames that change it rather
+ * than by the animation frames, which a background tab does not get. */
+function users() {
+    const w = page.world, joined = page.status === 'joined';
+    ui_users(ui, joined ? w.self.name : null, joined ? [...w.avatars.values()] : []);
 }
 
 /* A frame is drawn while something may change on screen: for this long
@@ -155,7 +166,6 @@ function frame() {
             show_boxes: ui_show_boxes(), show_collisions: ui_show_collisions(),
             pose_of: proto.proto_pose_metres, dt: frame_dt(now), self_pos: me, now,
         });
-        ui_users(ui, joined ? w.self.name : null, joined ? [...w.avatars.values()] : []);
         const rtt = page.session && page.session.rtt_ms !== null ? `, round trip ${page.session.rtt_ms.toFixed(0)} ms` : '';
         ui_hud(ui, joined ? `(${me.map((c) => c.toFixed(1)).join(', ')}) · ${w.objects.size} objects, ` +
             `${w.meshes.size} meshes${rtt}` : '');

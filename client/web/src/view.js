@@ -235,7 +235,7 @@ function label_sprite(text) {
     const tex = new THREE.CanvasTexture(c);
     tex.colorSpace = THREE.SRGBColorSpace;
     const s = new THREE.Sprite(new THREE.SpriteMaterial({ map: tex, depthWrite: false }));
-    s.scale.set(0.32 * w / 64, 0.32, 1);
+    s.scale.set(0.24 * w / 64, 0.24, 1);
     return s;
 }
 
