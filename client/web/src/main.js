@@ -245,3 +245,5 @@ const params = new URLSearchParams(location.search);
 ui_form(ui, true, params.get('name') ?? '');
 if (params.has('name'))
     join(params.get('name'), '');
+else
+    ui_status(ui, 'not connected: give a name to join as a guest, and a password to join as an account');
