@@ -582,22 +582,23 @@ export function proto_put_upload_chunk(upload_id, offset, data) {
     return w.end();
 }
 
-export function proto_put_upload_end(upload_id, pos, yaw, scale) {
-    const w = new writer(T.OBJECT_UPLOAD_END, 24);
-    w.u32(upload_id);
+/* A frame of an id and a transform (section 1): OBJECT_UPLOAD_END and
+ * OBJECT_PLACE. */
+function put_transform(type, id, pos, yaw, scale) {
+    const w = new writer(type, 24);
+    w.u32(id);
     w.vec3(pos);
     w.f32(yaw);
     w.f32(scale);
     return w.end();
 }
 
+export function proto_put_upload_end(upload_id, pos, yaw, scale) {
+    return put_transform(T.OBJECT_UPLOAD_END, upload_id, pos, yaw, scale);
+}
+
 export function proto_put_object_place(object_id, pos, yaw, scale) {
-    const w = new writer(T.OBJECT_PLACE, 24);
-    w.u32(object_id);
-    w.vec3(pos);
-    w.f32(yaw);
-    w.f32(scale);
-    return w.end();
+    return put_transform(T.OBJECT_PLACE, object_id, pos, yaw, scale);
 }
 
 /* hash: the 64 hex digits of OBJECT_INFO's mesh_hash. */

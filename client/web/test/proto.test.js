@@ -51,6 +51,9 @@ test('worked examples of section 11, byte for byte', () => {
     const pose = p.proto_pose_fit(0.5, -0.25, { head: { p: [0, 1.7, 0], q: [0, 0, 0, 1] } });
     assert.equal(hex(p.proto_put_move(2, [1, 0, -2.5], pose)),
         '29000000050002000000' + '0000803f00000000000020c0' + '0000003f000080be01' + '0000a4060000' + '000000000000ff7f');
+    assert.equal(hex(p.proto_put_object_place(3, [0, 0, 10], Math.PI / 2, 2)),
+        '1a000000230003000000' + '000000000000000000002041' + 'db0fc93f' + '00000040');
+    assert.equal(hex(p.proto_put_upload_end(3, [0, 0, 10], Math.PI / 2, 2)).slice(8, 12), '2200');
 });
 
 test('framing: the message is exactly one frame within the cap', () => {
