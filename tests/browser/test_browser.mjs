@@ -373,6 +373,13 @@ check('join_and_see', async () => {
       return [pos && dist(pos, own) <= TOL_M, `at ${fmt(pos)}, its own ${fmt(own)}`];
     });
   }
+  // three's VRButton: "ENTER VR" where WebXR can start a session, else
+  // a disabled button or a note saying why not (headless: no headset).
+  const vr = await until('page 2 shows one VR button (three\'s VRButton)', async () => {
+    const texts = await p2.$$eval('button, a', (els) => els.map((e) => e.textContent).filter((t) => /\bVR\b|WEBXR/.test(t)));
+    return [texts.length === 1, texts.length === 1 ? texts[0] : JSON.stringify(texts)];
+  });
+  console.log(`     page 2's VR button says ${JSON.stringify(vr)}`);
   for (const [page, label] of [[p1, 'page 1'], [p2, 'page 2']]) {
     await until(`${label}'s #users lists alice, bob and term`, async () => {
       const names = await page.$$eval('#users li', (lis) => lis.map((li) => li.textContent));
