@@ -65,6 +65,7 @@ for (const [file, what] of [
 }
 
 const TMP = fs.mkdtempSync(path.join(os.tmpdir(), 'cvre-browser-'));
+const PROFILE = path.join(TMP, 'chromium'); // the browser's profile, removed at the end
 const children = []; // every process started, killed by teardown and the watchdog
 let browser = null;
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
@@ -80,6 +81,7 @@ const watchdog = setTimeout(() => {
   console.log(`FAIL watchdog: the run took over ${WATCHDOG_MS / 1000}s; everything killed, logs kept in ${TMP}`);
   console.log('0 passed, 1 failed');
   killAll();
+  fs.rmSync(PROFILE, { recursive: true, force: true });
   process.exit(1);
 }, WATCHDOG_MS);
 
@@ -314,7 +316,8 @@ check('webgl', async () => {
   w.termJoin = await w.term.wait('join_ok', 'join_ok');
   const args = ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'];
   if (process.getuid && process.getuid() === 0) args.push('--no-sandbox'); // root has no user namespace sandbox
-  browser = await puppeteer.launch({ executablePath: CHROMIUM, headless: true, args, defaultViewport: VIEW });
+  browser = await puppeteer.launch({ executablePath: CHROMIUM, headless: true, args, defaultViewport: VIEW,
+    userDataDir: PROFILE });
   w.pages = [];
   for (const label of ['page 1', 'page 2']) {
     const ctx = await browser.createBrowserContext();
@@ -591,6 +594,7 @@ try {
   clearTimeout(watchdog);
   if (browser) await Promise.race([browser.close(), sleep(5000)]);
   killAll();
+  fs.rmSync(PROFILE, { recursive: true, force: true });
 }
 console.log(`browser test: ${((Date.now() - t0) / 1000).toFixed(1)}s`);
 console.log(`${checks.length - failed} passed, ${failed} failed`);
