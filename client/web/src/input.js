@@ -12,8 +12,9 @@
  * changed. The prediction is then moved by the difference between that
  * position and where we had asked to be at ack_seq, and the moves not yet
  * applied move with it, so a wall or the speed limit corrects the
- * prediction within a round trip while unanswered steps are kept. Height
- * is the server's alone (it applies gravity and steps; MOVE's y is only
+ * prediction within a round trip while unanswered steps are kept. The
+ * prediction itself stops at the objects' collision boxes. Height is the
+ * server's alone (it applies gravity and steps; MOVE's y is only
  * carried).
  */
 import * as proto from './proto.js';
@@ -42,7 +43,10 @@ const KEYS = {
  */
 export function input_new(canvas) {
     const inp = { yaw: 0, pitch: 0, keys: new Set(), run: false, dragging: false };
-    const typing = (e) => e.target instanceof HTMLInputElement || e.target instanceof HTMLTextAreaElement;
+    /* Keys typed into a text field are the field's; a focused checkbox
+     * or button does not take letters, so the walk keeps them. */
+    const typing = (e) => (e.target instanceof HTMLInputElement && !['checkbox', 'radio', 'button', 'submit'].includes(e.target.type)) ||
+        e.target instanceof HTMLTextAreaElement;
     window.addEventListener('keydown', (e) => {
         if (typing(e))
             return;
@@ -92,6 +96,7 @@ export function control_new(spawn) {
         pending: [],          /* {seq, x, z}: moves sent, not yet applied */
         seq: 0,
         sent: null,           /* {x, y, z, key}: the last move sent */
+        push: [0, 0, 0],      /* the walk a box kept back since that move */
         next_send: 0,
     };
 }
@@ -99,9 +104,15 @@ export function control_new(spawn) {
 /*
  * Advances the prediction by dt seconds of the keys held, at walking
  * speed (Shift: near the server's max_speed), relative to yaw. A
- * VR thumbstick's [right, forward] may be given as stick.
+ * VR thumbstick's [right, forward] may be given as stick. blocked(from,
+ * to) tells whether the avatar may not go from one point to the other
+ * (world_blocked); each axis is tried on its own, so the prediction
+ * slides along a wall as the server's move does instead of walking into
+ * it and being pulled back. What a wall kept back is still asked for
+ * (control_move): the server must see the user push into the box, since
+ * its collisions are what refine the collision maps.
  */
-export function control_step(c, inp, dt, max_speed, stick) {
+export function control_step(c, inp, dt, max_speed, stick, blocked) {
     let right = 0, fwd = 0;
     for (const k of inp.keys) {
         right += KEYS[k][0];
@@ -118,8 +129,15 @@ export function control_step(c, inp, dt, max_speed, stick) {
     const speed = (inp.run ? top : Math.min(INPUT_WALK_SPEED, top)) * Math.min(1, len) / len;
     const s = Math.sin(inp.yaw), co = Math.cos(inp.yaw);
     /* Forward is (-sin yaw, 0, -cos yaw); right is (cos yaw, 0, -sin yaw). */
-    c.pred[0] += (fwd * -s + right * co) * speed * dt;
-    c.pred[2] += (fwd * -co + right * -s) * speed * dt;
+    const d = [(fwd * -s + right * co) * speed * dt, 0, (fwd * -co + right * -s) * speed * dt];
+    for (const k of [0, 2]) {
+        const to = c.pred.slice();
+        to[k] += d[k];
+        if (!blocked(c.pred, to))
+            c.pred = to;
+        else
+            c.push[k] += d[k];
+    }
 }
 
 /*
@@ -153,19 +171,25 @@ export function control_correct(c, ack_seq, auth_pos, last_auth) {
 
 /*
  * The MOVE to send now, or null: none before next_send (one a server
- * tick), none when neither the position nor the pose changed. pose is a
- * quantized pose (proto.proto_pose_fit); key names it for comparison.
+ * tick), none when neither the position nor the pose changed and no box
+ * kept the walk back. pose is a quantized pose (proto.proto_pose_fit).
+ * The move asks for the predicted position plus what a box kept back
+ * (into the box: the server stops the avatar and reports the collision);
+ * the prediction is what is kept for the correction, since that is where
+ * the avatar is expected to end.
  */
 export function control_move(c, now, tick_ms, pose) {
     if (now < c.next_send)
         return null;
     const key = JSON.stringify(pose);
-    const s = c.sent;
-    if (s && Math.abs(s.x - c.pred[0]) < INPUT_EPSILON && Math.abs(s.z - c.pred[2]) < INPUT_EPSILON && s.key === key)
+    const s = c.sent, pushing = c.push[0] !== 0 || c.push[2] !== 0;
+    if (s && !pushing && Math.abs(s.x - c.pred[0]) < INPUT_EPSILON && Math.abs(s.z - c.pred[2]) < INPUT_EPSILON && s.key === key)
         return null;
     c.seq++;
     c.sent = { x: c.pred[0], z: c.pred[2], key };
     c.pending.push({ seq: c.seq, x: c.pred[0], z: c.pred[2] });
     c.next_send = now + tick_ms;
-    return proto.proto_put_move(c.seq, c.pred, pose);
+    const want = [c.pred[0] + c.push[0], c.pred[1], c.pred[2] + c.push[2]];
+    c.push = [0, 0, 0];
+    return proto.proto_put_move(c.seq, want, pose);
 }

@@ -8,7 +8,7 @@
  */
 import * as proto from './proto.js';
 import { session_open, session_send, session_buffered, session_quit } from './session.js';
-import { world_new, world_welcome, world_joined, world_frame, world_prune } from './world.js';
+import { world_new, world_welcome, world_joined, world_frame, world_prune, world_blocked } from './world.js';
 import { input_new, control_new, control_step, control_correct, control_move } from './input.js';
 import { view_new, view_set_bounds, view_sync, view_sync_objects, view_place_camera, view_render, view_pick,
     view_drawn_triangles, VIEW_EYE_HEIGHT } from './view.js';
@@ -136,7 +136,7 @@ function tick() {
     const parts = xr_pose(xr, view);
     if (parts && parts.head)
         Object.assign(input, xr_facing(parts.head.q));
-    control_step(page.control, input, dt, w.welcome.max_speed, xr_stick(view));
+    control_step(page.control, input, dt, w.welcome.max_speed, xr_stick(view), (a, b) => world_blocked(w, a, b));
     const pose = proto.proto_pose_fit(input.yaw, input.pitch, parts);
     const move = control_move(page.control, now, 1000 / w.welcome.tick_hz, pose);
     if (move) {

@@ -125,6 +125,35 @@ export function world_prune(w, now) {
         w.collisions.shift();
 }
 
+/* ---- moving ------------------------------------------------------------ */
+
+/* A box whose top is at most this far above the feet is a step the server
+ * climbs (protocol/avatar.h, AVATAR_STEP), not a wall. */
+const WORLD_STEP = 0.35;
+
+/* Whether an avatar of size s with its feet at p overlaps box b, not
+ * counting a box it can step onto. */
+function overlaps(b, p, s) {
+    return b.max[1] > p[1] + WORLD_STEP && b.min[1] < p[1] + s[1] &&
+        b.min[0] < p[0] + s[0] / 2 && b.max[0] > p[0] - s[0] / 2 &&
+        b.min[2] < p[2] + s[2] / 2 && b.max[2] > p[2] - s[2] / 2;
+}
+
+/*
+ * Whether our avatar, going from `from` to `to`, would walk into an
+ * object's collision box: one it overlaps at `to` and not at `from`
+ * (the server ignores the boxes an avatar already stands in, so that it
+ * can walk out of them). A guess for the prediction; the server decides.
+ */
+export function world_blocked(w, from, to) {
+    const s = w.self.box;
+    for (const o of w.objects.values())
+        for (const b of o.boxes)
+            if (overlaps(b, to, s) && !overlaps(b, from, s))
+                return true;
+    return false;
+}
+
 /* ---- meshes ------------------------------------------------------------ */
 
 function hash_wanted(w, hash) {
