@@ -127,7 +127,7 @@ async function startServer() {
     if (proc.exitCode !== null) throw new Error(`the server exited (${proc.exitCode}): ${log.slice(-1000)}`);
     return [tcp && web, tcp && web ? { tcp: +tcp[1], web: +web[1] } : `stdout ${JSON.stringify(out)}`];
   });
-  return { proc, db, ...ports, output: () => out };
+  return { proc, db, ...ports };
 }
 
 function addAccount(db, name, password) {
