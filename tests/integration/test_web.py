@@ -10,14 +10,15 @@ import hashlib
 import json
 import math
 import os
+import signal
 import socket
 import struct
 import subprocess
 import tempfile
 import time
 
-from harness import (TEMP_DIRS, T, Client, Raw, Server, admin, args, drain, frame, hello, join, move, ping, run,
-                     split_frames, still_moving)
+from harness import (MODELS, TEMP_DIRS, T, Client, Raw, Server, admin, args, drain, frame, hello, join, move, ping,
+                     run, split_frames, still_moving)
 
 A = args()
 GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"  # RFC 6455 4.2.2
@@ -249,7 +250,7 @@ def test_client_over_websocket():
     w = Raw(SRV.port)
     _, wok = w.handshake("tcp-witness")
     bots = subprocess.Popen([os.path.join(A.bin, "cvre-client"), "--ws", "--port", str(PORT), "--bots", "3",
-                             "--name", "wsbot", "--pose", "--rate", "10", "--duration", "4"],
+                             "--name", "wsbot", "--pose", "--rate", "10", "--duration", "60"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     solo = Client(A.bin, PORT, "ws-solo", None, "--ws", "--json")
     try:
@@ -265,8 +266,9 @@ def test_client_over_websocket():
         # The user over a WebSocket sees the witness move.
         solo.until("the witness", lambda e: e["event"] == "joined" and e["name"] == "tcp-witness")
         x, y, z = wok["pos"]
-        for seq in range(1, 6):
+        for seq in range(1, 11):  # 2 m/s, under the speed limit
             w.send(move(seq, (x + 0.2 * seq, y, z)))
+            time.sleep(0.1)
         solo.until("the witness moved", lambda e: e["event"] == "snapshot" and any(
             a["id"] == wok["id"] and a["pos"][0] > x + 0.5 for a in e["avatars"]))
         # And the witness sees the user walk.
@@ -274,6 +276,7 @@ def test_client_over_websocket():
         moved(w, [i for i, n in names.items() if n == "ws-solo"], 0.5)
         solo.send("quit\n")
         assert solo.wait() == 0, solo.stderr
+        bots.send_signal(signal.SIGINT)  # the swarm's end: every bot says bye
         out, err = bots.communicate(timeout=30)
         assert bots.returncode == 0, (out[-2000:], err)
         summary = [json.loads(line) for line in out.splitlines()][-1]
@@ -283,11 +286,34 @@ def test_client_over_websocket():
         while len(left) < 4:
             left.add(w.expect("left", timeout=10)["id"])
         assert left == set(names), (left, names)
-        still_moving(w, 6)
+        still_moving(w, 11)
     finally:
         bots.kill()
         solo.proc.kill()
         w.close()
+
+
+def test_client_objects_over_websocket():
+    """Over --ws, an account's import (its chunks in 16 KiB messages) and
+    another user's fetch of the mesh (the server's chunks in large
+    messages, read across many socket reads)."""
+    os.environ["CVRE_PASSWORD"] = SRV.account("wsann")
+    try:
+        ann = Client(A.bin, PORT, "wsann", f"import {os.path.join(MODELS, 'classic', 'teapot.obj')} at 3 0 3\nquit\n",
+                     "--ws", "--json")
+    finally:
+        del os.environ["CVRE_PASSWORD"]
+    assert ann.wait(60) == 0, ann.stderr
+    done = [e for e in ann.of("done") if e["command"] == "import"]
+    assert done and done[0]["result"] == "ok", ann.events[-5:]
+    oid, out = done[0]["object"], os.path.join(ROOT, "teapot-fetched.obj")
+    bob = Client(A.bin, PORT, "wsbob", f"ping\nfetch {oid} {out}\nquit\n", "--ws", "--json")
+    assert bob.wait(60) == 0, bob.stderr
+    info = [e for e in bob.of("object") if e["id"] == oid][0]
+    fetched = bob.of("fetched")
+    assert fetched and fetched[0]["triangles"] == info["triangles"] > 1000, (fetched, info)
+    with open(out) as f:
+        assert sum(line.startswith("f ") for line in f) == info["triangles"]
 
 
 def test_client_websocket_refused():
@@ -442,6 +468,6 @@ def test_shutdown_close():
 
 
 run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_over_websocket,
-     test_client_websocket_refused, test_client_close_echoed,
+     test_client_objects_over_websocket, test_client_websocket_refused, test_client_close_echoed,
      test_kick_closes_with_1008, test_fragmented_message, test_malformed_frames, test_bad_handshakes,
      test_full_server_and_missing_root, test_shutdown_close])
