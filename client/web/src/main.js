@@ -30,6 +30,8 @@ const page = {
 
 const canvas = document.getElementById('view');
 const view = view_new(canvas);
+/* A ground under the form until a server's WELCOME gives the world's. */
+view_set_bounds(view, [-512, 0, -512], [512, 0, 512]);
 const xr = xr_new(view, document.body);
 const input = input_new(canvas);
 const ui = ui_new(join);
