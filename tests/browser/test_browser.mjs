@@ -304,7 +304,9 @@ function watchPage(page, label) {
 /** The avatar that page sees with that id, or null. */
 const seen = (s, id) => (s && s.avatars.find((a) => a.id === id)) || null;
 
-const w = {}; // the world as the checks build it: server, terminal client, pages
+// The world as the checks build it: server, terminal client, pages, and
+// the errors each page is expected to show (a refused login, a refused upload).
+const w = { expected: [[], []] };
 const checks = [];
 const check = (name, fn) => checks.push({ name, fn });
 
@@ -335,6 +337,29 @@ check('webgl', async () => {
   if (!renderer) throw new Error('no WebGL 2 context in headless Chromium (flags: ' + args.join(' ') + ')');
 });
 
+/** Joins page by its form, once the form is shown. */
+async function fillForm(page, name, password) {
+  await page.waitForSelector('#name', { visible: true, timeout: WAIT_MS }).catch(() => {
+    throw new Error('the page at / shows no #name field to join with');
+  });
+  await page.$eval('#name', (el) => { el.value = ''; });
+  await page.$eval('#password', (el) => { el.value = ''; });
+  await page.type('#name', name);
+  await page.type('#password', password);
+  await page.click('#join');
+}
+
+check('wrong_password', async () => {
+  const p1 = w.pages[0];
+  await fillForm(p1, 'alice', `${w.password}-wrong`);
+  w.expected[0] = await until('page 1 shows the refused login in #errors and its form again', async () => {
+    const s = await state(p1);
+    const form = await p1.$eval('#name', (el) => el.offsetParent !== null);
+    return [s.errors.length > 0 && form && s.status !== 'joined', s.errors.length ? s.errors : `state ${JSON.stringify(s)}`];
+  });
+  console.log(`     page 1 says: ${w.expected[0].join(' / ')}`);
+});
+
 check('join_and_see', async () => {
   const [p1, p2] = w.pages;
   const joined = async (page, label) => until(`${label} joins`, async () => {
@@ -344,12 +369,7 @@ check('join_and_see', async () => {
   // Always in this order, so that the seeded spawn points and the picture
   // are the same in every run.
   const s2 = await joined(p2, 'page 2 (?name=bob)');
-  await p1.waitForSelector('#name', { visible: true, timeout: WAIT_MS }).catch(() => {
-    throw new Error('page 1 (/) shows no #name field to join with');
-  });
-  await p1.type('#name', 'alice');
-  await p1.type('#password', w.password);
-  await p1.click('#join');
+  await fillForm(p1, 'alice', w.password);
   const s1 = await joined(p1, 'page 1 (form, account alice)');
   if (s1.self.name !== 'alice' || s2.self.name !== 'bob') throw new Error(`self names ${s1.self.name}, ${s2.self.name}`);
   w.ids = [s1.self.id, s2.self.id];
@@ -539,7 +559,7 @@ check('guest_upload_refused', async () => {
   const p2 = w.pages[1];
   const shown = (await state(p2)).errors.length;
   await dropModel(p2);
-  w.refusal = await until('page 2 (a guest) shows its upload refused in #errors', async () => {
+  w.expected[1] = await until('page 2 (a guest) shows its upload refused in #errors', async () => {
     const t = await p2.$$eval('#errors li', (lis) => lis.map((li) => li.textContent.trim()));
     const s = await state(p2);
     return [t.length > 0 && s.errors.length > shown, s.errors.slice(shown)];
@@ -551,14 +571,14 @@ check('guest_upload_refused', async () => {
   const pong = w.term.events.length;
   await w.term.wait('pong', 'pong', (e) => w.term.events.indexOf(e) >= pong);
   if (w.term.first('object', (e) => e.owner === 'bob')) {
-    throw new Error(`a guest's drop became an object (page 2 said ${JSON.stringify(w.refusal)})`);
+    throw new Error(`a guest's drop became an object (page 2 said ${JSON.stringify(w.expected[1])})`);
   }
-  console.log(`     page 2 says: ${w.refusal.join(' / ')}`);
+  console.log(`     page 2 says: ${w.expected[1].join(' / ')}`);
 });
 
 check('page_errors', async () => {
-  for (const [page, label] of [[w.pages[0], 'page 1'], [w.pages[1], 'page 2']]) {
-    const other = (await state(page)).errors.filter((e) => !w.refusal.includes(e));
+  for (const [i, label] of ['page 1', 'page 2'].entries()) {
+    const other = (await state(w.pages[i])).errors.filter((e) => !w.expected[i].includes(e));
     if (other.length) errors.push(`${label} shows errors: ${JSON.stringify(other)}`);
   }
   if (errors.length) throw new Error(errors.join('; '));
