@@ -5,8 +5,9 @@
  * page's life) and the recent collisions. No three.js here: view.js draws
  * from this state, input.js predicts from it.
  *
- * Meshes are asked for a few at a time (MESH_REQUEST), nearest objects
- * first since the server announces them nearest first; the chunks of one
+ * Meshes are asked for a few at a time (MESH_REQUEST) and within the
+ * server's rate, nearest objects first since the server announces them
+ * nearest first; the chunks of one
  * mesh come in order and whole before the next (PROTOCOL.md, section 5,
  * "Meshes") and are put together, checked and decoded here.
  */
@@ -14,10 +15,17 @@ import * as proto from './proto.js';
 
 const { T, S } = proto;
 
-/* Mesh requests waiting at the server at once: under its 16 waiting and
- * its burst of 32, so an honest page is never refused for the rate. */
+/* Mesh requests waiting at the server at once: under its 16 waiting. */
 const WORLD_MESH_IN_FLIGHT = 8;
-/* After a RATE_LIMITED refusal, ask again this much later. */
+/* The server's rate for mesh requests (PROTOCOL.md, section 5, "Meshes":
+ * a burst of 32, then 8 a second, per address), kept here too so that a
+ * page alone on its address is not refused: a little under it, since the
+ * server's clock is its tick's and the requests arrive a moment after
+ * they leave. */
+const WORLD_MESH_BURST = 30;
+const WORLD_MESH_PER_S = 7;
+/* After a RATE_LIMITED refusal (other pages share the address), ask
+ * again this much later. */
 const WORLD_MESH_RETRY_MS = 1000;
 /* Collisions kept for the markers: the last few seconds' worth. */
 const WORLD_COLLISIONS_KEEP = 64;
@@ -44,6 +52,8 @@ export function world_new(send, hooks) {
         mesh_in_flight: new Map(), /* object id -> {hash, tri_count} asked for */
         mesh_rx: null,         /* the mesh being received: {object_id, total, parts, len} */
         mesh_hold_until: 0,
+        mesh_tokens: WORLD_MESH_BURST, /* requests the rate allows now */
+        mesh_tokens_at: performance.now(),
         mesh_timer: 0,
         collisions: [],        /* {point, normal, object_id, t} */
         collision_count: 0,
@@ -165,26 +175,39 @@ function hash_wanted(w, hash) {
     return true;
 }
 
+/* Calls mesh_pump again at time `at` (once, however often asked). */
+function mesh_later(w, at) {
+    if (!w.mesh_timer)
+        w.mesh_timer = setTimeout(() => {
+            w.mesh_timer = 0;
+            mesh_pump(w);
+        }, Math.max(0, at - performance.now()));
+}
+
 /* Asks for the meshes the page lacks, in the order the objects came,
- * while fewer than WORLD_MESH_IN_FLIGHT requests wait; each hash once. */
+ * while fewer than WORLD_MESH_IN_FLIGHT requests wait and the rate
+ * allows; each hash once. */
 function mesh_pump(w) {
     const now = performance.now();
     if (now < w.mesh_hold_until) {
-        if (!w.mesh_timer)
-            w.mesh_timer = setTimeout(() => {
-                w.mesh_timer = 0;
-                mesh_pump(w);
-            }, w.mesh_hold_until - now);
+        mesh_later(w, w.mesh_hold_until);
         return;
     }
+    w.mesh_tokens = Math.min(WORLD_MESH_BURST, w.mesh_tokens + (now - w.mesh_tokens_at) * WORLD_MESH_PER_S / 1000);
+    w.mesh_tokens_at = now;
     for (const o of w.objects.values()) {
         if (w.mesh_in_flight.size >= WORLD_MESH_IN_FLIGHT)
             return;
         if (o.mesh_refused || w.mesh_in_flight.has(o.object_id) || !hash_wanted(w, o.mesh_hash))
             continue;
+        if (w.mesh_tokens < 1) {
+            mesh_later(w, now + (1 - w.mesh_tokens) * 1000 / WORLD_MESH_PER_S);
+            return;
+        }
         if (!w.send(proto.proto_put_mesh_request(o.object_id, o.mesh_hash)))
             return;
-        w.mesh_in_flight.set(o.object_id, { hash: o.mesh_hash, tri_count: o.tri_count, name: o.name });
+        w.mesh_tokens -= 1;
+        w.mesh_in_flight.set(o.object_id, { hash: o.mesh_hash, tri_count: o.tri_count });
     }
 }
 
