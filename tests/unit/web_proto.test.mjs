@@ -1,12 +1,13 @@
 /*
- * proto.test.js: the page's codec (src/proto.js) against PROTOCOL.md: the
- * worked examples byte for byte, the decoding order of section 9 on the
- * frames a client receives, the text rule, poses and the encoded mesh.
- * Run with `node --test client/web/test/` (Node 18 or later; no browser).
+ * web_proto.test.mjs: the web client's codec (client/web/src/proto.js)
+ * against PROTOCOL.md: the worked examples byte for byte, the decoding
+ * order of section 9 on the frames a client receives, the text rule, poses and the encoded mesh.
+ * Run with `node --test tests/unit/web_proto.test.mjs` (Node 18 or later; no
+ * browser); ctest runs it as web_proto.
  */
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import * as p from '../src/proto.js';
+import * as p from '../../client/web/src/proto.js';
 
 const { S, T } = p;
 const hex = (buf) => Buffer.from(buf).toString('hex');
