@@ -62,19 +62,21 @@ def web_port(log, proc):
     sys.exit(f"bench: no 'web on' line in {log}")
 
 
-def swarm(bindir, port, n, seconds, extra=(), processes=1, ramp=2000):
+def swarm(bindir, port, n, seconds, extra=(), name="bot", ramp=2000):
+    """n bots in one client process, starting ramp connections per second
+    (crash.py, soak.py and test_disk_faults.py share it)."""
+    return subprocess.Popen([os.path.join(bindir, "cvre-client"), "--port", str(port), "--bots", str(n),
+                             "--name", name, "--rate", "20", "--pattern", "random-walk", "--duration", str(seconds),
+                             "--ramp", str(ramp), *extra], stdout=subprocess.PIPE, text=True)
+
+
+def swarms(bindir, port, n, seconds, extra=(), processes=1, ramp=2000):
     """n bots in as many client processes (each its own name prefix), so
     that the clients' side keeps up on a small machine, starting ramp
     connections per second in all."""
-    out, per = [], -(-n // processes)
-    for k in range(processes):
-        m = min(per, n - k * per)
-        if m > 0:
-            out.append(subprocess.Popen(
-                [os.path.join(bindir, "cvre-client"), "--port", str(port), "--bots", str(m), "--name", f"bot{k}",
-                 "--rate", "20", "--pattern", "random-walk", "--duration", str(seconds),
-                 "--ramp", str(max(1, ramp // processes)), *extra], stdout=subprocess.PIPE, text=True))
-    return out
+    per = -(-n // processes)
+    return [swarm(bindir, port, min(per, n - k * per), seconds, extra, f"bot{k}", max(1, ramp // processes))
+            for k in range(processes) if n - k * per > 0]
 
 
 def summary(procs, timeout):
@@ -120,7 +122,7 @@ def measure_window(pid, seconds):
 
 def run_bare(bindir, n, ramp, seconds):
     srv, port = start([os.path.join(bindir, "tests", "bare_server")])
-    sw = swarm(bindir, port, n, ramp + seconds + 1, ["--no-handshake"])
+    sw = [swarm(bindir, port, n, ramp + seconds + 1, ["--no-handshake"])]
     time.sleep(ramp)
     c0 = cpu_seconds(srv.pid)
     # Frames are counted by the server only at exit, so estimate the window's
@@ -175,7 +177,7 @@ def run_cvre(bindir, n, ramp, seconds, objects, bots_extra=(), ws=False, process
         bots_extra = ["--ws", *bots_extra]
     # The bots run long enough for the longest ramp and are told to end
     # (SIGINT: their byes and summary) once the window is over.
-    sw = swarm(bindir, port, n, 3 * ramp + seconds + 5, bots_extra, processes, conn_rate)
+    sw = swarms(bindir, port, n, 3 * ramp + seconds + 5, bots_extra, processes, conn_rate)
     t_start = time.time()
     waited = ramp_up(stats, n, ramp)
     cpu, wall, peak = measure_window(srv.pid, seconds)
