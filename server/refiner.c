@@ -12,6 +12,7 @@
 #include "apply.h"
 #include "db.h"
 #include "ecm.h"
+#include "find.h"
 #include "log.h"
 #include "mailbox.h"
 #include "record.h"
@@ -41,9 +42,7 @@ typedef struct tracked {
     int64_t id;
     uint32_t version; /* the version in force; points are of this one only */
     int gone;         /* removed from the world */
-    float *xyz;
-    uint32_t *users;
-    uint32_t n, cap;
+    object_points pts;
     uint32_t fresh;   /* points added since it was last clustered */
     int full_logged;
     /* The clusters when a refinement last changed nothing: the same
@@ -76,7 +75,7 @@ static uint64_t now_ms(void)
 static void tracked_reset(tracked *t, uint32_t version)
 {
     t->version = version;
-    t->n = t->fresh = 0;
+    t->pts.n = t->fresh = 0;
     t->full_logged = 0;
     free(t->settled);
     t->settled = NULL;
@@ -148,20 +147,14 @@ static void follow_feed(refiner *r)
 
 static void add_point(tracked *t, const float xyz[3], uint32_t user)
 {
-    if (t->n == REFINER_POINTS_MAX) {
+    if (t->pts.n == REFINER_POINTS_MAX) {
         if (!t->full_logged)
             log_warn("refiner: object %lld version %u: %u collisions kept, later ones ignored until it changes",
                      (long long)t->id, t->version, REFINER_POINTS_MAX);
         t->full_logged = 1;
         return;
     }
-    if (t->n == t->cap) {
-        t->cap = t->cap ? t->cap * 2 : 1024;
-        t->xyz = cvre_xrealloc(t->xyz, (size_t)t->cap * 3 * sizeof *t->xyz);
-        t->users = cvre_xrealloc(t->users, t->cap * sizeof *t->users);
-    }
-    memcpy(t->xyz + 3 * (size_t)t->n, xyz, 3 * sizeof *xyz);
-    t->users[t->n++] = user;
+    object_points_add(&t->pts, xyz, user);
     t->fresh++;
 }
 
@@ -210,37 +203,22 @@ static int cmp_sig(const void *a, const void *b)
     return memcmp(a, b, sizeof(cluster_sig));
 }
 
-/* Clusters t's points; appends what it finds to *found (problem boxes
- * resolved against the version's boxes). Returns the clusters found, or
- * -errno. */
+/* Clusters t's points; appends what it finds to *found. Returns the
+ * clusters found, or -errno. */
 static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nfound)
 {
-    int32_t *labels = cvre_xmalloc((t->n ? t->n : 1) * sizeof *labels);
-    dbscan_result *res = NULL;
     float(*boxes)[6] = NULL;
     uint32_t nboxes = 0;
-    int rc = dbscan_run(t->xyz, t->users, t->n, &r->cfg.cluster, labels, &res);
-    free(labels);
+    int rc = db_ecm_boxes(r->db, t->id, t->version, &boxes, &nboxes);
     if (rc < 0) {
-        log_error("refiner: object %lld: clustering failed: %s", (long long)t->id, strerror(-rc));
-        return rc;
-    }
-    size_t k = dbscan_result_count(res);
-    if (k && (rc = db_ecm_boxes(r->db, t->id, t->version, &boxes, &nboxes)) < 0) {
         log_error("refiner: object %lld: %s", (long long)t->id, db_error(r->db));
-        dbscan_result_free(res);
         return rc;
     }
-    *found = cvre_xrealloc(*found, (*nfound + k + 1) * sizeof **found);
-    for (size_t i = 0; i < k; i++) {
-        cluster_found *f = &(*found)[(*nfound)++];
-        *f = (cluster_found){.object_id = t->id, .ecm_version = t->version, .cluster_id = (uint32_t)i,
-                             .c = *dbscan_result_cluster(res, i)};
-        f->box = cluster_problem_box((const float(*)[6])boxes, nboxes, f->c.centroid);
-    }
+    rc = cluster_find(&t->pts, &r->cfg.cluster, t->id, t->version, (const float(*)[6])boxes, nboxes, found, nfound);
     free(boxes);
-    dbscan_result_free(res);
-    return (int)k;
+    if (rc < 0)
+        log_error("refiner: object %lld: clustering failed: %s", (long long)t->id, strerror(-rc));
+    return rc;
 }
 
 /* The clusters found[0..k), in an order that does not depend on DBSCAN's. */
@@ -313,11 +291,11 @@ static void examine(refiner *r)
     uint32_t nwhich = 0;
     for (uint32_t i = 0; i < r->nobjs; i++) {
         tracked *t = &r->objs[i];
-        if (t->gone || t->fresh == 0 || t->n < r->cfg.cluster.min_points)
+        if (t->gone || t->fresh == 0 || t->pts.n < r->cfg.cluster.min_points)
             continue;
         t->fresh = 0;
         run.objects++;
-        run.points += t->n;
+        run.points += t->pts.n;
         size_t before = nfound;
         int k = cluster_one(r, t, &found, &nfound);
         if (k <= 0)
@@ -427,8 +405,7 @@ void refiner_stop(refiner *r)
     pthread_join(r->thread, NULL);
     mailbox_destroy(r->updates, free_update);
     for (uint32_t i = 0; i < r->nobjs; i++) {
-        free(r->objs[i].xyz);
-        free(r->objs[i].users);
+        object_points_free(&r->objs[i].pts);
         free(r->objs[i].settled);
     }
     free(r->objs);

@@ -21,6 +21,7 @@
 #include "apply.h"
 #include "db.h"
 #include "dbscan.h"
+#include "find.h"
 #include "num.h"
 #include "record.h"
 #include "timefmt.h"
@@ -66,12 +67,6 @@ typedef struct object_row {
     uint32_t nboxes;
 } object_row;
 
-typedef struct points {
-    float *xyz;
-    uint32_t *users;
-    size_t n, cap;
-} points;
-
 static int fail_usage(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 static int fail_usage(const char *fmt, ...)
 {
@@ -82,17 +77,6 @@ static int fail_usage(const char *fmt, ...)
     fprintf(stderr, "; try --help\n");
     va_end(ap);
     return EXIT_USAGE;
-}
-
-static void push_point(points *pt, const float xyz[3], uint32_t user)
-{
-    if (pt->n == pt->cap) {
-        pt->cap = pt->cap ? pt->cap * 2 : 1024;
-        pt->xyz = cvre_xrealloc(pt->xyz, pt->cap * 3 * sizeof *pt->xyz);
-        pt->users = cvre_xrealloc(pt->users, pt->cap * sizeof *pt->users);
-    }
-    memcpy(pt->xyz + 3 * pt->n, xyz, 3 * sizeof *xyz);
-    pt->users[pt->n++] = user;
 }
 
 int main(int argc, char **argv)
@@ -197,8 +181,7 @@ int main(int argc, char **argv)
     object_row *objs = NULL;
     size_t nobjs = 0;
     sqlite3_stmt *st = NULL;
-    points pt = {0};
-    int32_t *labels = NULL;
+    object_points pt = {0};
     uint64_t total_points = 0;
     int64_t run_id = 0;
     cluster_found *found = NULL;
@@ -261,29 +244,19 @@ int main(int argc, char **argv)
         while ((o = sqlite3_step(st)) == SQLITE_ROW) {
             float xyz[3] = {(float)sqlite3_column_double(st, 0), (float)sqlite3_column_double(st, 1),
                             (float)sqlite3_column_double(st, 2)};
-            push_point(&pt, xyz, (uint32_t)sqlite3_column_int64(st, 3));
+            object_points_add(&pt, xyz, (uint32_t)sqlite3_column_int64(st, 3));
         }
         sqlite3_reset(st);
         if (o != SQLITE_DONE)
             goto db_fail;
         total_points += pt.n;
-        labels = cvre_xrealloc(labels, (pt.n ? pt.n : 1) * sizeof *labels);
-        dbscan_result *res = NULL;
-        int drc = dbscan_run(pt.xyz, pt.users, pt.n, &prm, labels, &res);
+        int drc = cluster_find(&pt, &prm, objs[i].id, objs[i].version, (const float(*)[6])objs[i].boxes,
+                               objs[i].nboxes, &found, &nfound);
         if (drc < 0) {
             fprintf(stderr, "cvre-cluster: object %lld: clustering failed: %s\n", (long long)objs[i].id,
                     strerror(-drc));
             goto done;
         }
-        for (size_t k = 0; k < dbscan_result_count(res); k++) {
-            found = cvre_xrealloc(found, (nfound + 1) * sizeof *found);
-            found[nfound] = (cluster_found){.object_id = objs[i].id, .ecm_version = objs[i].version,
-                                            .cluster_id = (uint32_t)k, .c = *dbscan_result_cluster(res, k)};
-            found[nfound].box = cluster_problem_box((const float(*)[6])objs[i].boxes, objs[i].nboxes,
-                                                    found[nfound].c.centroid);
-            nfound++;
-        }
-        dbscan_result_free(res);
         if (tty)
             fprintf(stderr, "\rcvre-cluster: %zu/%zu objects, %llu collisions, %zu clusters", i + 1, nobjs,
                     (unsigned long long)total_points, nfound);
@@ -395,9 +368,7 @@ done:
     for (size_t i = 0; i < nobjs; i++)
         free(objs[i].boxes);
     free(objs);
-    free(pt.xyz);
-    free(pt.users);
-    free(labels);
+    object_points_free(&pt);
     free(found);
     free(applied);
     free(outcome);

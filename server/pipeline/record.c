@@ -1,28 +1,8 @@
 #include "record.h"
 
-#include <math.h>
 #include <stdio.h>
 
 #include "err.h"
-
-uint32_t cluster_problem_box(const float (*boxes)[6], uint32_t n, const float p[3])
-{
-    uint32_t best = 0;
-    double best_d = INFINITY;
-    for (uint32_t i = 0; i < n; i++) {
-        double d = 0;
-        for (int k = 0; k < 3; k++) {
-            double lo = boxes[i][k], hi = boxes[i][3 + k];
-            double e = p[k] < lo ? lo - p[k] : p[k] > hi ? p[k] - hi : 0;
-            d += e * e;
-        }
-        if (d < best_d) {
-            best_d = d;
-            best = i;
-        }
-    }
-    return best;
-}
 
 uint64_t cluster_problem_boxes(const cluster_found *found, size_t n)
 {

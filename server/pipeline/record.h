@@ -24,7 +24,7 @@ typedef struct cluster_found {
     int64_t object_id;
     uint32_t ecm_version;
     uint32_t cluster_id; /* 0.. within the object, in DBSCAN's order */
-    uint32_t box;        /* the box it names: cluster_problem_box (refinement takes
+    uint32_t box;        /* the box it names: find.h's cluster_find (refinement takes
                           * every other box its points lie on too: refine.h) */
     dbscan_cluster c;
 } cluster_found;
@@ -36,10 +36,6 @@ typedef struct cluster_run {
     double since, until;
     uint64_t objects, points; /* examined */
 } cluster_run;
-
-/* The box among boxes[0..n) that contains p, or else the nearest one
- * (ties: the lowest index). */
-uint32_t cluster_problem_box(const float (*boxes)[6], uint32_t n, const float p[3]);
 
 /* How many distinct (object, version, box) the n clusters name. */
 uint64_t cluster_problem_boxes(const cluster_found *found, size_t n);
