@@ -32,11 +32,10 @@ _Static_assert(3 * ECM_DEPTH_MAX < 32, "cell counts fit uint32_t");
  * later rounds nothing to divide with, and merging costs grow with the
  * square of the boxes held. */
 #define DIVIDE_SLACK 8u
-/* Most bytes of the padded array one cluster's wanted space is worked out
- * in: 256^3, an avatar as long as half the grid on each axis. */
-#define WANTED_BYTES_MAX ((size_t)16 << 20)
-/* Kernel lengths are at most n, so padded lines fit uint16_t marks. */
-_Static_assert(3u << ECM_DEPTH_MAX <= UINT16_MAX, "marks fit uint16_t");
+/* Most cells of the padded array one cluster's wanted space is worked out
+ * in: 256^3, an avatar as long as half the grid on each axis (2 MiB of
+ * bits). */
+#define WANTED_CELLS_MAX ((size_t)16 << 20)
 
 /* A box of cells: [lo, hi) on each axis. */
 typedef struct ibox {
@@ -473,60 +472,90 @@ done:
 }
 
 /*
- * One pass of a sliding window along axis a over a dim[0] x dim[1] x dim[2]
- * byte array of 0/1: erode (v[t] = 1 if v[t .. t+k-1] are all 1, the window
- * inside the array) or dilate (v[t] = 1 if one of v[t-k+1 .. t] is 1).
- * Along y and z it works on whole rows at once (the next 0 at or after t,
- * the last 1 at or before t, kept per column in mark), so the inner loops
- * run over contiguous memory; mark has room for dim[0] * dim[1] entries.
+ * The padded array of mark_wanted: dim[0] x dim[1] x dim[2] bits, each line
+ * along x in w words (bit t of a line is bit t % 64 of word t / 64), the
+ * bits past dim[0] kept 0 until the dilations.
  */
-static void slide(uint8_t *v, const uint32_t dim[3], int a, uint32_t k, int erode, uint16_t *mark)
+typedef struct bits3 {
+    uint64_t *v;
+    uint32_t dim[3];
+    size_t w;
+} bits3;
+
+/* Line r of b becomes, at each t, r[t] AND r[t + s] (erode: 0 past the
+ * line) or r[t] OR r[t - s] (dilate: 0 before it). */
+static void line_step(uint64_t *r, size_t w, uint32_t s, int erode)
 {
-    size_t row, rows_stride, groups, group_stride;
-    uint32_t len = dim[a];
-    if (a == 0) {
-        row = 1;
-        rows_stride = 1;
-        groups = (size_t)dim[1] * dim[2];
-        group_stride = dim[0];
-    } else if (a == 1) {
-        row = dim[0];
-        rows_stride = dim[0];
-        groups = dim[2];
-        group_stride = (size_t)dim[0] * dim[1];
+    size_t q = s / 64;
+    unsigned sh = s % 64;
+    if (erode) {
+        for (size_t i = 0; i < w; i++) {
+            uint64_t lo = i + q < w ? r[i + q] : 0, hi = i + q + 1 < w ? r[i + q + 1] : 0;
+            r[i] &= sh ? (lo >> sh) | (hi << (64 - sh)) : lo;
+        }
     } else {
-        row = (size_t)dim[0] * dim[1];
-        rows_stride = row;
-        groups = 1;
-        group_stride = 0;
+        for (size_t i = w; i-- > 0;) {
+            uint64_t hi = i >= q ? r[i - q] : 0, lo = i >= q + 1 ? r[i - q - 1] : 0;
+            r[i] |= sh ? (hi << sh) | (lo >> (64 - sh)) : hi;
+        }
     }
+}
+
+/* Along y or z: block t (len blocks of bsize words, groups of them gstride
+ * words apart) becomes block t AND block t + s (0 past the end), or block
+ * t OR block t - s (nothing before the start). */
+static void block_step(uint64_t *v, size_t groups, size_t gstride, uint32_t len, size_t bsize, uint32_t s, int erode)
+{
     for (size_t g = 0; g < groups; g++) {
-        uint8_t *base = v + g * group_stride;
+        uint64_t *base = v + g * gstride;
         if (erode) {
-            /* Backwards: mark = the next 0 at or after t (len if none). */
-            for (size_t x = 0; x < row; x++)
-                mark[x] = (uint16_t)len;
-            for (uint32_t t = len; t-- > 0;) {
-                uint8_t *r = base + t * rows_stride;
-                uint8_t ok = t + k <= len;
-                for (size_t x = 0; x < row; x++) {
-                    if (!r[x])
-                        mark[x] = (uint16_t)t;
-                    r[x] = (uint8_t)(ok & (mark[x] >= t + k));
+            for (uint32_t t = 0; t < len; t++) {
+                uint64_t *d = base + t * bsize;
+                if (t + s < len) {
+                    const uint64_t *o = base + (size_t)(t + s) * bsize;
+                    for (size_t i = 0; i < bsize; i++)
+                        d[i] &= o[i];
+                } else {
+                    memset(d, 0, bsize * sizeof *d);
                 }
             }
         } else {
-            /* Forwards: mark = 1 + the last 1 at or before t (0 if none). */
-            for (size_t x = 0; x < row; x++)
-                mark[x] = 0;
-            for (uint32_t t = 0; t < len; t++) {
-                uint8_t *r = base + t * rows_stride;
-                for (size_t x = 0; x < row; x++) {
-                    if (r[x])
-                        mark[x] = (uint16_t)(t + 1);
-                    r[x] = (uint8_t)(mark[x] && t + 1 - mark[x] < k);
-                }
+            for (uint32_t t = len; t-- > s;) {
+                uint64_t *d = base + t * bsize;
+                const uint64_t *o = base + (size_t)(t - s) * bsize;
+                for (size_t i = 0; i < bsize; i++)
+                    d[i] |= o[i];
             }
+        }
+    }
+}
+
+/*
+ * Erodes (a bit stays 1 if the k bits from it on along axis a are all 1,
+ * the window inside the array) or dilates (a bit becomes 1 if one of the k
+ * bits up to it is 1) b along axis a, by doubling: windows of 1, 2, 4 ...
+ * p bits (p the largest power of two up to k), then two windows of p that
+ * overlap to span k.
+ */
+static void morph(bits3 *b, int a, uint32_t k, int erode)
+{
+    uint32_t steps[40], ns = 0;
+    uint32_t p = 1;
+    while (2 * p <= k) {
+        steps[ns++] = p;
+        p *= 2;
+    }
+    if (k > p)
+        steps[ns++] = k - p;
+    for (uint32_t i = 0; i < ns; i++) {
+        if (a == 0) {
+            size_t lines = (size_t)b->dim[1] * b->dim[2];
+            for (size_t l = 0; l < lines; l++)
+                line_step(b->v + l * b->w, b->w, steps[i], erode);
+        } else if (a == 1) {
+            block_step(b->v, b->dim[2], b->w * b->dim[1], b->dim[1], b->w, steps[i], erode);
+        } else {
+            block_step(b->v, 1, 0, b->dim[2], b->w * b->dim[1], steps[i], erode);
         }
     }
 }
@@ -585,7 +614,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
         k[a] = kc < 1 ? 1 : kc > n ? n : (uint32_t)kc;
     }
-    /* Bounded memory: past WANTED_BYTES_MAX the longest kernel is halved
+    /* Bounded memory: past WANTED_CELLS_MAX the longest kernel is halved
      * (more space counts as wanted, never less; only deep grids with a
      * large avatar get there). */
     for (;;) {
@@ -595,42 +624,50 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
             total *= dim[a];
         }
         int longest = k[0] >= k[1] && k[0] >= k[2] ? 0 : k[1] >= k[2] ? 1 : 2;
-        if (total <= WANTED_BYTES_MAX || k[longest] == 1)
+        if (total <= WANTED_CELLS_MAX || k[longest] == 1)
             break;
         k[longest] /= 2;
     }
-    uint8_t *v = cvre_malloc(total);
-    uint16_t *mark = cvre_malloc((size_t)dim[0] * dim[1] * sizeof *mark);
-    if (!v || !mark) {
-        free(v);
-        free(mark);
+    bits3 b = {.dim = {dim[0], dim[1], dim[2]}, .w = (dim[0] + 63) / 64};
+    size_t lines = (size_t)dim[1] * dim[2];
+    b.v = cvre_malloc(lines * b.w * sizeof *b.v);
+    if (!b.v)
         return -ENOMEM;
-    }
     /* 1 = free: empty cells, and every cell outside the grid. */
-    memset(v, 1, total);
+    for (size_t l = 0; l < lines; l++) {
+        uint64_t *r = b.v + l * b.w;
+        for (size_t i = 0; i < b.w; i++)
+            r[i] = dim[0] - 64 * i >= 64 ? UINT64_MAX : ((uint64_t)1 << (dim[0] - 64 * i)) - 1;
+    }
     for (uint32_t z = 0; z < dim[2]; z++) {
         int64_t cz = (int64_t)lo[2] - k[2] + z;
         for (uint32_t y = 0; y < dim[1] && cz >= 0 && cz < n; y++) {
             int64_t cy = (int64_t)lo[1] - k[1] + y;
             if (cy < 0 || cy >= n)
                 continue;
-            uint8_t *row = v + (size_t)dim[0] * (y + (size_t)dim[1] * z);
+            uint64_t *row = b.v + b.w * (y + (size_t)dim[1] * z);
             int64_t x0 = (int64_t)lo[0] - k[0];
             for (int64_t cx = x0 < 0 ? 0 : x0; cx < n && cx - x0 < dim[0]; cx++)
-                row[cx - x0] = (uint8_t)!voxel_get(g, (uint32_t)cx, (uint32_t)cy, (uint32_t)cz);
+                if (voxel_get(g, (uint32_t)cx, (uint32_t)cy, (uint32_t)cz)) {
+                    uint64_t t = (uint64_t)(cx - x0);
+                    row[t / 64] &= ~((uint64_t)1 << (t % 64));
+                }
         }
     }
     for (int a = 0; a < 3; a++)
-        slide(v, dim, a, k[a], 1, mark);
+        morph(&b, a, k[a], 1);
     for (int a = 0; a < 3; a++)
-        slide(v, dim, a, k[a], 0, mark);
+        morph(&b, a, k[a], 0);
     for (uint32_t z = lo[2]; z < hi[2]; z++)
-        for (uint32_t y = lo[1]; y < hi[1]; y++)
-            for (uint32_t x = lo[0]; x < hi[0]; x++)
-                if (v[(x - lo[0] + k[0]) + (size_t)dim[0] * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]))])
+        for (uint32_t y = lo[1]; y < hi[1]; y++) {
+            const uint64_t *row = b.v + b.w * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]));
+            for (uint32_t x = lo[0]; x < hi[0]; x++) {
+                uint32_t t = x - lo[0] + k[0];
+                if ((row[t / 64] >> (t % 64)) & 1u)
                     w->wanted[x + (size_t)n * (y + (size_t)n * z)] = 1;
-    free(v);
-    free(mark);
+            }
+        }
+    free(b.v);
     return 0;
 }
 
