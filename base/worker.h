@@ -4,8 +4,10 @@
  * work (parsing a model, hashing a password) never stalls the tick.
  *
  * Jobs are copied in by value (job_size bytes each); the queue holds at most
- * queue_max, so a flood is refused (-EBUSY) rather than held. The loop
- * watches worker_fd and takes results with worker_take.
+ * queue_max, so a flood is refused (-EBUSY) rather than held. A worker may
+ * also do something of its own every period_ms (between jobs, never during
+ * one), and hand any number of results over from there with worker_put. The
+ * loop watches worker_fd and takes results with worker_take.
  */
 #ifndef CVRE_WORKER_H
 #define CVRE_WORKER_H
@@ -20,11 +22,16 @@ typedef void *worker_fn(void *ctx, void *job);
 
 typedef struct worker_ops {
     size_t job_size;
-    unsigned queue_max;
-    worker_fn *run;
+    unsigned queue_max; /* 0: no jobs (worker_submit refuses every one) */
+    worker_fn *run;     /* NULL when there are no jobs */
     void *ctx;
     void (*drop_job)(void *job);       /* a job never run (at stop); may be NULL */
     void (*free_result)(void *result); /* a result never taken (at stop); may be NULL: free() */
+    /* Called with ctx on the worker's thread every period_ms after the
+     * last call returned (the first period_ms after the start), while no
+     * job is waiting; NULL: none. */
+    void (*every)(void *ctx, worker *w);
+    unsigned period_ms;
 } worker_ops;
 
 /* Starts the thread. NULL with a message in err on failure. */
@@ -38,5 +45,8 @@ int worker_fd(const worker *w);
 int worker_submit(worker *w, const void *job);
 /* The next result (the caller frees it), or NULL when none is waiting. */
 void *worker_take(worker *w);
+/* Hands a result (allocated) to the loop, from the worker's own thread:
+ * from ops.every (ops.run returns its one result instead). */
+void worker_put(worker *w, void *result);
 
 #endif

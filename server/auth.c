@@ -138,7 +138,8 @@ static void drop_job(void *job) { sodium_memzero(job, sizeof(auth_job)); }
 auth *auth_start(const char *db_path, char *err, size_t errlen)
 {
     auth *a = cvre_xcalloc(1, sizeof *a);
-    worker_ops ops = {sizeof(auth_job), AUTH_QUEUE_MAX, run_job, a, drop_job, NULL};
+    worker_ops ops = {.job_size = sizeof(auth_job), .queue_max = AUTH_QUEUE_MAX, .run = run_job, .ctx = a,
+                      .drop_job = drop_job};
 
     if (sodium_init() < 0) {
         snprintf(err, errlen, "libsodium could not start");

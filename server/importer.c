@@ -125,7 +125,8 @@ importer *importer_start(const char *db_path, const import_proc *proc, const imp
                          size_t errlen)
 {
     importer *im = cvre_xcalloc(1, sizeof *im);
-    worker_ops ops = {sizeof(import_job), IMPORTER_QUEUE_MAX, run_job, im, drop_job, free_result};
+    worker_ops ops = {.job_size = sizeof(import_job), .queue_max = IMPORTER_QUEUE_MAX, .run = run_job, .ctx = im,
+                      .drop_job = drop_job, .free_result = free_result};
 
     im->proc = proc;
     im->limits = *limits;

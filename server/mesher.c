@@ -47,7 +47,8 @@ static void free_result(void *p)
 mesher *mesher_start(char *err, size_t errlen)
 {
     mesher *m = cvre_xcalloc(1, sizeof *m);
-    worker_ops ops = {sizeof(mesher_job), MESHER_QUEUE_MAX, run_job, NULL, drop_job, free_result};
+    worker_ops ops = {.job_size = sizeof(mesher_job), .queue_max = MESHER_QUEUE_MAX, .run = run_job,
+                      .drop_job = drop_job, .free_result = free_result};
     m->worker = worker_start(&ops, err, errlen);
     if (!m->worker) {
         free(m);

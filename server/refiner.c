@@ -1,7 +1,6 @@
 #include "refiner.h"
 
 #include <errno.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -14,8 +13,8 @@
 #include "ecm.h"
 #include "find.h"
 #include "log.h"
-#include "mailbox.h"
 #include "record.h"
+#include "worker.h"
 
 /* How often the change feed is read: a rollback or an offline refinement
  * reaches clients within a quarter of a second, for one indexed query. */
@@ -53,12 +52,9 @@ typedef struct tracked {
 
 struct refiner {
     refiner_config cfg;
-    pthread_t thread;
-    pthread_mutex_t lock;
-    pthread_cond_t wake;
-    int stop;
-    mailbox *updates; /* refiner_update *, to the loop */
+    worker *worker; /* the thread: refiner_update * to the loop */
     db *db;
+    uint64_t next_examine; /* ms, monotonic; the worker's own */
     int64_t feed_after, collisions_after;
     tracked *objs; /* sorted by id */
     uint32_t nobjs, cap;
@@ -119,11 +115,18 @@ static tracked *track(refiner *r, int64_t id)
     return &r->objs[lo];
 }
 
+/* The change feed being read, on the worker's thread. */
+typedef struct feed_read {
+    refiner *r;
+    worker *w; /* where the new versions go */
+} feed_read;
+
 /* One change feed event: queue the version for the tick and start the
  * object's points afresh. */
 static int on_event(void *ctx, int64_t event_id, int64_t object_id, uint32_t version)
 {
-    refiner *r = ctx;
+    feed_read *f = ctx;
+    refiner *r = f->r;
     refiner_update u = {.object_id = (uint32_t)object_id, .version = version};
     if (db_ecm_boxes(r->db, object_id, version, &u.boxes, &u.count) < 0) {
         log_error("refiner: change %lld: object %lld version %u: %s", (long long)event_id, (long long)object_id,
@@ -132,16 +135,17 @@ static int on_event(void *ctx, int64_t event_id, int64_t object_id, uint32_t ver
     }
     refiner_update *q = cvre_xmalloc(sizeof *q);
     *q = u;
-    mailbox_put(r->updates, q);
+    worker_put(f->w, q);
     tracked *t = track(r, object_id);
     if (t && version > t->version)
         tracked_reset(t, version);
     return 0;
 }
 
-static void follow_feed(refiner *r)
+static void follow_feed(refiner *r, worker *w)
 {
-    if (db_ecm_events(r->db, r->feed_after, on_event, r, &r->feed_after) < 0)
+    feed_read f = {r, w};
+    if (db_ecm_events(r->db, r->feed_after, on_event, &f, &r->feed_after) < 0)
         log_error("refiner: reading the change feed: %s", db_error(r->db));
 }
 
@@ -324,68 +328,18 @@ static void examine(refiner *r)
     free(from);
 }
 
-static void *run_thread(void *arg)
+/* What the worker does every REFINER_FEED_MS: follows the feed, and runs a
+ * round of the online loop when one is due. */
+static void every(void *ctx, worker *w)
 {
-    refiner *r = arg;
+    refiner *r = ctx;
+    follow_feed(r, w);
     uint64_t interval_ms = (uint64_t)(r->cfg.interval_s * 1000.0);
-    uint64_t next_examine = now_ms() + interval_ms;
-    pthread_mutex_lock(&r->lock);
-    while (!r->stop) {
-        uint64_t wake = now_ms() + REFINER_FEED_MS;
-        if (interval_ms && next_examine < wake)
-            wake = next_examine;
-        struct timespec ts = {.tv_sec = (time_t)(wake / 1000u), .tv_nsec = (long)(wake % 1000u) * 1000000L};
-        while (!r->stop && pthread_cond_timedwait(&r->wake, &r->lock, &ts) != ETIMEDOUT)
-            ;
-        if (r->stop)
-            break;
-        pthread_mutex_unlock(&r->lock);
-        follow_feed(r);
-        if (interval_ms && now_ms() >= next_examine) {
-            examine(r);
-            follow_feed(r); /* publish what this round wrote now */
-            next_examine = now_ms() + interval_ms;
-        }
-        pthread_mutex_lock(&r->lock);
+    if (interval_ms && now_ms() >= r->next_examine) {
+        examine(r);
+        follow_feed(r, w); /* publish what this round wrote now */
+        r->next_examine = now_ms() + interval_ms;
     }
-    pthread_mutex_unlock(&r->lock);
-    return NULL;
-}
-
-refiner *refiner_start(const refiner_config *cfg, char *err, size_t errlen)
-{
-    refiner *r = cvre_xcalloc(1, sizeof *r);
-    r->cfg = *cfg;
-    r->feed_after = cfg->feed_after;
-    r->updates = mailbox_create();
-    if (!r->updates) {
-        snprintf(err, errlen, "eventfd: %s", strerror(errno));
-        free(r);
-        return NULL;
-    }
-    r->db = db_open(cfg->db_path, DB_READWRITE, err, errlen);
-    if (!r->db) {
-        mailbox_destroy(r->updates, NULL);
-        free(r);
-        return NULL;
-    }
-    pthread_condattr_t ca;
-    pthread_condattr_init(&ca);
-    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
-    pthread_cond_init(&r->wake, &ca);
-    pthread_condattr_destroy(&ca);
-    pthread_mutex_init(&r->lock, NULL);
-    int rc = pthread_create(&r->thread, NULL, run_thread, r);
-    if (rc != 0) {
-        snprintf(err, errlen, "cannot start the refiner thread: %s", strerror(rc));
-        pthread_mutex_destroy(&r->lock);
-        pthread_cond_destroy(&r->wake);
-        db_close(r->db);
-        mailbox_destroy(r->updates, NULL);
-        free(r);
-        return NULL;
-    }
-    return r;
 }
 
 static void free_update(void *p)
@@ -394,32 +348,46 @@ static void free_update(void *p)
     free(p);
 }
 
+refiner *refiner_start(const refiner_config *cfg, char *err, size_t errlen)
+{
+    refiner *r = cvre_xcalloc(1, sizeof *r);
+    r->cfg = *cfg;
+    r->feed_after = cfg->feed_after;
+    r->next_examine = now_ms() + (uint64_t)(cfg->interval_s * 1000.0);
+    r->db = db_open(cfg->db_path, DB_READWRITE, err, errlen);
+    if (!r->db) {
+        free(r);
+        return NULL;
+    }
+    worker_ops ops = {.ctx = r, .every = every, .period_ms = REFINER_FEED_MS, .free_result = free_update};
+    r->worker = worker_start(&ops, err, errlen);
+    if (!r->worker) {
+        db_close(r->db);
+        free(r);
+        return NULL;
+    }
+    return r;
+}
+
 void refiner_stop(refiner *r)
 {
     if (!r)
         return;
-    pthread_mutex_lock(&r->lock);
-    r->stop = 1;
-    pthread_cond_signal(&r->wake);
-    pthread_mutex_unlock(&r->lock);
-    pthread_join(r->thread, NULL);
-    mailbox_destroy(r->updates, free_update);
+    worker_stop(r->worker);
     for (uint32_t i = 0; i < r->nobjs; i++) {
         object_points_free(&r->objs[i].pts);
         free(r->objs[i].settled);
     }
     free(r->objs);
-    pthread_mutex_destroy(&r->lock);
-    pthread_cond_destroy(&r->wake);
     db_close(r->db);
     free(r);
 }
 
-int refiner_fd(const refiner *r) { return mailbox_fd(r->updates); }
+int refiner_fd(const refiner *r) { return worker_fd(r->worker); }
 
 int refiner_take(refiner *r, refiner_update *out)
 {
-    refiner_update *u = mailbox_take(r->updates);
+    refiner_update *u = worker_take(r->worker);
     if (!u)
         return -EAGAIN;
     *out = *u;

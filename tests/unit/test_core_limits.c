@@ -2,7 +2,8 @@
  * base/ where it fails: the loop, its epoll backend, the mailbox and
  * the worker when memory, file descriptors or threads run out, when a
  * callback deletes what is already reported ready, when a signal cuts the
- * wait short, and when the queue is full at stop.
+ * wait short, and when the queue is full at stop; and a worker's own
+ * periodic work, whose results reach the loop like a job's.
  *
  * worker.c is included, not linked, so that the stop test can see the
  * worker's stop flag: the job in progress is released only once the stop
@@ -13,6 +14,7 @@
 
 #include <fcntl.h>
 #include <limits.h>
+#include <poll.h>
 #include <sched.h>
 #include <setjmp.h>
 #include <signal.h>
@@ -366,7 +368,7 @@ static void *stop_worker(void *w)
 
 static void test_worker_full_then_stopped(void **state)
 {
-    const worker_ops ops = {sizeof(int), 2, gated_job, NULL, drop, NULL};
+    const worker_ops ops = {.job_size = sizeof(int), .queue_max = 2, .run = gated_job, .drop_job = drop};
     char err[128];
     int job;
     pthread_t stopper;
@@ -406,7 +408,7 @@ static void test_worker_full_then_stopped(void **state)
 
 static void test_worker_cannot_start(void **state)
 {
-    const worker_ops ops = {sizeof(int), 2, gated_job, NULL, NULL, NULL};
+    const worker_ops ops = {.job_size = sizeof(int), .queue_max = 2, .run = gated_job};
     pthread_attr_t huge, saved;
     char err[128];
 
@@ -429,6 +431,43 @@ static void test_worker_cannot_start(void **state)
     assert_non_null(strstr(err, "cannot start a worker thread"));
 }
 
+/* A worker's own work: every call puts its number as a result, up to 3;
+ * the fourth and later put nothing. */
+static void count_every(void *ctx, worker *w)
+{
+    int *calls = ctx; /* the worker's thread only, until it is stopped */
+    if (++*calls > 3)
+        return;
+    int *result = cvre_xmalloc(sizeof *result);
+    *result = *calls;
+    worker_put(w, result);
+}
+
+static void test_worker_every(void **state)
+{
+    int calls = 0, taken = 0;
+    const worker_ops ops = {.ctx = &calls, .every = count_every, .period_ms = 2};
+    char err[128];
+    worker *w = worker_start(&ops, err, sizeof err);
+    int job = 0;
+
+    (void)state;
+    assert_non_null(w);
+    assert_int_equal(worker_submit(w, &job), -EBUSY); /* no queue: no jobs */
+    /* its results arrive in order, through the fd the loop watches */
+    while (taken < 3) {
+        struct pollfd pf = {.fd = worker_fd(w), .events = POLLIN};
+        assert_int_equal(poll(&pf, 1, 60000), 1);
+        int *r;
+        while ((r = worker_take(w))) {
+            assert_int_equal(*r, ++taken);
+            free(r);
+        }
+    }
+    worker_stop(w);
+    assert_true(calls >= 3);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -441,6 +480,7 @@ int main(void)
         cmocka_unit_test(test_mailbox_failures),
         cmocka_unit_test(test_worker_full_then_stopped),
         cmocka_unit_test(test_worker_cannot_start),
+        cmocka_unit_test(test_worker_every),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
