@@ -35,9 +35,10 @@
 #define BOTS_RAW_HALF 500.0
 
 /* Over a WebSocket, upgrades in flight at once, at most: the server's web
- * endpoint answers 16 HTTP connections at a time and refuses more with 503
- * (server/net/http_server.h), so that two swarms side by side stay within
- * it. The ramp waits for a place. */
+ * endpoint answers 64 HTTP connections at a time and refuses more with 503
+ * (WEB_CONNS, server/web_endpoint.c), and a ramp of hundreds a second on a
+ * busy machine would have more than that waiting; 8 leaves room for several
+ * swarms side by side and for browsers. The ramp waits for a place. */
 #define BOTS_UPGRADES_MAX 8u
 
 /* Moves remembered per bot to reconcile with the server: 32 at 20 Hz is
