@@ -757,9 +757,14 @@ def run_scenes(a, scenes):
             if r < a.rounds:  # clustering and refinement, as an operator would run them
                 out, wall_s = tool(a.bin, "cvre-cluster", "--db", sc.srv.db, "--apply", "--json")
                 job = json.loads(out)
-                refine_ms = sum(x["total_ms"] for x in job["refined"])
-                st["cluster_s"], st["refine_ms"] = wall_s - refine_ms / 1000, refine_ms
+                # Refinement: digitizing, dividing and judging; the rest of
+                # total_ms is the store (waiting for its write lock too).
+                refine_ms = sum(x["voxel_ms"] + x["divide_ms"] + x.get("judge", {}).get("ms", 0.0)
+                                for x in job["refined"])
+                total_ms = sum(x["total_ms"] for x in job["refined"])
+                st["cluster_s"], st["refine_ms"] = wall_s - total_ms / 1000, refine_ms
                 st["clusters"] = len(job["clusters"])
+                st["rejected"] = sum(x.get("outcome") == "rejected" for x in job["refined"])
                 row["cluster_s"] += st["cluster_s"]
                 row["refine_ms"] += refine_ms
             row["scenes"][sc.name] = st
@@ -815,16 +820,18 @@ def report(a, scenes, rounds, bump):
              "(the single-MBR map). Collisions: the COLLISION messages users got (blocked by a box, or moving "
              "inside one). Phantom: a collision where the avatar's box, grown sideways and upwards by one cell "
              "of the refinement grid over the MBR (the map's resolution), touches no triangle of the object. "
-             "Leak: the avatar's box overlaps a triangle. Tightness: volume of occupied cells / volume of the "
+             "Leak: the avatar's box overlaps a triangle. Refinement ms: digitizing, dividing and judging after the "
+             "round (the store's share of the job is not in it). A rejected candidate: a refined map the judge "
+             "found no better, not published. Tightness: volume of occupied cells / volume of the "
              "boxes (grid 2^7 over the MBR). Full-voxel baseline: every occupied cell its own box.", "",
              "| scene | round | version | moves | collisions | phantom | phantom / 1000 moves | leaks | boxes | "
-             "tightness | full-voxel boxes |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "tightness | full-voxel boxes | refinement ms | candidates rejected |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rounds:
         for n, s in r["scenes"].items():
             lines.append(f"| {n} | {r['round']} | {s['version']} | {s['moves']} | {s['collisions']} | {s['phantom']} "
                          f"| {s['phantom_per_1000']:.2f} | {s['leaks']} | {s['boxes']} | {s['tightness']:.3f} "
-                         f"| {s['full_voxel_boxes']} |")
+                         f"| {s['full_voxel_boxes']} | {s.get('refine_ms', 0.0):.1f} | {s.get('rejected', '-')} |")
     lines += ["", "| round | clustering s | refinement ms | bumper collisions | bumper leaks |",
               "|---|---|---|---|---|"]
     for r in rounds:
@@ -915,7 +922,8 @@ def summary(a, dirs):
     lines = ["# Scenario summary", "", f"Seeds {', '.join(str(x) for x in sorted(dirs))}; each seed's report in "
              + ("this directory" if len(dirs) == 1 else "seed-N/report.md") + ".", "",
              "| scene | seeds | phantom / 1000, round 0 (mean) | last round (mean) | reduction, mean | worst | "
-             "worst rise | leaks | most boxes | met |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "worst rise | leaks | most boxes | candidates rejected | met |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     scenes = {}
     for n in names:
         js = [(seed, rep["scenes"][n]) for seed, rep in reports.items() if n in rep["scenes"]]
@@ -925,12 +933,14 @@ def summary(a, dirs):
                    reduction_mean=sum(j["reduction"] for _, j in js) / len(js),
                    reduction_worst=worst[1]["reduction"], worst_seed=worst[0],
                    rise_worst=max(j["rise"] for _, j in js), leaks=sum(j["leaks"] for _, j in js),
-                   boxes=max(j["boxes"] for _, j in js), met=all(j["met"] for _, j in js))
+                   boxes=max(j["boxes"] for _, j in js), met=all(j["met"] for _, j in js),
+                   rejected=sum(r["scenes"][n].get("rejected", 0) for rep in reports.values() for r in rep["rounds"]
+                                if n in r["scenes"]))
         scenes[n] = row
         lines.append(f"| {n} | {row['seeds']} | {row['first_mean']:.2f} | {row['final_mean']:.2f} | "
                      f"{100 * row['reduction_mean']:.1f}% | {100 * row['reduction_worst']:.1f}% (seed "
                      f"{row['worst_seed']}) | {row['rise_worst']:.2f} | {row['leaks']} | {row['boxes']} | "
-                     f"{'yes' if row['met'] else 'NO'} |")
+                     f"{row['rejected']} | {'yes' if row['met'] else 'NO'} |")
     refine = [rep["refine_ms"] for rep in reports.values() if rep.get("refine_ms") is not None]
     walls = [seed for seed, rep in reports.items() if not rep.get("wall_ok", True)]
     met = not missing and not walls and all(rep["targets_met"] for rep in reports.values())
