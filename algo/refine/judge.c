@@ -1,0 +1,437 @@
+#include "judge.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdbool.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "alloc.h"
+#include "err.h"
+#include "refine.h"
+#include "voxel.h"
+
+/* The table's counts: a whole grid's cells fit uint32_t. */
+#define JUDGE_DEPTH_MAX 8u
+_Static_assert(3 * JUDGE_DEPTH_MAX < 32, "cell counts fit uint32_t");
+_Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
+/* Bins per axis of the triangle index the exact test looks in: a triangle
+ * of a detailed mesh falls in one or two, a room's wall in a row of them. */
+#define JUDGE_BINS 16u
+
+/* The geometry, asked "does this box touch a triangle?". Local
+ * coordinates: boxes in the metric frame are divided by the scale. */
+typedef struct geometry {
+    voxel_grid g;
+    uint32_t *svt;      /* (n + 1)^3: occupied cells in [0, x) x [0, y) x [0, z) */
+    uint32_t *bin_first; /* JUDGE_BINS^3 + 1 offsets into bin_tris */
+    uint32_t *bin_tris;
+    uint32_t *big;       /* triangles spanning more than JUDGE_BIN_SPREAD_MAX bins */
+    uint32_t nbig;
+    const float *tris;
+    double scale;
+} geometry;
+
+/* One map in the metric frame, with room for the boxes near one move. */
+typedef struct map {
+    move_box *boxes;
+    uint32_t n;
+    move_box *near;
+} map;
+
+void judge_params_default(judge_params *p)
+{
+    move_params_default(&p->move);
+    p->dt = JUDGE_DT_DEFAULT;
+    p->reach = JUDGE_REACH_DEFAULT;
+    p->speed = JUDGE_SPEED_DEFAULT;
+    p->deflect = JUDGE_DEFLECT_DEFAULT;
+    p->depth = ECM_DEPTH_DEFAULT;
+    p->max_samples = JUDGE_SAMPLES_DEFAULT;
+}
+
+static void geometry_free(geometry *g)
+{
+    voxel_grid_free(&g->g);
+    free(g->svt);
+    free(g->bin_first);
+    free(g->bin_tris);
+    free(g->big);
+}
+
+static size_t svt_at(uint32_t m, uint32_t x, uint32_t y, uint32_t z)
+{
+    return (size_t)x + (size_t)m * ((size_t)y + (size_t)m * z);
+}
+
+/* The table, as three running sums: along x, then y, then z. */
+static void build_svt(geometry *g)
+{
+    uint32_t n = g->g.n, m = n + 1;
+    for (uint32_t z = 0; z < n; z++)
+        for (uint32_t y = 0; y < n; y++)
+            for (uint32_t x = 0; x < n; x++)
+                g->svt[svt_at(m, x + 1, y + 1, z + 1)] =
+                    g->svt[svt_at(m, x, y + 1, z + 1)] + (uint32_t)voxel_get(&g->g, x, y, z);
+    for (uint32_t z = 1; z <= n; z++)
+        for (uint32_t y = 1; y <= n; y++)
+            for (uint32_t x = 1; x <= n; x++)
+                g->svt[svt_at(m, x, y, z)] += g->svt[svt_at(m, x, y - 1, z)];
+    for (uint32_t z = 1; z <= n; z++)
+        for (uint32_t y = 1; y <= n; y++)
+            for (uint32_t x = 1; x <= n; x++)
+                g->svt[svt_at(m, x, y, z)] += g->svt[svt_at(m, x, y, z - 1)];
+}
+
+/* The bin range [lo, hi] of a local interval on axis a; 0 if it misses the
+ * object's bounding box. */
+static int bin_range(const geometry *g, int a, double lo, double hi, uint32_t *blo, uint32_t *bhi)
+{
+    if (hi < g->g.min[a] || lo > g->g.max[a])
+        return 0;
+    double w = (g->g.max[a] - g->g.min[a]) / JUDGE_BINS;
+    if (w <= 0) {
+        *blo = *bhi = 0;
+        return 1;
+    }
+    double l = floor((lo - g->g.min[a]) / w), h = floor((hi - g->g.min[a]) / w);
+    *blo = l < 0 ? 0 : (uint32_t)l;
+    *bhi = h >= JUDGE_BINS - 1 ? JUDGE_BINS - 1 : (uint32_t)h;
+    return 1;
+}
+
+/* The bins of triangle t's bounding box; their count, 0 if none. */
+static uint64_t tri_bins(const geometry *g, const float *t, uint32_t lo[3], uint32_t hi[3])
+{
+    uint64_t count = 1;
+    for (int a = 0; a < 3; a++) {
+        double l = fmin(fmin(t[a], t[3 + a]), t[6 + a]), h = fmax(fmax(t[a], t[3 + a]), t[6 + a]);
+        if (!bin_range(g, a, l, h, &lo[a], &hi[a]))
+            return 0;
+        count *= hi[a] - lo[a] + 1;
+    }
+    return count;
+}
+
+/* Fills the triangle bins: counts, offsets, then the triangles. */
+static int build_bins(geometry *g, uint32_t ntris)
+{
+    const uint32_t nb = JUDGE_BINS * JUDGE_BINS * JUDGE_BINS;
+    g->bin_first = cvre_calloc(nb + 1, sizeof *g->bin_first);
+    g->big = cvre_malloc((ntris ? ntris : 1) * sizeof *g->big);
+    if (!g->bin_first || !g->big)
+        return -ENOMEM;
+    uint32_t lo[3], hi[3];
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t i = 0; i < ntris; i++) {
+            uint64_t c = tri_bins(g, g->tris + 9 * (size_t)i, lo, hi);
+            if (c > JUDGE_BIN_SPREAD_MAX) {
+                if (pass == 0)
+                    g->big[g->nbig++] = i;
+                continue;
+            }
+            for (uint32_t z = lo[2]; c && z <= hi[2]; z++)
+                for (uint32_t y = lo[1]; y <= hi[1]; y++)
+                    for (uint32_t x = lo[0]; x <= hi[0]; x++) {
+                        uint32_t b = x + JUDGE_BINS * (y + JUDGE_BINS * z);
+                        if (pass == 0)
+                            g->bin_first[b + 1]++;
+                        else
+                            g->bin_tris[g->bin_first[b]++] = i;
+                    }
+        }
+        if (pass == 0) {
+            for (uint32_t b = 0; b < nb; b++)
+                g->bin_first[b + 1] += g->bin_first[b];
+            /* At most JUDGE_BIN_SPREAD_MAX entries a triangle: fits. */
+            g->bin_tris = cvre_malloc((g->bin_first[nb] ? g->bin_first[nb] : 1) * sizeof *g->bin_tris);
+            if (!g->bin_tris)
+                return -ENOMEM;
+        }
+    }
+    /* The second pass moved each offset to its bin's end: shift back. */
+    memmove(g->bin_first + 1, g->bin_first, nb * sizeof *g->bin_first);
+    g->bin_first[0] = 0;
+    return 0;
+}
+
+static int geometry_init(geometry *g, const judge_params *p, const judge_input *in)
+{
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < (size_t)in->ntris * 3; i++)
+        for (int a = 0; a < 3; a++) {
+            lo[a] = fminf(lo[a], in->tris[3 * i + (size_t)a]);
+            hi[a] = fmaxf(hi[a], in->tris[3 * i + (size_t)a]);
+        }
+    g->tris = in->tris;
+    g->scale = in->scale;
+    int rc = voxel_grid_init(&g->g, p->depth, lo, hi);
+    if (rc < 0)
+        return rc;
+    if ((rc = voxel_mark(&g->g, in->tris, in->ntris)) < 0)
+        return rc;
+    uint32_t m = g->g.n + 1;
+    g->svt = cvre_calloc((size_t)m * m * m, sizeof *g->svt);
+    if (!g->svt)
+        return -ENOMEM;
+    build_svt(g);
+    return build_bins(g, in->ntris);
+}
+
+/* The cells of a local interval on axis a: [lo, hi], closed cells, so a box
+ * touching a cell's face gets that cell too; 0 if it misses the grid. */
+static int cell_range(const geometry *g, int a, double lo, double hi, uint32_t *clo, uint32_t *chi)
+{
+    if (hi < g->g.min[a] || lo > g->g.max[a])
+        return 0;
+    uint32_t n = g->g.n;
+    if (g->g.cell[a] <= 0) {
+        *clo = 0;
+        *chi = n - 1;
+        return 1;
+    }
+    double l = floor((lo - g->g.min[a]) / g->g.cell[a]), h = floor((hi - g->g.min[a]) / g->g.cell[a]);
+    *clo = l < 0 ? 0 : l > n - 1 ? n - 1 : (uint32_t)l;
+    *chi = h < 0 ? 0 : h > n - 1 ? n - 1 : (uint32_t)h;
+    return 1;
+}
+
+/* Whether the metric box [lo, hi] may touch a triangle: occupied cells in
+ * the cells it meets. */
+static int maybe_touches(const geometry *g, const double lo[3], const double hi[3])
+{
+    uint32_t a[3], b[3];
+    for (int k = 0; k < 3; k++)
+        if (!cell_range(g, k, lo[k] / g->scale, hi[k] / g->scale, &a[k], &b[k]))
+            return 0;
+    uint32_t m = g->g.n + 1;
+    const uint32_t *t = g->svt;
+    b[0]++, b[1]++, b[2]++;
+    int64_t v = (int64_t)t[svt_at(m, b[0], b[1], b[2])] - t[svt_at(m, a[0], b[1], b[2])] -
+                t[svt_at(m, b[0], a[1], b[2])] - t[svt_at(m, b[0], b[1], a[2])] + t[svt_at(m, a[0], a[1], b[2])] +
+                t[svt_at(m, a[0], b[1], a[2])] + t[svt_at(m, b[0], a[1], a[2])] - t[svt_at(m, a[0], a[1], a[2])];
+    return v > 0;
+}
+
+static int tri_overlaps(const geometry *g, uint32_t i, const double lo[3], const double hi[3])
+{
+    double t[9];
+    for (int k = 0; k < 9; k++)
+        t[k] = g->tris[9 * (size_t)i + (size_t)k];
+    return voxel_tri_box_overlap(t, lo, hi);
+}
+
+/* Whether the metric box [lo, hi] overlaps a triangle, exactly. */
+static int touches_exactly(const geometry *g, const double lo[3], const double hi[3])
+{
+    if (!maybe_touches(g, lo, hi))
+        return 0;
+    double l[3], h[3];
+    uint32_t a[3], b[3];
+    for (int k = 0; k < 3; k++) {
+        l[k] = lo[k] / g->scale;
+        h[k] = hi[k] / g->scale;
+        if (!bin_range(g, k, l[k], h[k], &a[k], &b[k]))
+            return 0;
+    }
+    for (uint32_t i = 0; i < g->nbig; i++)
+        if (tri_overlaps(g, g->big[i], l, h))
+            return 1;
+    for (uint32_t z = a[2]; z <= b[2]; z++)
+        for (uint32_t y = a[1]; y <= b[1]; y++)
+            for (uint32_t x = a[0]; x <= b[0]; x++) {
+                uint32_t bin = x + JUDGE_BINS * (y + JUDGE_BINS * z);
+                for (uint32_t k = g->bin_first[bin]; k < g->bin_first[bin + 1]; k++)
+                    if (tri_overlaps(g, g->bin_tris[k], l, h))
+                        return 1;
+            }
+    return 0;
+}
+
+static int map_init(map *m, const float (*boxes)[6], uint32_t n, double scale)
+{
+    m->boxes = cvre_malloc(n * sizeof *m->boxes);
+    m->near = cvre_malloc(n * sizeof *m->near);
+    if (!m->boxes || !m->near)
+        return -ENOMEM;
+    m->n = n;
+    for (uint32_t i = 0; i < n; i++) {
+        m->boxes[i] = (move_box){.box_index = i};
+        for (int a = 0; a < 3; a++) {
+            m->boxes[i].min[a] = (float)(boxes[i][a] * scale);
+            m->boxes[i].max[a] = (float)(boxes[i][3 + a] * scale);
+        }
+    }
+    return 0;
+}
+
+static void map_free(map *m)
+{
+    free(m->boxes);
+    free(m->near);
+}
+
+/* The avatar's box at feet f, grown by lo below and hi above on each axis
+ * (negative: shrunk). */
+static void avatar_box(const move_params *mp, const float f[3], const double grow_lo[3], const double grow_hi[3],
+                       double lo[3], double hi[3])
+{
+    const double base[3] = {-mp->size[0] / 2.0, 0, -mp->size[2] / 2.0};
+    const double top[3] = {mp->size[0] / 2.0, mp->size[1], mp->size[2] / 2.0};
+    for (int a = 0; a < 3; a++) {
+        lo[a] = f[a] + base[a] - grow_lo[a];
+        hi[a] = f[a] + top[a] + grow_hi[a];
+    }
+}
+
+/* What one trial counted. */
+typedef struct tally {
+    uint64_t phantom, opened;
+} tally;
+
+/* Walks the avatar from s along (dx, dz) (a unit vector) at speed for
+ * ticks ticks against m; adds what it finds to *t. */
+static void trial(const judge_params *p, const geometry *g, const double cell[3], map *m, const judge_sample *s,
+                  float dx, float dz, float speed, uint32_t ticks, tally *t)
+{
+    /* Its bottom raised: what it stands on is support, not what stopped it. */
+    const double grow_lo[3] = {cell[0], -JUDGE_FLOOR_TOLERANCE, cell[2]};
+    const double shrink[3] = {-JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE};
+    const float disp[3] = {dx * speed * p->dt, 0, dz * speed * p->dt};
+    move_state st = {.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true};
+    for (uint32_t k = 0; k < ticks; k++) {
+        float lo[3], hi[3];
+        move_bounds(&p->move, &st, disp, p->dt, lo, hi);
+        uint32_t n = 0;
+        for (uint32_t i = 0; i < m->n; i++) {
+            const move_box *b = &m->boxes[i];
+            if (b->min[0] <= hi[0] && b->max[0] >= lo[0] && b->min[1] <= hi[1] && b->max[1] >= lo[1] &&
+                b->min[2] <= hi[2] && b->max[2] >= lo[2])
+                m->near[n++] = *b;
+        }
+        move_result r;
+        if (move_step(&p->move, &st, disp, p->dt, m->near, n, &r) < 0)
+            return; /* out of the controller's range: the trial ends there */
+        double blo[3], bhi[3];
+        int phantom = 0, opened;
+        if (r.ncontacts) {
+            avatar_box(&p->move, r.state.pos, grow_lo, cell, blo, bhi);
+            phantom = !touches_exactly(g, blo, bhi);
+        }
+        avatar_box(&p->move, r.state.pos, shrink, shrink, blo, bhi);
+        opened = touches_exactly(g, blo, bhi);
+        bool stuck = memcmp(&r.state.pos, &st.pos, sizeof st.pos) == 0 && r.state.vy == st.vy &&
+                     r.state.grounded == st.grounded;
+        /* Stuck: every tick left would be this one again. */
+        uint64_t times = stuck ? ticks - k : 1;
+        t->phantom += (uint64_t)phantom * times;
+        t->opened += (uint64_t)opened * times;
+        if (stuck)
+            return;
+        st = r.state;
+    }
+}
+
+static int finite_box(const float b[6])
+{
+    for (int a = 0; a < 3; a++)
+        if (!isfinite(b[a]) || !isfinite(b[3 + a]) || b[a] > b[3 + a])
+            return 0;
+    return 1;
+}
+
+static int check(const judge_params *p, const judge_input *in, char *err, size_t errlen)
+{
+    if (!(p->dt > 0 && p->dt <= MOVE_MAX_DT) || !(p->reach > 0 && p->reach <= 100) ||
+        !(p->speed >= JUDGE_SPEED_MIN && p->speed <= 100) || !(p->deflect >= 0 && p->deflect <= 1.5707964f) ||
+        p->depth < VOXEL_DEPTH_MIN || p->depth > JUDGE_DEPTH_MAX || p->max_samples < 1 ||
+        p->max_samples > JUDGE_SAMPLES_LIMIT)
+        return cvre_fail(err, errlen, -EINVAL, "judge parameters out of range");
+    if (!in->tris || in->ntris == 0)
+        return cvre_fail(err, errlen, -EINVAL, "no triangles to judge against");
+    for (size_t i = 0; i < (size_t)in->ntris * 9; i++)
+        if (!isfinite(in->tris[i]))
+            return cvre_fail(err, errlen, -EINVAL, "triangle %zu: a coordinate is not finite", i / 9);
+    if (!(in->scale > 0) || !isfinite(in->scale) || !isfinite(in->pose_y))
+        return cvre_fail(err, errlen, -EINVAL, "scale %g or height %g unusable", in->scale, in->pose_y);
+    const float (*maps[2])[6] = {in->old_boxes, in->new_boxes};
+    uint32_t counts[2] = {in->nold, in->nnew};
+    for (int k = 0; k < 2; k++) {
+        if (!maps[k] || counts[k] == 0 || counts[k] > ECM_MAX_BOXES_LIMIT)
+            return cvre_fail(err, errlen, -EINVAL, "%s map: %u boxes, 1 to %u wanted", k ? "new" : "old", counts[k],
+                             ECM_MAX_BOXES_LIMIT);
+        for (uint32_t i = 0; i < counts[k]; i++)
+            if (!finite_box(maps[k][i]))
+                return cvre_fail(err, errlen, -EINVAL, "%s map: box %u is not a finite box", k ? "new" : "old", i);
+    }
+    if (!in->samples || in->nsamples == 0)
+        return cvre_fail(err, errlen, -EINVAL, "no samples: nothing to judge by");
+    for (uint32_t i = 0; i < in->nsamples; i++)
+        for (int a = 0; a < 3; a++) {
+            float v = in->samples[i].pos[a], w = in->samples[i].vel[a];
+            if (!isfinite(v) || !isfinite(w) || fabsf(v) > MOVE_MAX_COORD || fabsf(w) > MOVE_MAX_COORD)
+                return cvre_fail(err, errlen, -EINVAL, "sample %u: coordinate out of range", i);
+        }
+    return 0;
+}
+
+int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen)
+{
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    memset(out, 0, sizeof *out);
+    int rc = check(p, in, err, errlen);
+    if (rc < 0)
+        return rc;
+    judge_params jp = *p;
+    jp.move.floor_y = (float)-in->pose_y;
+    geometry g = {0};
+    map maps[2] = {{0}, {0}};
+    if ((rc = geometry_init(&g, &jp, in)) < 0 || (rc = map_init(&maps[0], in->old_boxes, in->nold, in->scale)) < 0 ||
+        (rc = map_init(&maps[1], in->new_boxes, in->nnew, in->scale)) < 0) {
+        /* The input was checked: what is left is memory. */
+        rc = cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
+        goto done;
+    }
+    const double cell[3] = {g.g.cell[0] * in->scale, g.g.cell[1] * in->scale, g.g.cell[2] * in->scale};
+    uint32_t n = in->nsamples < jp.max_samples ? in->nsamples : jp.max_samples;
+    const float turns[3] = {0, jp.deflect, -jp.deflect};
+    int nturns = jp.deflect > 0 ? 3 : 1;
+    tally t[2] = {{0, 0}, {0, 0}};
+    for (uint32_t i = 0; i < n; i++) {
+        const judge_sample *s = &in->samples[(uint64_t)i * in->nsamples / n];
+        float h = hypotf(s->vel[0], s->vel[2]);
+        if (!(h > 0)) {
+            out->still++;
+            continue;
+        }
+        float speed = h < JUDGE_SPEED_MIN ? jp.speed : h;
+        if (speed * jp.dt * JUDGE_TICKS_MAX < jp.reach)
+            speed = jp.reach / (jp.dt * JUDGE_TICKS_MAX);
+        uint32_t ticks = (uint32_t)ceilf(jp.reach / (speed * jp.dt));
+        for (int d = 0; d < nturns; d++) {
+            float c = cosf(turns[d]), sn = sinf(turns[d]);
+            float dx = (s->vel[0] * c - s->vel[2] * sn) / h, dz = (s->vel[0] * sn + s->vel[2] * c) / h;
+            for (int k = 0; k < 2; k++)
+                trial(&jp, &g, cell, &maps[k], s, dx, dz, speed, ticks, &t[k]);
+            out->moves += ticks;
+        }
+    }
+    out->samples = n;
+    out->phantom_old = t[0].phantom;
+    out->phantom_new = t[1].phantom;
+    out->opened_old = t[0].opened;
+    out->opened_new = t[1].opened;
+    out->better = t[1].phantom < t[0].phantom && t[1].opened <= t[0].opened;
+done:
+    geometry_free(&g);
+    map_free(&maps[0]);
+    map_free(&maps[1]);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    if (rc == 0)
+        out->ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;
+    else
+        memset(out, 0, sizeof *out);
+    return rc;
+}

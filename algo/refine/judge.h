@@ -1,0 +1,143 @@
+/*
+ * judge.h: whether a refined collision map is better than the one in force,
+ * found by walking the avatar controller (algo/scene/move.h) through both
+ * maps from the collisions that asked for the refinement. A map is never
+ * published unless it is better (server/pipeline/apply.c). Pure module: no
+ * I/O, no global state, no threads; the same input always gives the same
+ * output (times aside).
+ *
+ * Everything is simulated in the object's metric frame: local coordinates
+ * times the object's scale (so that the avatar's size, gravity and step
+ * height are in metres), y up; the world's floor y = 0 is the plane
+ * y = -pose_y there, pose_y being the height of the object's origin. Other
+ * objects are not part of the trial.
+ *
+ * The trial. Each sample is a logged collision: where the avatar's feet were
+ * and how it moved. From each, in each of three directions (the sample's
+ * horizontal direction, and that turned by +-deflect, so that the trial also
+ * tries the space beside the line the user took), the avatar walks at the
+ * sample's horizontal speed (or `speed` when it is nearly still) for as many
+ * ticks of dt as cover `reach` metres, once against the old boxes and once
+ * against the new, with gravity and steps up as on the server: an opening
+ * that leads onto a step and on under a box is tried as a user would. Per
+ * map, every tick counts as
+ *
+ *   - a phantom block when a box of the map blocked the avatar (a blocking
+ *     contact or an inside contact) while its box, grown by one cell of the
+ *     grid (below) sideways and upwards, its bottom raised by
+ *     JUDGE_FLOOR_TOLERANCE (what it stands on is support), touches no
+ *     triangle: the map stopped a user where nothing real was
+ *     (tests/bench/scenario.py's phantom check);
+ *   - opened when the avatar's box, shrunk by JUDGE_LEAK_TOLERANCE, ends the
+ *     tick overlapping a triangle: the map let a user into real geometry.
+ *
+ * Verdict: the new map is better iff it has fewer phantom blocks and opens
+ * no more than the old one (none where the old one opened nothing).
+ *
+ * "Touches a triangle" is answered by an occupancy grid of 2^depth cells per
+ * axis over the object's bounding box (voxel.h, conservative: a cell a
+ * triangle may touch is occupied) with a summed-volume table, so a box far
+ * from the geometry costs O(1); a "maybe" is then confirmed with the exact
+ * triangle-box test on the triangles binned near the avatar. Both tests
+ * need the exact one: the centimetre by which the avatar's box is raised
+ * from what it stands on is less than a cell.
+ *
+ * Costs: building the grid is one pass over the triangles (voxel_mark) plus
+ * 8 (2^depth + 1)^3 bytes for the table (8.6 MiB at depth 7); the bins hold
+ * each triangle at most JUDGE_BIN_SPREAD_MAX times. Then at most
+ * max_samples x 3 directions x 2 maps x JUDGE_TICKS_MAX ticks, each one
+ * move_step against the boxes near the avatar plus O(1) grid tests (the
+ * exact test only near triangles). A run stuck in place (the same state
+ * after a tick as before) is not simulated further: every later tick would
+ * be the same, and is counted as such.
+ */
+#ifndef CVRE_ECM_JUDGE_H
+#define CVRE_ECM_JUDGE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "move.h"
+
+/* The server's tick at its default 20 Hz (server/srv_limits.h). */
+#define JUDGE_DT_DEFAULT 0.05f
+/* How far each trial walks: past a doorway and a room's first metres, far
+ * enough to reach what an opening leads to (a step, a low roof). */
+#define JUDGE_REACH_DEFAULT 3.0f
+/* Walking pace for samples logged nearly still (below JUDGE_SPEED_MIN). */
+#define JUDGE_SPEED_DEFAULT 1.5f
+#define JUDGE_SPEED_MIN 0.3f
+/* The deflected directions: +-30 degrees. */
+#define JUDGE_DEFLECT_DEFAULT 0.5235988f
+/* Samples judged at most: chosen evenly from those given. 2048 x 3 x 2
+ * trials of about 40 ticks are some 500,000 moves, well under a second. */
+#define JUDGE_SAMPLES_DEFAULT 2048u
+#define JUDGE_SAMPLES_LIMIT 65536u
+/* Ticks a trial takes at most (reach at JUDGE_SPEED_MIN and the shortest
+ * tick would be more; the speed is raised to fit). */
+#define JUDGE_TICKS_MAX 400u
+/* How far the avatar's box may reach down into what it stands on and still
+ * not touch it (phantom test), and how far into a triangle it must be to
+ * count as let in (opened test): a centimetre, as the scenario checks. */
+#define JUDGE_FLOOR_TOLERANCE 0.01f
+#define JUDGE_LEAK_TOLERANCE 0.01f
+/* A triangle whose bounding box spans more bins than this is kept on a
+ * list every exact test looks at, so that the bins stay within this many
+ * entries a triangle. */
+#define JUDGE_BIN_SPREAD_MAX 64u
+
+typedef struct judge_params {
+    move_params move;      /* avatar size, gravity, step height, m; floor_y is set from pose_y */
+    float dt;              /* tick, s, in (0, MOVE_MAX_DT] */
+    float reach;           /* m a trial walks, in (0, 100] */
+    float speed;           /* m/s for samples nearly still, in [JUDGE_SPEED_MIN, 100] */
+    float deflect;         /* radians, [0, pi/2]; 0: only the sample's own direction */
+    uint32_t depth;        /* grid depth, VOXEL_DEPTH_MIN..8 */
+    uint32_t max_samples;  /* 1..JUDGE_SAMPLES_LIMIT */
+} judge_params;
+
+/* Fills p with the defaults above, the default avatar (move.h) and the
+ * refinement's grid depth (refine.h: the same cells, the same tolerance). */
+void judge_params_default(judge_params *p);
+
+/* A logged collision in the object's metric frame. */
+typedef struct judge_sample {
+    float pos[3]; /* the avatar's feet */
+    float vel[3]; /* its velocity, m/s */
+} judge_sample;
+
+typedef struct judge_input {
+    const float *tris;            /* ntris triangles, 9 floats each, local */
+    uint32_t ntris;
+    double scale;                 /* metres per local unit, > 0 */
+    double pose_y;                /* world height of the object's origin, m */
+    const float (*old_boxes)[6];  /* the map in force, local */
+    uint32_t nold;
+    const float (*new_boxes)[6];  /* the candidate, local */
+    uint32_t nnew;
+    const judge_sample *samples;
+    uint32_t nsamples;
+} judge_input;
+
+typedef struct judge_result {
+    int better;           /* 1: publish the candidate */
+    uint32_t samples;     /* judged (after the cap) */
+    uint32_t still;       /* of which without a horizontal direction: not walked */
+    uint64_t moves;       /* ticks per map */
+    uint64_t phantom_old, phantom_new;
+    uint64_t opened_old, opened_new;
+    double ms;
+} judge_result;
+
+/*
+ * Judges in->new_boxes against in->old_boxes (see above) and fills *out,
+ * whatever the verdict. Returns 0, or with *out zeroed and a one-line
+ * reason in err (room for errlen bytes): -EINVAL for parameters out of
+ * range, no triangles, no boxes or more than ECM_MAX_BOXES_LIMIT, a
+ * coordinate, the scale or pose_y not finite (or a scale not above 0), a
+ * box with min > max, no samples, or a sample with a coordinate that is not
+ * finite or beyond MOVE_MAX_COORD; -ENOMEM when out of memory.
+ */
+int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen);
+
+#endif

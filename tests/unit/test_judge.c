@@ -1,0 +1,280 @@
+/* The judge: a doorway opened is better, a garage's base opened under a
+ * coarse roof box is not, a map that uncovers a wall is not, the same input
+ * gives the same figures, and bad input gets a clear refusal. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <errno.h>
+#include <math.h>
+#include <string.h>
+
+#include "judge.h"
+
+#define MAX_TRIS 256
+
+typedef struct mesh {
+    float t[MAX_TRIS * 9];
+    uint32_t n;
+} mesh;
+
+/* The 12 triangles of the surface of box [x0, x1] x [y0, y1] x [z0, z1]. */
+static void cuboid(mesh *m, float x0, float y0, float z0, float x1, float y1, float z1)
+{
+    const float c[8][3] = {{x0, y0, z0}, {x1, y0, z0}, {x1, y1, z0}, {x0, y1, z0},
+                           {x0, y0, z1}, {x1, y0, z1}, {x1, y1, z1}, {x0, y1, z1}};
+    const int f[12][3] = {{0, 1, 2}, {0, 2, 3}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                          {3, 2, 6}, {3, 6, 7}, {0, 3, 7}, {0, 7, 4}, {1, 2, 6}, {1, 6, 5}};
+    assert_true(m->n + 12 <= MAX_TRIS);
+    for (int i = 0; i < 12; i++, m->n++)
+        for (int v = 0; v < 3; v++)
+            memcpy(m->t + 9 * m->n + 3 * v, c[f[i][v]], sizeof c[0]);
+}
+
+/* A wall 6 m wide, 3 m tall, 0.2 m thick in z in [0, 0.2], with a doorway
+ * 1 m wide and 2.2 m tall at x = 0; its parts as boxes. */
+static const float wall_parts[3][6] = {
+    {-3, 0, 0, -0.5f, 3, 0.2f}, {0.5f, 0, 0, 3, 3, 0.2f}, {-0.5f, 2.2f, 0, 0.5f, 3, 0.2f}};
+static const float wall_mbr[1][6] = {{-3, 0, 0, 3, 3, 0.2f}};
+
+static void wall(mesh *m)
+{
+    m->n = 0;
+    for (int i = 0; i < 3; i++)
+        cuboid(m, wall_parts[i][0], wall_parts[i][1], wall_parts[i][2], wall_parts[i][3], wall_parts[i][4],
+               wall_parts[i][5]);
+}
+
+/* Users stopped in front of the wall (their box's front 1 mm before z = 0),
+ * walking into it at 1.5 m/s, from x0 to x1. */
+static uint32_t in_front(judge_sample *s, uint32_t n, float x0, float x1)
+{
+    for (uint32_t i = 0; i < n; i++)
+        s[i] = (judge_sample){.pos = {x0 + (x1 - x0) * (float)i / (float)(n > 1 ? n - 1 : 1), 0, -0.301f},
+                              .vel = {0, 0, 1.5f}};
+    return n;
+}
+
+static judge_input input(const mesh *m, const float (*old)[6], uint32_t nold, const float (*cand)[6], uint32_t nnew,
+                         const judge_sample *s, uint32_t ns)
+{
+    return (judge_input){.tris = m->t, .ntris = m->n, .scale = 1, .pose_y = 0, .old_boxes = old, .nold = nold,
+                         .new_boxes = cand, .nnew = nnew, .samples = s, .nsamples = ns};
+}
+
+/* Judges with the default parameters; the call must succeed. */
+static judge_result judged(const judge_input *in)
+{
+    judge_params p;
+    judge_params_default(&p);
+    judge_result r;
+    char err[128] = "";
+    int rc = judge_maps(&p, in, &r, err, sizeof err);
+    if (rc != 0)
+        fail_msg("judge_maps: %d %s", rc, err);
+    return r;
+}
+
+static void test_doorway_opened_is_better(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[16];
+    uint32_t ns = in_front(s, 16, -0.15f, 0.15f);
+    judge_input in = input(&m, wall_mbr, 1, wall_parts, 3, s, ns);
+    judge_result r = judged(&in);
+    assert_int_equal(r.samples, 16);
+    assert_int_equal(r.still, 0);
+    assert_true(r.moves > 0);
+    /* The MBR stops every user in the doorway, every tick: phantoms. */
+    assert_true(r.phantom_old >= 16 * 3);
+    assert_true(r.phantom_new < r.phantom_old / 10);
+    assert_int_equal(r.opened_old, 0);
+    assert_int_equal(r.opened_new, 0);
+    assert_int_equal(r.better, 1);
+    /* The same, the other way round: the refined map is not worse than
+     * itself, nor the MBR better than it. */
+    judge_input back = input(&m, wall_parts, 3, wall_mbr, 1, s, ns);
+    r = judged(&back);
+    assert_int_equal(r.better, 0);
+    assert_true(r.phantom_new > r.phantom_old);
+}
+
+/* A garage: a 0.31 m base one steps onto, posts, a roof plate at 2.5 m and
+ * a beam at the back reaching down to 1.83 m. The candidate makes the base a
+ * box of its own but keeps the roof, beam and posts in one box whose bottom
+ * is the beam's, 1.83 m: users step onto the base, walk on, and hit that
+ * box with their heads where nothing is near them. The MBR stopped them at
+ * the base, which is real. */
+static void test_garage_base_opened_under_a_low_box_is_rejected(void **state)
+{
+    (void)state;
+    static mesh m;
+    m.n = 0;
+    cuboid(&m, -2, 0, 0, 2, 0.31f, 6);       /* base */
+    cuboid(&m, -2, 2.5f, 0, 2, 2.6f, 6);     /* roof plate */
+    cuboid(&m, -2, 1.83f, 5.8f, 2, 2.5f, 6); /* beam at the back */
+    cuboid(&m, -2, 0.31f, 0, -1.9f, 2.5f, 0.1f);
+    cuboid(&m, 1.9f, 0.31f, 0, 2, 2.5f, 0.1f);
+    const float mbr[1][6] = {{-2, 0, 0, 2, 2.6f, 6}};
+    const float cand[4][6] = {{-2, 0, 0, 2, 0.31f, 6},
+                              {-2, 1.83f, 1.0f, 2, 2.6f, 6},
+                              {-2, 0.31f, 0, -1.9f, 2.6f, 1.0f},
+                              {1.9f, 0.31f, 0, 2, 2.6f, 1.0f}};
+    judge_sample s[8];
+    uint32_t ns = in_front(s, 8, -0.5f, 0.5f);
+    judge_input in = input(&m, mbr, 1, cand, 4, s, ns);
+    judge_result r = judged(&in);
+    assert_int_equal(r.phantom_old, 0);
+    assert_true(r.phantom_new > 0);
+    assert_int_equal(r.opened_new, 0);
+    assert_int_equal(r.better, 0);
+}
+
+/* A candidate that forgets the right part of the wall: fewer phantoms at
+ * the doorway, but users in front of that part walk into it. */
+static void test_uncovered_wall_is_rejected(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[24];
+    uint32_t ns = in_front(s, 16, -0.15f, 0.15f);
+    ns += in_front(s + ns, 8, 1.2f, 2.4f);
+    const float two[2][6] = {{-3, 0, 0, -0.5f, 3, 0.2f}, {-0.5f, 2.2f, 0, 0.5f, 3, 0.2f}};
+    judge_input in = input(&m, wall_mbr, 1, two, 2, s, ns);
+    judge_result r = judged(&in);
+    assert_true(r.phantom_new < r.phantom_old);
+    assert_int_equal(r.opened_old, 0);
+    assert_true(r.opened_new > 0);
+    assert_int_equal(r.better, 0);
+}
+
+/* The same input twice: the same figures; a cap picks samples evenly; a
+ * sample that stood still is not walked; the object's scale and height
+ * carry the trial into metres. */
+static void test_deterministic_cap_still_scale(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[40];
+    uint32_t ns = in_front(s, 39, -0.15f, 0.15f);
+    s[ns++] = (judge_sample){.pos = {0, 0, -0.301f}, .vel = {0, -3, 0}};
+    judge_input in = input(&m, wall_mbr, 1, wall_parts, 3, s, ns);
+    judge_result a = judged(&in), b = judged(&in);
+    assert_int_equal(a.samples, 40);
+    assert_int_equal(a.still, 1);
+    assert_int_equal(a.moves, b.moves);
+    assert_int_equal(a.phantom_old, b.phantom_old);
+    assert_int_equal(a.phantom_new, b.phantom_new);
+    assert_int_equal(a.opened_old, b.opened_old);
+    assert_int_equal(a.opened_new, b.opened_new);
+    assert_int_equal(a.better, b.better);
+    judge_params p;
+    judge_params_default(&p);
+    p.max_samples = 10;
+    char err[128] = "";
+    assert_int_equal(judge_maps(&p, &in, &b, err, sizeof err), 0);
+    assert_int_equal(b.samples, 10);
+    assert_int_equal(b.still, 0); /* the last sample is not among every fourth */
+    assert_true(b.moves < a.moves);
+    /* The wall at a tenth of its size, scaled back up: the same trial. */
+    static mesh small;
+    small = m;
+    for (uint32_t i = 0; i < small.n * 9; i++)
+        small.t[i] /= 10;
+    float mbr[1][6], parts[3][6];
+    for (int k = 0; k < 6; k++) {
+        mbr[0][k] = wall_mbr[0][k] / 10;
+        for (int i = 0; i < 3; i++)
+            parts[i][k] = wall_parts[i][k] / 10;
+    }
+    judge_input scaled = input(&small, (const float(*)[6])mbr, 1, (const float(*)[6])parts, 3, s, ns);
+    scaled.scale = 10;
+    b = judged(&scaled);
+    assert_int_equal(b.better, 1);
+    assert_true(b.phantom_new < b.phantom_old / 10);
+    /* Sunk 0.5 m into the floor: users stand 0.5 m higher in the object's
+     * frame, and the 2.2 m doorway stops them at its lintel, which is real:
+     * the MBR was no worse. */
+    scaled.pose_y = -0.5;
+    b = judged(&scaled);
+    assert_int_equal(b.better, 0);
+    assert_true(b.phantom_old < a.phantom_old / 10);
+}
+
+static void test_bad_input(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[4];
+    uint32_t ns = in_front(s, 4, -0.1f, 0.1f);
+    judge_params p;
+    judge_params_default(&p);
+    judge_result r;
+    char err[128];
+    judge_input in = input(&m, wall_mbr, 1, wall_parts, 3, s, 0);
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "no samples: nothing to judge by");
+    assert_int_equal(r.samples, 0);
+    assert_int_equal(r.better, 0);
+
+    in.nsamples = ns;
+    s[2].vel[0] = NAN;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "sample 2: coordinate out of range");
+    s[2].vel[0] = 0;
+    s[1].pos[1] = 1e9f;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    s[1].pos[1] = 0;
+
+    m.t[13] = NAN;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "triangle 1: a coordinate is not finite");
+    wall(&m);
+
+    const float inverted[1][6] = {{1, 0, 0, 0, 1, 1}};
+    in.new_boxes = inverted;
+    in.nnew = 1;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "new map: box 0 is not a finite box");
+    in.new_boxes = wall_parts;
+    in.nnew = 0;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    in.nnew = 3;
+
+    in.scale = 0;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    in.scale = 1;
+    in.pose_y = INFINITY;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    in.pose_y = 0;
+    in.ntris = 0;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    in.ntris = m.n;
+
+    p.dt = 0;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "judge parameters out of range");
+    judge_params_default(&p);
+    p.max_samples = 0;
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    judge_params_default(&p);
+    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), 0);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_doorway_opened_is_better),
+        cmocka_unit_test(test_garage_base_opened_under_a_low_box_is_rejected),
+        cmocka_unit_test(test_uncovered_wall_is_rejected),
+        cmocka_unit_test(test_deterministic_cap_still_scale),
+        cmocka_unit_test(test_bad_input),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
