@@ -201,13 +201,15 @@ static void respond(http_conn *hc, http_reply *rep, int complete)
         body_len = 0;
         hc->file_fd = rep->file_fd;
         hc->file_left = rep->file_size;
+    } else if (rep->status == 304) {
+        body_len = 0;
     } else if (!body) {
         body_len = status_body(rep->status, line, sizeof line);
         body = line;
         rep->content_type = "text/plain; charset=utf-8";
     }
     int n = http_response_head(head, sizeof head, rep->status, rep->content_type,
-                               file ? (size_t)rep->file_size : body_len, rep->extra);
+                               file || rep->status == 304 ? (size_t)rep->file_size : body_len, rep->extra);
     uint8_t *room;
     size_t room_len;
     if (n < 0 || conn_out_reserve(&hc->c, (size_t)n + body_len, &room, &room_len) < 0) {

@@ -64,11 +64,14 @@ typedef void http_takeover_fn(void *data, int fd, const char *peer, const uint8_
 
 /* What a handler answers. The server sets status 200, file_fd -1 and the
  * rest empty before the call. A reply without a body or a file gets a
- * one-line text body naming its status. */
+ * one-line text body naming its status, except 304 (Not Modified), which
+ * has none: its Content-Length is file_size, the size a 200 would send. */
 typedef struct http_reply {
     int status;
     const char *content_type; /* static; NULL: none */
-    const char *extra;        /* static header lines, each ending in CRLF; NULL: none */
+    const char *extra;        /* header lines, each ending in CRLF, that live until the
+                               * handler returns (static, or extra_buf); NULL: none */
+    char extra_buf[128];      /* room for lines made per request */
     char *body;               /* malloc'd; the server frees it */
     size_t body_len;
     /* A file sent as the body instead, read from the fd as the peer takes

@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <stdio.h>
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
@@ -172,6 +173,9 @@ static int walk(int root_fd, char *path, web_file *out)
     out->fd = fd;
     out->size = (uint64_t)st.st_size;
     out->type = type_of(name);
+    snprintf(out->etag, sizeof out->etag, "\"%llx-%llx-%llx\"", (unsigned long long)st.st_ino,
+             (unsigned long long)st.st_size,
+             (unsigned long long)st.st_mtim.tv_sec * 1000000000ull + (unsigned long long)st.st_mtim.tv_nsec);
     rc = 0;
 done:
     if (dfd != root_fd)
@@ -195,4 +199,23 @@ int web_files_open(int root_fd, const char *target, size_t len, web_file *out)
     if (rc == 0)
         rc = walk(root_fd, path, out);
     return rc;
+}
+
+int web_files_etag_matches(const char *if_none_match, const char *etag)
+{
+    if (!if_none_match)
+        return 0;
+    size_t len = strlen(etag);
+    for (const char *p = if_none_match; *p;) {
+        p += strspn(p, " \t,");
+        if (*p == '*')
+            return 1;
+        if (strncmp(p, "W/", 2) == 0)
+            p += 2;
+        size_t n = strcspn(p, " \t,");
+        if (n == len && memcmp(p, etag, len) == 0)
+            return 1;
+        p += n;
+    }
+    return 0;
 }

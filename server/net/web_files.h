@@ -30,10 +30,18 @@
  * root's). */
 #define WEB_FILES_INDEX "index.html"
 
+/* Room for a file's entity tag: quotes, three 16-digit hex numbers, two
+ * dashes and the NUL. */
+#define WEB_FILES_ETAG_MAX 56u
+
 typedef struct web_file {
     int fd;           /* read-only, close-on-exec; the caller closes it */
     uint64_t size;    /* bytes, when it was opened */
     const char *type; /* the Content-Type, a static string */
+    /* A strong entity tag (RFC 9110 8.8.3), quotes included: the file's
+     * inode, size and modification time in ns, so that a file replaced or
+     * rewritten (an upgrade of the web client) gets a new one. */
+    char etag[WEB_FILES_ETAG_MAX];
 } web_file;
 
 /*
@@ -59,5 +67,10 @@ typedef struct web_file {
  * read from, never closed or moved. *out is untouched on failure.
  */
 int web_files_open(int root_fd, const char *target, size_t len, web_file *out);
+
+/* Whether an If-None-Match header's value (NULL: none) names etag: "*",
+ * or etag among its comma-separated tags (a weak W/ tag matches its strong
+ * twin: the comparison for GET is the weak one, RFC 9110 13.1.2). */
+int web_files_etag_matches(const char *if_none_match, const char *etag);
 
 #endif

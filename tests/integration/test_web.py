@@ -193,6 +193,22 @@ def test_files():
     assert status(r) == 200 and r.endswith(INDEX), r
 
 
+def test_not_modified():
+    """Every file carries an ETag and asks to be checked again (no-cache);
+    a GET with that tag gets 304 and no body, a stale tag the whole file."""
+    r = http(b"GET /big.js HTTP/1.1\r\nHost: h\r\n\r\n")
+    head = r.split(b"\r\n\r\n", 1)[0].decode()
+    tag = [line.split(":", 1)[1].strip() for line in head.split("\r\n") if line.lower().startswith("etag:")]
+    assert len(tag) == 1 and tag[0].startswith('"'), head
+    assert "Cache-Control: no-cache" in head, head
+    r = http(f"GET /big.js HTTP/1.1\r\nHost: h\r\nIf-None-Match: \"old\", {tag[0]}\r\n\r\n".encode())
+    head, body = r.split(b"\r\n\r\n", 1)
+    assert status(r) == 304 and body == b"", r[:300]
+    assert f"Content-Length: {len(BIG)}".encode() in head and tag[0].encode() in head, head
+    r = http(b'GET /big.js HTTP/1.1\r\nHost: h\r\nIf-None-Match: "old"\r\n\r\n')
+    assert status(r) == 200 and r.split(b"\r\n\r\n", 1)[1] == BIG
+
+
 def test_file_not_read_is_cut_off():
     """A peer that stops reading a large file is cut off once nothing has
     moved for the linger (HTTP_LINGER_MS, 5 s): the rest of the file is
@@ -467,7 +483,7 @@ def test_shutdown_close():
     assert SRV.proc.wait(30) == 0
 
 
-run([test_files, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_over_websocket,
+run([test_files, test_not_modified, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_over_websocket,
      test_client_objects_over_websocket, test_client_websocket_refused, test_client_close_echoed,
      test_kick_closes_with_1008, test_fragmented_message, test_malformed_frames, test_bad_handshakes,
      test_full_server_and_missing_root, test_shutdown_close])

@@ -8,6 +8,7 @@
 #include <cmocka.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <stdio.h>
 #include <string.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -43,7 +44,7 @@ static int open_len(const char *target, size_t len, web_file *f)
  * web_file as it was. */
 static void expect_len(const char *target, size_t len, int rc)
 {
-    web_file f = {-7, 7, "untouched"};
+    web_file f = {.fd = -7, .size = 7, .type = "untouched"};
     int got = open_len(target, len, &f);
     if (got != rc)
         print_error("%.*s: %d, expected %d\n", (int)len, target, got, rc);
@@ -127,6 +128,51 @@ static void test_index(void **state)
     expect("/sub", -ENOENT);
     expect("/empty", -ENOENT);
     expect("/sub/deeper/", -ENOENT);
+}
+
+/* Writes a file of the root, replacing what it held. */
+static void write_file(const char *name, const char *data)
+{
+    int fd = openat(root, name, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    assert_true(fd >= 0);
+    assert_int_equal(write(fd, data, strlen(data)), (ssize_t)strlen(data));
+    close(fd);
+}
+
+/* A file's entity tag is the same while it is, and changes when it is
+ * rewritten; If-None-Match names it among others, weakly or by "*". */
+static void test_etags(void **state)
+{
+    (void)state;
+    web_file a, b;
+    write_file("etag.txt", "first\n");
+    assert_int_equal(open_len("/etag.txt", 9, &a), 0);
+    assert_int_equal(open_len("/etag.txt", 9, &b), 0);
+    close(a.fd);
+    close(b.fd);
+    assert_true(a.etag[0] == '"' && a.etag[strlen(a.etag) - 1] == '"');
+    assert_string_equal(a.etag, b.etag);
+    assert_int_equal(open_len("/app.js", 7, &b), 0);
+    close(b.fd);
+    assert_string_not_equal(a.etag, b.etag);
+    write_file("etag.txt", "second, longer\n");
+    assert_int_equal(open_len("/etag.txt", 9, &b), 0);
+    close(b.fd);
+    assert_string_not_equal(a.etag, b.etag);
+    assert_int_equal(unlinkat(root, "etag.txt", 0), 0);
+
+    char list[3 * WEB_FILES_ETAG_MAX];
+    assert_true(web_files_etag_matches(b.etag, b.etag));
+    snprintf(list, sizeof list, "\"x\", W/%s", b.etag);
+    assert_true(web_files_etag_matches(list, b.etag));
+    snprintf(list, sizeof list, "%s,\"y\"", b.etag);
+    assert_true(web_files_etag_matches(list, b.etag));
+    assert_true(web_files_etag_matches("*", b.etag));
+    assert_false(web_files_etag_matches(NULL, b.etag));
+    assert_false(web_files_etag_matches("", b.etag));
+    assert_false(web_files_etag_matches(a.etag, b.etag));
+    snprintf(list, sizeof list, "%.*s", (int)strlen(b.etag) - 1, b.etag); /* a prefix is not the tag */
+    assert_false(web_files_etag_matches(list, b.etag));
 }
 
 static void test_query_and_fragment_ignored(void **state)
@@ -367,6 +413,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_types),
         cmocka_unit_test(test_index),
+        cmocka_unit_test(test_etags),
         cmocka_unit_test(test_query_and_fragment_ignored),
         cmocka_unit_test(test_percent_decoding),
         cmocka_unit_test(test_bad_escapes),
