@@ -74,6 +74,10 @@ static const char usage[] =
     "                            logged as \"web on http://...\"; off by default\n"
     "  --web-root DIR            the web client's files (default client/web under\n"
     "                            the current directory)\n"
+    "  --web-origin LIST         let pages of these origins open a WebSocket too\n"
+    "                            (comma-separated, as https://play.example.org;\n"
+    "                            * for any); by default only the server's own\n"
+    "                            pages and clients sending no Origin header can\n"
     "  --log-level LEVEL         debug, info, warn or error (default info)\n"
     "  --help                    show this help\n"
     "  --version                 show the version\n"
@@ -150,7 +154,7 @@ int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
            O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
-           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS, O_WEB, O_WEB_ROOT };
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS, O_WEB, O_WEB_ROOT, O_WEB_ORIGIN };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -172,6 +176,7 @@ int main(int argc, char **argv)
         {"quota-objects", required_argument, 0, O_Q_OBJ}, {"quota-mb", required_argument, 0, O_Q_MB},
         {"metrics", required_argument, 0, O_METRICS},
         {"web", required_argument, 0, O_WEB}, {"web-root", required_argument, 0, O_WEB_ROOT},
+        {"web-origin", required_argument, 0, O_WEB_ORIGIN},
         {0, 0, 0, 0}};
     server_config cfg;
     server_config_defaults(&cfg);
@@ -196,6 +201,7 @@ int main(int argc, char **argv)
         case O_METRICS: host_port("metrics", optarg, &cfg.metrics_host, &cfg.metrics_port); break;
         case O_WEB: host_port("web", optarg, &cfg.web_host, &cfg.web_port); break;
         case O_WEB_ROOT: cfg.web_root = optarg; break;
+        case O_WEB_ORIGIN: cfg.web_origins = optarg; break;
         case O_WORLD_FILE: cfg.world_file = optarg; break;
         case O_MAX_UPLOAD: cfg.max_upload = (uint32_t)integer("max-upload", optarg, 1, SRV_MAX_UPLOAD_LIMIT); break;
         case O_MAX_TRIS: cfg.max_triangles = (uint32_t)integer("max-triangles", optarg, 1, SRV_MAX_TRIANGLES_LIMIT); break;

@@ -34,6 +34,8 @@ typedef struct server_config {
     const char *web_host;     /* the web client and WebSocket endpoint (--web); NULL: off */
     uint16_t web_port;        /* 0: any free port */
     const char *web_root;     /* its files (--web-root) */
+    const char *web_origins;  /* --web-origin: comma-separated origins whose pages may
+                               * open a WebSocket besides the server's own; "*": any */
     import_proc importer;   /* the isolated importer every model goes through */
     int auth_required;      /* 1: accounts only; 0: guests may walk and look */
     double login_burst;     /* logins an address may make at once (then SRV_LOGIN_PER_SECOND) */

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <unistd.h>
 
 #include "admission.h"
@@ -36,8 +37,50 @@ static char *switching(const char *accept, size_t *len)
     return out;
 }
 
+/* Whether list (comma-separated, spaces around items ignored) holds item,
+ * in any case, or is "*". */
+static int listed(const char *list, const char *item, size_t len)
+{
+    for (const char *p = list; p && *p;) {
+        p += strspn(p, " ,");
+        size_t n = strcspn(p, ",");
+        size_t m = n;
+        while (m && p[m - 1] == ' ')
+            m--;
+        if ((m == 1 && *p == '*') || (m == len && m && strncasecmp(p, item, m) == 0))
+            return 1;
+        p += n;
+    }
+    return 0;
+}
+
+/* Whether a page of this Origin may open a WebSocket: a browser sends
+ * Origin, so a page elsewhere that the user happens to visit cannot play
+ * in their name on a server their browser reaches (127.0.0.1 included)
+ * unless --web-origin lists it. The server's own pages (the origin is
+ * http:// or https:// followed by the Host the request was sent to) may,
+ * and so may every client that sends no Origin (cvre-client --ws, bots):
+ * they are not a browser acting for someone. */
+static int origin_allowed(const server *s, const char *origin, const char *host)
+{
+    if (!origin)
+        return 1;
+    const char *rest = strncasecmp(origin, "http://", 7) == 0    ? origin + 7
+                       : strncasecmp(origin, "https://", 8) == 0 ? origin + 8
+                                                                  : NULL;
+    if (rest && host && strcasecmp(rest, host) == 0)
+        return 1;
+    return listed(s->cfg.web_origins, origin, strlen(origin));
+}
+
 static void upgrade(server *s, const http_request *req, http_reply *rep)
 {
+    const char *origin = http_request_header(req, "origin");
+    if (!origin_allowed(s, origin, http_request_header(req, "host"))) {
+        log_info("web: a WebSocket from a page of %s refused: not this server's, not in --web-origin", origin);
+        rep->status = 403;
+        return;
+    }
     ws_upgrade u = {.method = http_request_method(req),
                     .http_minor = http_request_minor(req),
                     .upgrade = http_request_header(req, "upgrade"),

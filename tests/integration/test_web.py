@@ -442,11 +442,37 @@ def test_bad_handshakes():
     w.close()
 
 
+def upgrade_status(port, origin):
+    """The status line's code of an upgrade sent with this Origin header."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    s.sendall(upgrade_request(extra=f"Origin: {origin}\r\n"))
+    head = b""
+    while b"\r\n" not in head:
+        d = s.recv(4096)
+        assert d, head
+        head += d
+    s.close()
+    return status(head)
+
+
+def test_origin():
+    """A page of another site may not open a WebSocket in a visitor's name
+    (403); the server's own pages may (the Origin is the Host), and so may
+    clients that send no Origin (the other tests)."""
+    assert upgrade_status(PORT, "http://127.0.0.1") == 101  # upgrade_request's Host
+    assert upgrade_status(PORT, "HTTPS://127.0.0.1") == 101
+    for other in ("https://evil.example", "http://127.0.0.1:1", "null", "http://127.0.0.1.evil.example"):
+        assert upgrade_status(PORT, other) == 403, other
+    assert "not in --web-origin" in SRV.logtext()
+
+
 def test_full_server_and_missing_root():
-    """A second server, of one client and with no web root: files are 404,
+    """A second server, of one client, with no web root and two more
+    origins: files are 404, a listed origin's page may open a WebSocket,
     and a WebSocket past --max-clients gets its 101, SERVER_FULL in a
     message and close 1013."""
-    srv = Server(A.bin, "--web", "127.0.0.1:0", "--web-root", os.path.join(ROOT, "missing"), "--max-clients", "1")
+    srv = Server(A.bin, "--web", "127.0.0.1:0", "--web-root", os.path.join(ROOT, "missing"), "--max-clients", "1",
+                 "--web-origin", "https://a.example, https://play.example")
     try:
         port = None
         for _ in range(50):
@@ -466,6 +492,8 @@ def test_full_server_and_missing_root():
         assert [m["type"] for m in msgs] == ["error"] and msgs[0]["code"] == 30, msgs  # SERVER_FULL
         assert ws.close_code == 1013, ws.close_code
         still_moving(tcp, 1)
+        assert upgrade_status(port, "https://evil.example") == 403
+        assert upgrade_status(port, "https://PLAY.example") == 101  # listed (then SERVER_FULL)
         tcp.close()
         assert srv.stop() == 0
     finally:
@@ -486,4 +514,4 @@ def test_shutdown_close():
 run([test_files, test_not_modified, test_file_not_read_is_cut_off, test_join_over_websocket, test_client_over_websocket,
      test_client_objects_over_websocket, test_client_websocket_refused, test_client_close_echoed,
      test_kick_closes_with_1008, test_fragmented_message, test_malformed_frames, test_bad_handshakes,
-     test_full_server_and_missing_root, test_shutdown_close])
+     test_origin, test_full_server_and_missing_root, test_shutdown_close])
