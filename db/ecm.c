@@ -138,37 +138,125 @@ static int exists(db *d, sqlite3_stmt *st)
     return r;
 }
 
-/* The part of db_ecm_write inside the transaction; the caller commits on 0
- * and rolls back otherwise. */
-static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double at, uint32_t *version)
+/* Whether version is in force for object_id (q: W_OBJECT's statement): 0,
+ * or -ENOENT (no such object), -ESTALE (removed, or another version in
+ * force) or the database's error, with a message that starts with what. */
+static int check_in_force(db *d, sqlite3_stmt *q, int64_t object_id, uint32_t version, const char *what)
 {
-    long long id = (long long)c->object_id;
-    sqlite3_stmt *q = st[W_OBJECT];
-    sqlite3_bind_int64(q, 1, c->object_id);
+    sqlite3_bind_int64(q, 1, object_id);
     int r = step_row(d, q);
     int64_t in_force = r == 1 ? sqlite3_column_int64(q, 0) : 0;
     int removed = r == 1 && sqlite3_column_int(q, 1);
     sqlite3_reset(q);
+    long long id = (long long)object_id;
     if (r < 0)
         return r;
     if (r == 0)
-        return db__fail(d, -ENOENT, "ecm write: no object %lld", id);
+        return db__fail(d, -ENOENT, "%s: no object %lld", what, id);
     if (removed)
-        return db__fail(d, -ESTALE, "ecm write: object %lld was removed", id);
-    if (in_force != (int64_t)c->parent_version)
-        return db__fail(d, -ESTALE, "ecm write: object %lld: version %lld is in force, not %u", id,
-                        (long long)in_force, c->parent_version);
+        return db__fail(d, -ESTALE, "%s: object %lld was removed", what, id);
+    if (in_force != (int64_t)version)
+        return db__fail(d, -ESTALE, "%s: object %lld: version %lld is in force, not %u", what, id,
+                        (long long)in_force, version);
+    return 0;
+}
 
-    q = st[W_NEXT];
-    sqlite3_bind_int64(q, 1, c->object_id);
-    r = step_row(d, q);
-    int64_t next = r == 1 ? sqlite3_column_int64(q, 0) : 0;
+/* The object's next version or candidate (kind) number from q (W_NEXT's or
+ * R_NEXT's statement) into *next: 0, -EOVERFLOW when none is left, or the
+ * database's error; messages start with what. */
+static int next_number(db *d, sqlite3_stmt *q, int64_t object_id, int64_t *next, const char *what,
+                       const char *kind)
+{
+    sqlite3_bind_int64(q, 1, object_id);
+    int r = step_row(d, q);
+    *next = r == 1 ? sqlite3_column_int64(q, 0) : 0;
     sqlite3_reset(q);
     if (r < 0)
         return r;
-    if (next < 1 || next > (int64_t)DB_ECM_VERSION_MAX)
-        return db__fail(d, -EOVERFLOW, "ecm write: object %lld: no version number left after %lld", id,
-                        (long long)next - 1);
+    if (*next < 1 || *next > (int64_t)DB_ECM_VERSION_MAX)
+        return db__fail(d, -EOVERFLOW, "%s: object %lld: no %s number left after %lld", what, (long long)object_id,
+                        kind, (long long)*next - 1);
+    return 0;
+}
+
+/* Inserts boxes numbered 0.. under (object_id, number) with q, whose
+ * parameters are object, number, index and the six coordinates. */
+static int insert_boxes(db *d, sqlite3_stmt *q, int64_t object_id, int64_t number, uint32_t n,
+                        const float (*boxes)[6])
+{
+    for (uint32_t i = 0; i < n; i++) {
+        sqlite3_bind_int64(q, 1, object_id);
+        sqlite3_bind_int64(q, 2, number);
+        sqlite3_bind_int64(q, 3, i);
+        for (int k = 0; k < 6; k++)
+            sqlite3_bind_double(q, 4 + k, (double)boxes[i][k]);
+        int r = step_done(d, q);
+        if (r < 0)
+            return r;
+    }
+    return 0;
+}
+
+/* Inserts the ties of (object_id, number) to clusters ids of run_id with q
+ * (parameters: object, number, run, cluster). */
+static int insert_ties(db *d, sqlite3_stmt *q, int64_t object_id, int64_t number, int64_t run_id, uint32_t n,
+                       const uint32_t *ids)
+{
+    for (uint32_t i = 0; i < n; i++) {
+        sqlite3_bind_int64(q, 1, object_id);
+        sqlite3_bind_int64(q, 2, number);
+        sqlite3_bind_int64(q, 3, run_id);
+        sqlite3_bind_int64(q, 4, ids[i]);
+        int r = step_done(d, q);
+        if (r < 0)
+            return r;
+    }
+    return 0;
+}
+
+/* Prepares the nsql statements, runs fn with them in a BEGIN IMMEDIATE
+ * transaction of its own, and commits if it returns 0 (rolls back if not). */
+typedef int locked_fn(db *d, sqlite3_stmt **st, const void *arg, double at, uint32_t *number);
+static int in_transaction(db *d, const char *const *sql, int nsql, locked_fn *fn, const void *arg, double at,
+                          uint32_t *number, const char *what)
+{
+    sqlite3 *s = db_sqlite(d);
+    if (!sqlite3_get_autocommit(s))
+        return db__fail(d, -EINVAL, "%s: called inside a transaction (it needs one of its own)", what);
+    sqlite3_stmt *st[W_COUNT] = {0};
+    int rc = 0;
+    for (int i = 0; i < nsql; i++)
+        if (sqlite3_prepare_v2(s, sql[i], -1, &st[i], NULL) != SQLITE_OK) {
+            rc = db__sql_fail(d, NULL);
+            goto cleanup;
+        }
+    if ((rc = db_begin(d)) < 0) /* the message and db_busy() come from the BEGIN */
+        goto cleanup;
+    rc = fn(d, st, arg, at, number);
+    if (rc == 0)
+        rc = db_commit(d);
+    if (rc != 0)
+        db_rollback(d);
+cleanup:
+    for (int i = 0; i < nsql; i++)
+        sqlite3_finalize(st[i]);
+    return rc;
+}
+
+/* The part of db_ecm_write inside the transaction; the caller commits on 0
+ * and rolls back otherwise. */
+static int write_locked(db *d, sqlite3_stmt **st, const void *arg, double at, uint32_t *version)
+{
+    const db_ecm_change *c = arg;
+    long long id = (long long)c->object_id;
+    int r = check_in_force(d, st[W_OBJECT], c->object_id, c->parent_version, "ecm write");
+    sqlite3_stmt *q;
+    if (r < 0)
+        return r;
+
+    int64_t next;
+    if ((r = next_number(d, st[W_NEXT], c->object_id, &next, "ecm write", "version")) < 0)
+        return r;
 
     if (c->restores) {
         sqlite3_bind_int64(st[W_HAS_VERSION], 1, c->object_id);
@@ -210,25 +298,9 @@ static int write_locked(db *d, sqlite3_stmt **st, const db_ecm_change *c, double
         sqlite3_bind_text(q, 9, c->detail, -1, SQLITE_STATIC);
     if ((r = step_done(d, q)) < 0)
         return r;
-    q = st[W_BOX];
-    for (uint32_t i = 0; i < c->box_count; i++) {
-        sqlite3_bind_int64(q, 1, c->object_id);
-        sqlite3_bind_int64(q, 2, next);
-        sqlite3_bind_int64(q, 3, i);
-        for (int k = 0; k < 6; k++)
-            sqlite3_bind_double(q, 4 + k, (double)c->boxes[i][k]);
-        if ((r = step_done(d, q)) < 0)
-            return r;
-    }
-    q = st[W_TIE];
-    for (uint32_t i = 0; i < c->ncluster_ids; i++) {
-        sqlite3_bind_int64(q, 1, c->object_id);
-        sqlite3_bind_int64(q, 2, next);
-        sqlite3_bind_int64(q, 3, c->run_id);
-        sqlite3_bind_int64(q, 4, c->cluster_ids[i]);
-        if ((r = step_done(d, q)) < 0)
-            return r;
-    }
+    if ((r = insert_boxes(d, st[W_BOX], c->object_id, next, c->box_count, c->boxes)) < 0 ||
+        (r = insert_ties(d, st[W_TIE], c->object_id, next, c->run_id, c->ncluster_ids, c->cluster_ids)) < 0)
+        return r;
     q = st[W_SET];
     sqlite3_bind_int64(q, 1, c->object_id);
     sqlite3_bind_int64(q, 2, next);
@@ -253,26 +325,90 @@ int db_ecm_write(db *d, const db_ecm_change *c, double at, uint32_t *version)
     int rc = check_change(d, c, at, version);
     if (rc < 0)
         return rc;
-    sqlite3 *s = db_sqlite(d);
-    if (!sqlite3_get_autocommit(s))
-        return db__fail(d, -EINVAL, "ecm write: called inside a transaction (it needs one of its own)");
-    sqlite3_stmt *st[W_COUNT] = {0};
-    for (int i = 0; i < W_COUNT; i++)
-        if (sqlite3_prepare_v2(s, write_sql[i], -1, &st[i], NULL) != SQLITE_OK) {
-            rc = db__sql_fail(d, NULL);
-            goto cleanup;
-        }
-    if ((rc = db_begin(d)) < 0) /* the message and db_busy() come from the BEGIN */
-        goto cleanup;
-    rc = write_locked(d, st, c, at, version);
-    if (rc == 0)
-        rc = db_commit(d);
-    if (rc != 0)
-        db_rollback(d);
-cleanup:
-    for (int i = 0; i < W_COUNT; i++)
-        sqlite3_finalize(st[i]);
-    return rc;
+    return in_transaction(d, write_sql, W_COUNT, write_locked, c, at, version, "ecm write");
+}
+
+/* ---- rejected candidates ---- */
+
+enum { R_OBJECT, R_NEXT, R_CANDIDATE, R_BOX, R_TIE, R_COUNT };
+_Static_assert((int)R_COUNT <= (int)W_COUNT, "in_transaction holds W_COUNT statements");
+
+static const char *const reject_sql[R_COUNT] = {
+    [R_OBJECT] = "SELECT ecm_version, removed_at IS NOT NULL FROM objects WHERE id = ?1",
+    [R_NEXT] = "SELECT coalesce(max(candidate), 0) + 1 FROM ecm_candidates WHERE object_id = ?1",
+    [R_CANDIDATE] = "INSERT INTO ecm_candidates(object_id, candidate, version, created_at, run_id, evidence, box_count, "
+                    "samples, moves, phantom_old, phantom_new, opened_old, opened_new, detail) "
+                    "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14)",
+    [R_BOX] = "INSERT INTO ecm_candidate_boxes(object_id, candidate, box_index, min_x, min_y, min_z, max_x, max_y, "
+              "max_z) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
+    [R_TIE] = "INSERT OR IGNORE INTO ecm_candidate_clusters(object_id, candidate, run_id, cluster_id) "
+              "VALUES (?1, ?2, ?3, ?4)",
+};
+
+/* The part of db_ecm_reject inside the transaction. */
+static int reject_locked(db *d, sqlite3_stmt **st, const void *arg, double at, uint32_t *candidate)
+{
+    const db_ecm_candidate *c = arg;
+    int r = check_in_force(d, st[R_OBJECT], c->object_id, c->version, "ecm reject");
+    sqlite3_stmt *q;
+    if (r < 0)
+        return r;
+    int64_t next;
+    if ((r = next_number(d, st[R_NEXT], c->object_id, &next, "ecm reject", "candidate")) < 0)
+        return r;
+    q = st[R_CANDIDATE];
+    const uint64_t figures[6] = {c->samples, c->moves, c->phantom_old, c->phantom_new, c->opened_old, c->opened_new};
+    sqlite3_bind_int64(q, 1, c->object_id);
+    sqlite3_bind_int64(q, 2, next);
+    sqlite3_bind_int64(q, 3, c->version);
+    sqlite3_bind_double(q, 4, at);
+    if (c->run_id)
+        sqlite3_bind_int64(q, 5, c->run_id);
+    sqlite3_bind_int64(q, 6, c->evidence);
+    sqlite3_bind_int64(q, 7, c->box_count);
+    for (int k = 0; k < 6; k++)
+        sqlite3_bind_int64(q, 8 + k, (sqlite3_int64)(figures[k] > INT64_MAX ? INT64_MAX : figures[k]));
+    if (c->detail)
+        sqlite3_bind_text(q, 14, c->detail, -1, SQLITE_STATIC);
+    if ((r = step_done(d, q)) < 0)
+        return r;
+    if ((r = insert_boxes(d, st[R_BOX], c->object_id, next, c->box_count, c->boxes)) < 0 ||
+        (r = insert_ties(d, st[R_TIE], c->object_id, next, c->run_id, c->ncluster_ids, c->cluster_ids)) < 0)
+        return r;
+    *candidate = (uint32_t)next;
+    return 0;
+}
+
+int db_ecm_reject(db *d, const db_ecm_candidate *c, double at, uint32_t *candidate)
+{
+    if (!c || !candidate)
+        return db__fail(d, -EINVAL, "ecm reject: no candidate given");
+    /* The same checks as a version's: it is one, but for the verdict. */
+    db_ecm_change as_version = {.object_id = c->object_id, .parent_version = c->version, .reason = "rejected",
+                                .run_id = c->run_id, .ncluster_ids = c->ncluster_ids, .cluster_ids = c->cluster_ids,
+                                .detail = c->detail, .box_count = c->box_count, .boxes = c->boxes};
+    int rc = check_change(d, &as_version, at, candidate);
+    if (rc < 0)
+        return rc;
+    return in_transaction(d, reject_sql, R_COUNT, reject_locked, c, at, candidate, "ecm reject");
+}
+
+int db_ecm_rejected(db *d, int64_t object_id, uint32_t version, int64_t evidence, uint32_t *candidate)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(db_sqlite(d),
+                           "SELECT candidate FROM ecm_candidates WHERE object_id = ?1 AND version = ?2 "
+                           "AND evidence = ?3 ORDER BY candidate LIMIT 1",
+                           -1, &st, NULL) != SQLITE_OK)
+        return db__sql_fail(d, NULL);
+    sqlite3_bind_int64(st, 1, object_id);
+    sqlite3_bind_int64(st, 2, version);
+    sqlite3_bind_int64(st, 3, evidence);
+    int r = step_row(d, st);
+    if (r == 1)
+        *candidate = (uint32_t)sqlite3_column_int64(st, 0);
+    sqlite3_finalize(st);
+    return r;
 }
 
 /* ---- reading versions ---- */

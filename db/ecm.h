@@ -71,6 +71,37 @@ typedef struct db_ecm_change {
  * timeout). */
 int db_ecm_write(db *d, const db_ecm_change *c, double at, uint32_t *version);
 
+/* A refinement the judge found no better than the version in force
+ * (algo/refine/judge.h): kept, never published (migration 0008). */
+typedef struct db_ecm_candidate {
+    int64_t object_id;
+    uint32_t version;         /* the version in force it was judged against */
+    int64_t run_id;           /* cluster_runs.id whose clusters asked for it; 0: none */
+    uint32_t ncluster_ids;    /* those clusters (needs run_id) */
+    const uint32_t *cluster_ids;
+    int64_t evidence;         /* the caller's hash of the clusters: see db_ecm_rejected */
+    const char *detail;       /* free text; may be NULL */
+    uint32_t box_count;       /* 1..DB_ECM_BOXES_MAX */
+    const float (*boxes)[6];  /* local, finite, min <= max */
+    uint64_t samples, moves, phantom_old, phantom_new, opened_old, opened_new; /* the judge's figures */
+} db_ecm_candidate;
+
+/* Stores c as the object's next candidate (numbered 1.. within the object)
+ * with its boxes and cluster ties in one BEGIN IMMEDIATE transaction,
+ * stamped `at`; sets *candidate. Returns 0, or a negative errno with
+ * nothing written: -EINVAL on invalid input (as db_ecm_write) or inside a
+ * transaction; -ESTALE when the object was removed or c->version is no
+ * longer in force (the candidate answers nothing then); -ENOENT when the
+ * object does not exist; a run or cluster that does not exist is a
+ * foreign key the store refuses (-EINVAL); the database's error otherwise. */
+int db_ecm_reject(db *d, const db_ecm_candidate *c, double at, uint32_t *candidate);
+
+/* Whether a candidate of object_id judged against version was made from
+ * clusters with this evidence hash: 1 and its number in *candidate, 0 if
+ * none (a refinement of the same clusters would be the same candidate
+ * again), or the database's negative errno. */
+int db_ecm_rejected(db *d, int64_t object_id, uint32_t version, int64_t evidence, uint32_t *candidate);
+
 /* The boxes of one version: *boxes (malloc'd, the caller frees) gets *count
  * boxes in box_index order. -ENOENT if there is no such version, -EIO if
  * the stored boxes do not match the version's box_count, -ENOMEM, or the

@@ -28,14 +28,6 @@
  * the next version afresh. */
 #define REFINER_POINTS_MAX (1u << 20)
 
-/* What a refinement makes of a cluster: the box it names, the extent of
- * its points (the other boxes it presses on, its region) and its centroid
- * (the face users cross). */
-typedef struct cluster_sig {
-    uint32_t box;
-    float min[3], max[3], centroid[3];
-} cluster_sig;
-
 /* One object whose collisions the online loop follows. */
 typedef struct tracked {
     int64_t id;
@@ -44,10 +36,11 @@ typedef struct tracked {
     object_points pts;
     uint32_t fresh;   /* points added since it was last clustered */
     int full_logged;
-    /* The clusters when a refinement last changed nothing: the same
-     * clusters again are not worth a run. */
-    cluster_sig *settled;
-    uint32_t nsettled;
+    /* The clusters (apply.h's evidence) when a refinement last changed
+     * nothing or was rejected by the judge: the same clusters again are not
+     * worth a run. */
+    int64_t settled;
+    int has_settled;
 } tracked;
 
 struct refiner {
@@ -73,9 +66,7 @@ static void tracked_reset(tracked *t, uint32_t version)
     t->version = version;
     t->pts.n = t->fresh = 0;
     t->full_logged = 0;
-    free(t->settled);
-    t->settled = NULL;
-    t->nsettled = 0;
+    t->has_settled = 0;
 }
 
 /* The tracked entry for id, created (with its version read from the store)
@@ -202,11 +193,6 @@ fail:
     return -EIO;
 }
 
-static int cmp_sig(const void *a, const void *b)
-{
-    return memcmp(a, b, sizeof(cluster_sig));
-}
-
 /* Clusters t's points; appends what it finds to *found. Returns the
  * clusters found, or -errno. */
 static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nfound)
@@ -225,51 +211,44 @@ static int cluster_one(refiner *r, tracked *t, cluster_found **found, size_t *nf
     return rc;
 }
 
-/* The clusters found[0..k), in an order that does not depend on DBSCAN's. */
-static cluster_sig *signature(const cluster_found *f, size_t k)
-{
-    cluster_sig *sig = cvre_xcalloc(k ? k : 1, sizeof *sig); /* zeroed: compared bytewise */
-    for (size_t i = 0; i < k; i++) {
-        sig[i].box = f[i].box;
-        memcpy(sig[i].min, f[i].c.min, sizeof sig[i].min);
-        memcpy(sig[i].max, f[i].c.max, sizeof sig[i].max);
-        memcpy(sig[i].centroid, f[i].c.centroid, sizeof sig[i].centroid);
-    }
-    qsort(sig, k, sizeof *sig, cmp_sig);
-    return sig;
-}
-
 /* Whether t's clusters (found[0..k)) are the ones a refinement last made
  * nothing of. */
 static int settled_again(const tracked *t, const cluster_found *f, size_t k)
 {
-    if (!t->settled || t->nsettled != k)
-        return 0;
-    cluster_sig *sig = signature(f, k);
-    int same = memcmp(sig, t->settled, k * sizeof *sig) == 0;
-    free(sig);
-    return same;
+    return t->has_settled && t->settled == ecm_evidence(f, (uint32_t)k);
 }
 
 static void settle(tracked *t, const cluster_found *f, size_t k)
 {
-    free(t->settled);
-    t->settled = signature(f, k);
-    t->nsettled = (uint32_t)k;
+    t->settled = ecm_evidence(f, (uint32_t)k);
+    t->has_settled = 1;
 }
 
 /* Refines one object from its clusters (found[0..k)) of run run_id. */
 static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_found *f, size_t k)
 {
     ecm_applied a;
-    char err[512];
+    char err[512], figures[160];
     int rc = ecm_apply(r->db, &r->cfg.ecm, run_id, f, (uint32_t)k, &a, err, sizeof err);
+    ecm_judge_line(&a.judge, figures, sizeof figures);
     if (rc == 0 && a.version) {
         atomic_fetch_add_explicit(&r->versions_written, 1, memory_order_relaxed);
         log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %zu clusters of run %lld "
-                 "(digitize %.1f ms, divide %.1f ms, in all %.1f ms)",
+                 "(digitize %.1f ms, divide %.1f ms, in all %.1f ms); %s",
                  (long long)t->id, t->version, a.version, a.boxes_before, a.boxes_after, k, (long long)run_id,
-                 a.stats.voxel_ms, a.stats.divide_ms, a.total_ms);
+                 a.stats.voxel_ms, a.stats.divide_ms, a.total_ms, figures);
+    } else if (rc == 0 && a.candidate) {
+        /* Not better: the same clusters would make the same candidate. */
+        if (a.judged_before)
+            log_info("object %lld v%u: %zu clusters of run %lld are those of candidate %u, rejected before; "
+                     "map unchanged",
+                     (long long)t->id, t->version, k, (long long)run_id, a.candidate);
+        else
+            log_info("object %lld v%u: refined map (%u -> %u boxes) from %zu clusters of run %lld rejected as "
+                     "candidate %u, not published (%s: it must block fewer moves and let none into geometry)",
+                     (long long)t->id, t->version, a.boxes_before, a.boxes_after, k, (long long)run_id, a.candidate,
+                     figures);
+        settle(t, f, k);
     } else if (rc == 0) { /* unchanged */
         log_info("object %lld v%u: %zu clusters of run %lld press on real geometry only; map unchanged",
                  (long long)t->id, t->version, k, (long long)run_id);
@@ -374,10 +353,8 @@ void refiner_stop(refiner *r)
     if (!r)
         return;
     worker_stop(r->worker);
-    for (uint32_t i = 0; i < r->nobjs; i++) {
+    for (uint32_t i = 0; i < r->nobjs; i++)
         object_points_free(&r->objs[i].pts);
-        free(r->objs[i].settled);
-    }
     free(r->objs);
     db_close(r->db);
     free(r);

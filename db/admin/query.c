@@ -589,15 +589,27 @@ int query_versions(sqlite3 *s, int64_t id, int format, char *err, size_t errlen)
         {"restores", OUT_INT, 0}, {"boxes", OUT_INT, 0},       {"collisions", OUT_INT, 0},
         {"current", OUT_BOOL, 0}, {"detail", OUT_TEXT, 0},
     };
+    /* Rejected candidates (reason "rejected", no version of their own)
+     * come right after the version they were judged against (parent). */
     static const char sql[] =
-        "SELECT v.version, v.created_at, v.reason, v.parent_version, v.run_id, "
+        "SELECT version, created, reason, parent, run, clusters, restores, boxes, collisions, current, detail FROM ("
+        "SELECT v.version AS version, v.created_at AS created, v.reason AS reason, v.parent_version AS parent, "
+        "v.run_id AS run, "
         "(SELECT group_concat(t.cluster_id, ',') FROM (SELECT cluster_id FROM ecm_version_clusters t "
-        "WHERE t.object_id = v.object_id AND t.version = v.version ORDER BY t.run_id, t.cluster_id) t), "
-        "v.restores, v.box_count, coalesce(k.n, 0), v.version = o.ecm_version, v.detail "
+        "WHERE t.object_id = v.object_id AND t.version = v.version ORDER BY t.run_id, t.cluster_id) t) AS clusters, "
+        "v.restores AS restores, v.box_count AS boxes, coalesce(k.n, 0) AS collisions, "
+        "v.version = o.ecm_version AS current, v.detail AS detail, v.version AS after, 0 AS candidate "
         "FROM ecm_versions v JOIN objects o ON o.id = v.object_id "
         "LEFT JOIN (SELECT c.ecm_version AS version, count(*) AS n " FROM_RANGES
         "WHERE c.object_id = :object GROUP BY c.ecm_version) k ON k.version = v.version "
-        "WHERE v.object_id = :object ORDER BY v.version";
+        "WHERE v.object_id = :object "
+        "UNION ALL "
+        "SELECT NULL, c.created_at, 'rejected', c.version, c.run_id, "
+        "(SELECT group_concat(t.cluster_id, ',') FROM (SELECT cluster_id FROM ecm_candidate_clusters t "
+        "WHERE t.object_id = c.object_id AND t.candidate = c.candidate ORDER BY t.run_id, t.cluster_id) t), "
+        "NULL, c.box_count, 0, 0, 'candidate ' || c.candidate || ': ' || coalesce(c.detail, 'no detail'), "
+        "c.version, c.candidate FROM ecm_candidates c WHERE c.object_id = :object"
+        ") ORDER BY after, candidate";
     return per_object(s, id, sql, cols, LEN(cols), 0, format, err, errlen);
 }
 

@@ -1,8 +1,11 @@
 /*
  * apply.h: one refinement round for one object, from the store to the store:
- * load its mesh and the version in force, refine (refine.h) and write the
- * next version with its history (db/ecm.h), which every running server then
- * publishes. Shared by the offline job (cvre-cluster --apply) and the
+ * load its mesh and the version in force, refine (refine.h), judge the
+ * refined map against the one in force (judge.h) from the collisions that
+ * asked for it, and write the next version with its history (db/ecm.h),
+ * which every running server then publishes, only if the judge found it
+ * better; otherwise keep it as a rejected candidate with the judge's
+ * figures. Shared by the offline job (cvre-cluster --apply) and the
  * server's online loop.
  */
 #ifndef CVRE_ECM_APPLY_H
@@ -12,27 +15,55 @@
 #include <stdint.h>
 
 #include "db.h"
+#include "judge.h"
 #include "record.h"
 #include "refine.h"
 
-/* What became of one object. */
+/* Collisions read as the judge's samples, newest first: the judge takes
+ * JUDGE_SAMPLES_DEFAULT of them, evenly; a few times more leaves room for
+ * those outside the clusters, and reads in some 10 ms. */
+#define APPLY_SAMPLES_READ 16384u
+
+/* What became of one object: written (version), rejected (candidate),
+ * rejected before (candidate, judged_before: the same clusters made a
+ * candidate that was turned down; nothing refined again), or unchanged
+ * (all zero). */
 typedef struct ecm_applied {
-    uint32_t version;       /* the version written; 0: none (unchanged, or a failure) */
+    uint32_t version;       /* the version written; 0: none */
+    uint32_t candidate;     /* the rejected candidate stored (or found); 0: none */
+    int judged_before;      /* 1: candidate was rejected earlier for the same clusters */
     uint32_t boxes_before, boxes_after;
     ecm_result stats;       /* counts and times; no boxes */
-    double total_ms;        /* load, refine, write */
+    judge_result judge;     /* the judge's figures; zero when it did not run */
+    double total_ms;        /* load, refine, judge, write */
 } ecm_applied;
+
+/* A hash of the n clusters f (each one's box, extent and centroid), the
+ * same whatever their order: equal clusters give equal evidence. */
+int64_t ecm_evidence(const cluster_found *f, uint32_t n);
+
+/* One line for people: the judge's figures and verdict ("judge: 120
+ * samples, 14400 moves, phantom 900 -> 12, opened 0 -> 0, 35.2 ms"), into
+ * buf (room for len bytes). */
+void ecm_judge_line(const judge_result *j, char *buf, size_t len);
 
 /*
  * Refines the object the n clusters f were found on (all of one object and
  * version, of run run_id; 0: none recorded). p's avatar is in metres; it is
- * divided by the object's scale. Returns:
- *   0         done: out->version is the version written, or 0 when the
+ * divided by the object's scale. The judge's samples are the object's
+ * collisions with that version (the newest APPLY_SAMPLES_READ) that lie in
+ * a cluster's extent, turned into the object's metric frame. Returns:
+ *   0         done: out->version is the version written; or out->candidate
+ *             the candidate the judge rejected (stored; not published), or
+ *             the one it rejected earlier for the same clusters (then
+ *             out->judged_before: nothing refined); or neither when the
  *             refined boxes are the ones in force (unchanged: nothing
  *             written; a success, since there is nothing to do);
  *   -ESTALE   the object changed version or left meanwhile: nothing written;
  *   -EINVAL   refine.h refused the input (an object without triangles...),
- *             or could not run (out of memory), with the message in err;
+ *             or could not run (out of memory), or the judge had nothing to
+ *             judge by (no collisions left in the clusters), with the
+ *             message in err;
  *   any other negative errno: the store failed (db/db.h), with the
  *             message in err.
  */

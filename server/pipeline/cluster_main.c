@@ -4,8 +4,9 @@
  * object-local coordinates, clusters them with DBSCAN (dbscan.h) and writes
  * a run record and one row per cluster, each naming the ECM box nearest its
  * centroid (where it presses). With --apply it then refines each object
- * with clusters (server/pipeline/apply.h) and writes its next ECM version, which
- * a running server picks up and publishes. Safe beside a running server: it
+ * with clusters (server/pipeline/apply.h) and writes its next ECM version,
+ * which a running server picks up and publishes, if the judge finds it
+ * better (else a rejected candidate). Safe beside a running server: it
  * reads in one snapshot (WAL) and writes in short transactions.
  */
 #include <errno.h>
@@ -48,7 +49,12 @@ static const char usage[] =
     "                     2026-12-01T17:40:00.5, 2026-12-01 18:40+01:00; UTC\n"
     "                     without a zone); both ends included\n"
     "  --apply            refine every object with clusters and write its next\n"
-    "                     collision map version (a running server publishes it)\n"
+    "                     collision map version (a running server publishes it) if\n"
+    "                     a judge finds it better: the avatar walked from the\n"
+    "                     clusters' collisions meets fewer boxes where no triangle\n"
+    "                     is, and enters no geometry; otherwise it is stored as a\n"
+    "                     rejected candidate (cvre-admin versions), and the same\n"
+    "                     clusters are not refined again\n"
     "  --depth D          with --apply: grid of 2^D cells per axis of a box, 2..8 (default 7)\n"
     "  --max-boxes N      with --apply: most boxes per object, 1..1024 (default 64)\n"
     "  --max-empty F      with --apply: share of a merged box that may be empty, 0..1\n"
@@ -317,15 +323,24 @@ int main(int argc, char **argv)
             if (!apply || outcome[i] > 0)
                 continue;
             const ecm_applied *a = &applied[i];
-            printf("%s{\"object\":%lld,\"from\":%u,\"outcome\":\"%s\",\"version\":%u,\"boxes_before\":%u,"
-                   "\"boxes_after\":%u,\"capped\":%u,\"voxel_ms\":%.3f,\"divide_ms\":%.3f,\"total_ms\":%.3f}",
+            const judge_result *j = &a->judge;
+            printf("%s{\"object\":%lld,\"from\":%u,\"outcome\":\"%s\",\"version\":%u,\"candidate\":%u,"
+                   "\"boxes_before\":%u,\"boxes_after\":%u,\"capped\":%u,\"voxel_ms\":%.3f,\"divide_ms\":%.3f,"
+                   "\"total_ms\":%.3f,\"judge\":{\"better\":%s,\"samples\":%u,\"moves\":%llu,"
+                   "\"phantom_old\":%llu,\"phantom_new\":%llu,\"opened_old\":%llu,\"opened_new\":%llu,"
+                   "\"ms\":%.3f}}",
                    first ? "" : ",", (long long)objs[i].id, objs[i].version,
                    outcome[i] == -EINVAL   ? "refused"
                    : outcome[i] == -ESTALE ? "stale"
                    : a->version            ? "written"
+                   : a->judged_before      ? "rejected before"
+                   : a->candidate          ? "rejected"
                                            : "unchanged",
-                   a->version, a->boxes_before, a->boxes_after,
-                   a->stats.capped, a->stats.voxel_ms, a->stats.divide_ms, a->total_ms);
+                   a->version, a->candidate, a->boxes_before, a->boxes_after, a->stats.capped, a->stats.voxel_ms,
+                   a->stats.divide_ms, a->total_ms, j->better ? "true" : "false", j->samples,
+                   (unsigned long long)j->moves, (unsigned long long)j->phantom_old,
+                   (unsigned long long)j->phantom_new, (unsigned long long)j->opened_old,
+                   (unsigned long long)j->opened_new, j->ms);
             first = 0;
         }
         printf("]}\n");
@@ -342,9 +357,19 @@ int main(int argc, char **argv)
         }
         for (size_t i = 0; apply && i < nobjs; i++) {
             const ecm_applied *a = &applied[i];
+            char figures[160];
+            ecm_judge_line(&a->judge, figures, sizeof figures);
             if (outcome[i] == 0 && a->version)
-                printf("  object %lld: v%u -> v%u, %u -> %u boxes (%.1f ms)\n", (long long)objs[i].id,
-                       objs[i].version, a->version, a->boxes_before, a->boxes_after, a->total_ms);
+                printf("  object %lld: v%u -> v%u, %u -> %u boxes (%.1f ms; %s)\n", (long long)objs[i].id,
+                       objs[i].version, a->version, a->boxes_before, a->boxes_after, a->total_ms, figures);
+            else if (outcome[i] == 0 && a->judged_before)
+                printf("  object %lld: v%u unchanged: its clusters are those of candidate %u, rejected before\n",
+                       (long long)objs[i].id, objs[i].version, a->candidate);
+            else if (outcome[i] == 0 && a->candidate)
+                printf("  object %lld: v%u kept: the refined map (%u -> %u boxes) is no better, stored as candidate "
+                       "%u (%s)\n",
+                       (long long)objs[i].id, objs[i].version, a->boxes_before, a->boxes_after, a->candidate,
+                       figures);
             else if (outcome[i] == 0)
                 printf("  object %lld: v%u unchanged: its clusters press on real geometry only\n",
                        (long long)objs[i].id, objs[i].version);

@@ -7,6 +7,7 @@ clients, an avatar inside a box that appears is not trapped, and bad
 parameters and an object without triangles get clear errors."""
 import json
 import os
+import re
 import sqlite3
 import struct
 import subprocess
@@ -278,6 +279,25 @@ def test_offline_apply_is_published_live():
     assert srv.stop() == 0
 
 
+def insert_collisions(db, at, groups, users=3, each=4):
+    """Collisions as the log writer stores them, in one segment: for each
+    (object, local contact, feet in world, velocity) of groups, users x each
+    rows a centimetre apart in z, against the object's version 1."""
+    rows = []
+    for oid, local, feet, vel in groups:
+        for u in range(users):
+            for k in range(each):
+                rows.append((oid, u + 1, local[0], local[1], local[2] + 0.01 * k, feet[0], feet[1],
+                             feet[2] + 0.01 * k, at, *vel))
+    db.executemany("INSERT INTO collisions(g, at, session_id, user_id, avatar_id, object_id, ecm_version, "
+                   "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, "
+                   "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
+                   "VALUES (0, ?9, 1, ?2, 1, ?1, 1, 0, 0, ?6, ?7, ?8, 0, 0, 0, ?3, ?4, ?5, 1, 0, 0, ?10, ?11, ?12)",
+                   rows)
+    db.execute("INSERT INTO collision_segments SELECT min(id), max(id), ? FROM collisions", (int(at // 10),))
+    db.commit()
+
+
 def test_bad_parameters_and_an_object_without_triangles():
     srv = Server(A.bin, "--world", ROOM_WORLD)
     assert srv.stop() == 0
@@ -303,25 +323,72 @@ def test_bad_parameters_and_an_object_without_triangles():
     db.execute("INSERT INTO ecm_versions(object_id, version, created_at, reason, box_count) "
                "VALUES (?, 1, 0, 'import', 1)", (hollow,))
     db.execute("INSERT INTO ecm_boxes VALUES (?, 1, 0, -1, 0, -1, 1, 2, 1)", (hollow,))
-    rows = []
-    for oid, x, z in ((hollow, 1.0, 0.2), (room, 0.21757, -1.965)):
-        for u in range(3):
-            for k in range(4):
-                rows.append((oid, u + 1, x, 0.9, z + 0.01 * k))
-    db.executemany("INSERT INTO collisions(g, at, session_id, user_id, avatar_id, object_id, ecm_version, "
-                   "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, "
-                   "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
-                   "VALUES (0, 1, 1, ?2, 1, ?1, 1, 0, 0, 0, 0, 0, 0, 0, 0, ?3, ?4, ?5, 1, 0, 0, 0, 0, 0)", rows)
-    db.commit()
+    # Users walking west into the room's door (the object stands at x = 10),
+    # their feet 0.3 m and a millimetre east of the contact; the judge walks
+    # them on from there.
+    insert_collisions(db, time.time(), [(hollow, (1.0, 0.9, 0.2), (1.301, 0, 30.2), (-3, 0, 0)),
+                                        (room, (0.21757, 0.9, -1.965), (10.519, 0, -1.965), (-3, 0, 0))])
     rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply")
     assert rc == 4, (rc, out, err)
     assert f"object {hollow}" in err and "no triangles" in err, err
     assert "v1 -> v2" in out, out  # the room was refined all the same
+    # The judge let it through: the MBR stopped them in the doorway, the new
+    # map does not.
+    phantom = re.search(r"phantom (\d+) -> (\d+), opened 0 -> 0", out)
+    assert phantom and int(phantom[1]) > int(phantom[2]), out
     v = db.execute("SELECT ecm_version FROM objects WHERE id IN (?, ?) ORDER BY id", (room, hollow)).fetchall()
     assert v == [(2,), (1,)], v
+
+
+def test_a_map_no_better_is_kept_as_a_rejected_candidate():
+    """Users pushing on the room's solid east wall (z = -0.8): the MBR's face
+    there is the wall itself, so no move it blocks is a phantom; the refined
+    map (the room hollowed out behind the wall) blocks them as much. The
+    judge turns it down: no new version, a candidate with its figures, and
+    the same clusters are not refined again."""
+    srv = Server(A.bin, "--world", ROOM_WORLD)
+    assert srv.stop() == 0
+    room = object_id(srv.db, "openfoam_room_with_doorway.stl")
+    db = sqlite3.connect(srv.db)
+    insert_collisions(db, time.time(), [(room, (0.21757, 0.9, -0.8), (10.519, 0, -0.8), (-3, 0, 0))])
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json")
+    assert rc == 0, (rc, out, err)
+    got = json.loads(out)["refined"]
+    assert len(got) == 1 and got[0]["outcome"] == "rejected" and got[0]["version"] == 0, got
+    assert got[0]["candidate"] == 1 and got[0]["boxes_after"] > 1, got
+    j = got[0]["judge"]
+    assert not j["better"] and j["samples"] == 12 and j["moves"] > 0, j
+    assert j["phantom_new"] >= j["phantom_old"] and j["opened_new"] == 0, j
+    assert db.execute("SELECT ecm_version FROM objects WHERE id = ?", (room,)).fetchone() == (1,)
+    assert db.execute("SELECT count(*) FROM ecm_events WHERE object_id = ?", (room,)).fetchone() == (0,)
+    cand = db.execute("SELECT candidate, version, run_id, box_count, samples, phantom_old, phantom_new "
+                      "FROM ecm_candidates WHERE object_id = ?", (room,)).fetchall()
+    assert cand == [(1, 1, 1, got[0]["boxes_after"], 12, j["phantom_old"], j["phantom_new"])], cand
+    assert db.execute("SELECT count(*) FROM ecm_candidate_boxes WHERE object_id = ? AND candidate = 1",
+                      (room,)).fetchone() == (got[0]["boxes_after"],)
+    assert db.execute("SELECT run_id, cluster_id FROM ecm_candidate_clusters WHERE object_id = ?",
+                      (room,)).fetchall() == [(1, 0)]
+    # The same clusters again (a new run of the same log): not refined.
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply")
+    assert rc == 0 and "those of candidate 1, rejected before" in out, (rc, out, err)
+    assert db.execute("SELECT count(*) FROM ecm_candidates").fetchone() == (1,)
+    # cvre-admin versions shows it after the version it was judged against.
+    rc, out, err = cmd("cvre-admin", "--db", srv.db, "versions", str(room), "--json")
+    assert rc == 0, (rc, out, err)
+    rows = json.loads(out)
+    assert [(r["version"], r["reason"], r["parent"], r["run"], r["clusters"], r["current"]) for r in rows] == [
+        (1, "import", None, None, None, True), (None, "rejected", 1, 1, "0", False)], rows
+    assert rows[1]["boxes"] == got[0]["boxes_after"], rows
+    why = rows[1]["detail"]
+    assert why.startswith("candidate 1: ") and "not better, not published" in why, why
+    assert f"phantom {j['phantom_old']} -> {j['phantom_new']}, opened 0 -> 0" in why, why
+    rc, out, err = cmd("cvre-admin", "--db", srv.db, "versions", str(room))
+    assert rc == 0 and "rejected" in out and "candidate 1: " in out, (rc, out, err)
+    db.close()
 
 
 if __name__ == "__main__":
     run([test_doorway_opens_live_and_walls_stay, test_archway_opens_and_stays_solid_at_its_sides,
          test_moved_object_keeps_its_boxes_and_rollback_reaches_clients, test_offline_apply_is_published_live,
-         test_bad_parameters_and_an_object_without_triangles])
+         test_bad_parameters_and_an_object_without_triangles,
+         test_a_map_no_better_is_kept_as_a_rejected_candidate])

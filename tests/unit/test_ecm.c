@@ -253,6 +253,56 @@ static void test_stale_and_removed(void **state)
     db_close(d);
 }
 
+/* A rejected candidate: stored with its boxes, ties and figures, numbered
+ * within the object, found by its evidence; never a version, never in the
+ * feed; refused when stale or invalid, with nothing written. */
+static void test_rejected_candidates(void **state)
+{
+    (void)state;
+    db *d = open_rw();
+    int64_t id = make_object(d, "a");
+    make_run(d, 4, id, 2);
+    const uint32_t ids[2] = {1, 0};
+    db_ecm_candidate c = {.object_id = id, .version = 1, .run_id = 4, .ncluster_ids = 2, .cluster_ids = ids,
+                          .evidence = 12345, .detail = "judge: not better", .box_count = 3, .boxes = THREE,
+                          .samples = 10, .moves = 600, .phantom_old = 5, .phantom_new = 7};
+    counts before = count(d, id);
+    uint32_t n = 0;
+    assert_int_equal(db_ecm_rejected(d, id, 1, 12345, &n), 0);
+    assert_int_equal(db_ecm_reject(d, &c, 10, &n), 0);
+    assert_int_equal(n, 1);
+    c.evidence = 777;
+    assert_int_equal(db_ecm_reject(d, &c, 11, &n), 0);
+    assert_int_equal(n, 2);
+    assert_counts(count(d, id), before); /* no version, no event */
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_candidate_boxes WHERE candidate = 2"), 3);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_candidate_clusters WHERE candidate = 1 AND run_id = 4"), 2);
+    assert_int_equal(scalar(d, "SELECT phantom_new * 1000 + moves FROM ecm_candidates WHERE candidate = 1"), 7600);
+    uint32_t found = 0;
+    assert_int_equal(db_ecm_rejected(d, id, 1, 12345, &found), 1);
+    assert_int_equal(found, 1);
+    assert_int_equal(db_ecm_rejected(d, id, 1, 777, &found), 1);
+    assert_int_equal(found, 2);
+    assert_int_equal(db_ecm_rejected(d, id, 2, 777, &found), 0); /* another version */
+    /* Refusals write nothing. */
+    int64_t stored = scalar(d, "SELECT count(*) FROM ecm_candidates");
+    c.box_count = 0;
+    assert_int_equal(db_ecm_reject(d, &c, 12, &n), -EINVAL);
+    c.box_count = 3;
+    c.ncluster_ids = 0;
+    c.run_id = 99; /* no such run: the store's foreign key */
+    assert_int_equal(db_ecm_reject(d, &c, 12, &n), -EINVAL);
+    c.run_id = 4;
+    c.version = 2; /* not in force */
+    assert_int_equal(db_ecm_reject(d, &c, 12, &n), -ESTALE);
+    assert_non_null(strstr(db_error(d), "ecm reject: object"));
+    c.object_id = id + 100;
+    assert_int_equal(db_ecm_reject(d, &c, 12, &n), -ENOENT);
+    assert_int_equal(scalar(d, "SELECT count(*) FROM ecm_candidates"), stored);
+    assert_true(sqlite3_get_autocommit(db_sqlite(d)));
+    db_close(d);
+}
+
 static void test_invalid_input(void **state)
 {
     (void)state;
@@ -670,6 +720,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_write_read_round_trip, setup, teardown),
         cmocka_unit_test_setup_teardown(test_stale_and_removed, setup, teardown),
         cmocka_unit_test_setup_teardown(test_invalid_input, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_rejected_candidates, setup, teardown),
         cmocka_unit_test_setup_teardown(test_events_feed, setup, teardown),
         cmocka_unit_test_setup_teardown(test_events_with_a_write_in_the_callback, setup, teardown),
         cmocka_unit_test_setup_teardown(test_object_load, setup, teardown),
