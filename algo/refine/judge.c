@@ -17,8 +17,9 @@
 _Static_assert(3 * JUDGE_DEPTH_MAX < 32, "cell counts fit uint32_t");
 _Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Bins per axis of the triangle index the exact test looks in: a triangle
- * of a detailed mesh falls in one or two, a room's wall in a row of them. */
-#define JUDGE_BINS 16u
+ * of a detailed mesh falls in one or two, a room's wall in a row of them;
+ * 32^3 offsets are 128 KiB. */
+#define JUDGE_BINS 32u
 
 /* The geometry, asked "does this box touch a triangle?". Local
  * coordinates: boxes in the metric frame are divided by the scale. */
@@ -29,6 +30,7 @@ typedef struct geometry {
     uint32_t *bin_tris;
     uint32_t *big;       /* triangles spanning more than JUDGE_BIN_SPREAD_MAX bins */
     uint32_t nbig;
+    float (*tbox)[6];    /* each triangle's bounding box: most exact tests end there */
     const float *tris;
     double scale;
 } geometry;
@@ -58,6 +60,7 @@ static void geometry_free(geometry *g)
     free(g->bin_first);
     free(g->bin_tris);
     free(g->big);
+    free(g->tbox);
 }
 
 static size_t svt_at(uint32_t m, uint32_t x, uint32_t y, uint32_t z)
@@ -101,13 +104,12 @@ static int bin_range(const geometry *g, int a, double lo, double hi, uint32_t *b
     return 1;
 }
 
-/* The bins of triangle t's bounding box; their count, 0 if none. */
-static uint64_t tri_bins(const geometry *g, const float *t, uint32_t lo[3], uint32_t hi[3])
+/* The bins of triangle i's bounding box; their count, 0 if none. */
+static uint64_t tri_bins(const geometry *g, uint32_t i, uint32_t lo[3], uint32_t hi[3])
 {
     uint64_t count = 1;
     for (int a = 0; a < 3; a++) {
-        double l = fmin(fmin(t[a], t[3 + a]), t[6 + a]), h = fmax(fmax(t[a], t[3 + a]), t[6 + a]);
-        if (!bin_range(g, a, l, h, &lo[a], &hi[a]))
+        if (!bin_range(g, a, g->tbox[i][a], g->tbox[i][3 + a], &lo[a], &hi[a]))
             return 0;
         count *= hi[a] - lo[a] + 1;
     }
@@ -125,7 +127,7 @@ static int build_bins(geometry *g, uint32_t ntris)
     uint32_t lo[3], hi[3];
     for (int pass = 0; pass < 2; pass++) {
         for (uint32_t i = 0; i < ntris; i++) {
-            uint64_t c = tri_bins(g, g->tris + 9 * (size_t)i, lo, hi);
+            uint64_t c = tri_bins(g, i, lo, hi);
             if (c > JUDGE_BIN_SPREAD_MAX) {
                 if (pass == 0)
                     g->big[g->nbig++] = i;
@@ -159,11 +161,18 @@ static int build_bins(geometry *g, uint32_t ntris)
 static int geometry_init(geometry *g, const judge_params *p, const judge_input *in)
 {
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (size_t i = 0; i < (size_t)in->ntris * 3; i++)
+    g->tbox = cvre_malloc(in->ntris * sizeof *g->tbox);
+    if (!g->tbox)
+        return -ENOMEM;
+    for (uint32_t i = 0; i < in->ntris; i++) {
+        const float *t = in->tris + 9 * (size_t)i;
         for (int a = 0; a < 3; a++) {
-            lo[a] = fminf(lo[a], in->tris[3 * i + (size_t)a]);
-            hi[a] = fmaxf(hi[a], in->tris[3 * i + (size_t)a]);
+            g->tbox[i][a] = fminf(fminf(t[a], t[3 + a]), t[6 + a]);
+            g->tbox[i][3 + a] = fmaxf(fmaxf(t[a], t[3 + a]), t[6 + a]);
+            lo[a] = fminf(lo[a], g->tbox[i][a]);
+            hi[a] = fmaxf(hi[a], g->tbox[i][3 + a]);
         }
+    }
     g->tris = in->tris;
     g->scale = in->scale;
     int rc = voxel_grid_init(&g->g, p->depth, lo, hi);
@@ -216,6 +225,9 @@ static int maybe_touches(const geometry *g, const double lo[3], const double hi[
 
 static int tri_overlaps(const geometry *g, uint32_t i, const double lo[3], const double hi[3])
 {
+    const float *b = g->tbox[i];
+    if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
+        return 0;
     double t[9];
     for (int k = 0; k < 9; k++)
         t[k] = g->tris[9 * (size_t)i + (size_t)k];
@@ -333,6 +345,11 @@ static void trial(const judge_params *p, const geometry *g, const double cell[3]
     }
 }
 
+/* Samples in a fixed order: their bytes (judge_sample is six floats, no
+ * padding). */
+static int cmp_sample(const void *a, const void *b) { return memcmp(a, b, sizeof(judge_sample)); }
+_Static_assert(sizeof(judge_sample) == 6 * sizeof(float), "no padding in a sample");
+
 static int finite_box(const float b[6])
 {
     for (int a = 0; a < 3; a++)
@@ -388,6 +405,7 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
     jp.move.floor_y = (float)-in->pose_y;
     geometry g = {0};
     map maps[2] = {{0}, {0}};
+    judge_sample *distinct = NULL;
     if ((rc = geometry_init(&g, &jp, in)) < 0 || (rc = map_init(&maps[0], in->old_boxes, in->nold, in->scale)) < 0 ||
         (rc = map_init(&maps[1], in->new_boxes, in->nnew, in->scale)) < 0) {
         /* The input was checked: what is left is memory. */
@@ -395,12 +413,25 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
         goto done;
     }
     const double cell[3] = {g.g.cell[0] * in->scale, g.g.cell[1] * in->scale, g.g.cell[2] * in->scale};
-    uint32_t n = in->nsamples < jp.max_samples ? in->nsamples : jp.max_samples;
+    /* A user pressing on a box logs the same collision tick after tick:
+     * each distinct sample once, in an order of their own. */
+    distinct = cvre_malloc(in->nsamples * sizeof *distinct);
+    if (!distinct) {
+        rc = cvre_fail(err, errlen, -ENOMEM, "judging: %s", strerror(ENOMEM));
+        goto done;
+    }
+    memcpy(distinct, in->samples, in->nsamples * sizeof *distinct);
+    qsort(distinct, in->nsamples, sizeof *distinct, cmp_sample);
+    uint32_t m = 0;
+    for (uint32_t i = 0; i < in->nsamples; i++)
+        if (m == 0 || cmp_sample(&distinct[m - 1], &distinct[i]) != 0)
+            distinct[m++] = distinct[i];
+    uint32_t n = m < jp.max_samples ? m : jp.max_samples;
     const float turns[3] = {0, jp.deflect, -jp.deflect};
     int nturns = jp.deflect > 0 ? 3 : 1;
     tally t[2] = {{0, 0}, {0, 0}};
     for (uint32_t i = 0; i < n; i++) {
-        const judge_sample *s = &in->samples[(uint64_t)i * in->nsamples / n];
+        const judge_sample *s = &distinct[(uint64_t)i * m / n];
         float h = hypotf(s->vel[0], s->vel[2]);
         if (!(h > 0)) {
             out->still++;
@@ -425,6 +456,7 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
     out->opened_new = t[1].opened;
     out->better = t[1].phantom < t[0].phantom && t[1].opened <= t[0].opened;
 done:
+    free(distinct);
     geometry_free(&g);
     map_free(&maps[0]);
     map_free(&maps[1]);

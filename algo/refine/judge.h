@@ -13,7 +13,9 @@
  * objects are not part of the trial.
  *
  * The trial. Each sample is a logged collision: where the avatar's feet were
- * and how it moved. From each, in each of three directions (the sample's
+ * and how it moved (equal samples, a user pressing on a box tick after
+ * tick, count once; past max_samples, an even choice). From each, in each
+ * of three directions (the sample's
  * horizontal direction, and that turned by +-deflect, so that the trial also
  * tries the space beside the line the user took), the avatar walks at the
  * sample's horizontal speed (or `speed` when it is nearly still) for as many
@@ -43,7 +45,8 @@
  * from what it stands on is less than a cell.
  *
  * Costs: building the grid is one pass over the triangles (voxel_mark) plus
- * 8 (2^depth + 1)^3 bytes for the table (8.6 MiB at depth 7); the bins hold
+ * 4 (2^depth + 1)^3 bytes for the table (8.6 MiB at depth 7), sorting the
+ * samples is O(n log n); the bins hold
  * each triangle at most JUDGE_BIN_SPREAD_MAX times. Then at most
  * max_samples x 3 directions x 2 maps x JUDGE_TICKS_MAX ticks, each one
  * move_step against the boxes near the avatar plus O(1) grid tests (the
@@ -69,9 +72,11 @@
 #define JUDGE_SPEED_MIN 0.3f
 /* The deflected directions: +-30 degrees. */
 #define JUDGE_DEFLECT_DEFAULT 0.5235988f
-/* Samples judged at most: chosen evenly from those given. 2048 x 3 x 2
- * trials of about 40 ticks are some 500,000 moves, well under a second. */
-#define JUDGE_SAMPLES_DEFAULT 2048u
+/* Distinct samples judged at most: chosen evenly from those given. Clusters
+ * are a few places users were stopped at, so a hundred-odd samples cover
+ * them; 128 x 3 directions x 2 maps x about 40 ticks are some 30,000
+ * moves, about 30 ms. */
+#define JUDGE_SAMPLES_DEFAULT 128u
 #define JUDGE_SAMPLES_LIMIT 65536u
 /* Ticks a trial takes at most (reach at JUDGE_SPEED_MIN and the shortest
  * tick would be more; the speed is raised to fit). */
@@ -121,7 +126,7 @@ typedef struct judge_input {
 
 typedef struct judge_result {
     int better;           /* 1: publish the candidate */
-    uint32_t samples;     /* judged (after the cap) */
+    uint32_t samples;     /* judged: distinct ones (equal samples count once), at most max_samples */
     uint32_t still;       /* of which without a horizontal direction: not walked */
     uint64_t moves;       /* ticks per map */
     uint64_t phantom_old, phantom_new;
