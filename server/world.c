@@ -111,12 +111,61 @@ static void clamp_into_world(const world *w, const float box[3], float p[3])
     p[2] = clampf(p[2], lo[2] + box[2] * 0.5f, hi[2] - box[2] * 0.5f);
 }
 
-/* Whether a box of size box standing at p overlaps no box of sc. */
-static int free_at(world *w, const scene *sc, const float box[3], const float p[3])
+/* The controller's parameters for an avatar of size box in w. */
+static void params(const world *w, const float box[3], move_params *mp)
 {
-    float lo[3] = {p[0] - box[0] * 0.5f, p[1], p[2] - box[2] * 0.5f};
-    float hi[3] = {p[0] + box[0] * 0.5f, p[1] + box[1], p[2] + box[2] * 0.5f};
-    return scene_query(sc, lo, hi, w->handles, 0) == 0;
+    move_params_default(mp);
+    memcpy(mp->size, box, sizeof mp->size);
+    mp->floor_y = w->cfg.min[1];
+}
+
+/* Moves st by disp over dt through move_step against the boxes of sc the
+ * move can reach (into w->boxes). Returns move_step's result. */
+static int controller(world *w, const scene *sc, const move_params *mp, const move_state *st, const float disp[3],
+                      float dt, move_result *res)
+{
+    float lo[3], hi[3];
+    move_bounds(mp, st, disp, dt, lo, hi);
+    uint32_t n = scene_query(sc, lo, hi, w->handles, WORLD_MAX_CANDIDATES);
+    if (n > WORLD_MAX_CANDIDATES)
+        n = WORLD_MAX_CANDIDATES;
+    for (uint32_t i = 0; i < n; i++) {
+        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
+        w->boxes[i] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
+        memcpy(w->boxes[i].min, b->world.min, sizeof b->world.min);
+        memcpy(w->boxes[i].max, b->world.max, sizeof b->world.max);
+    }
+    return move_step(mp, st, disp, dt, w->boxes, n, res);
+}
+
+/* Whether a box of size box standing at p, once stood on any floor its feet
+ * are a little into (move.h), overlaps no box of sc (their interiors meet
+ * nowhere, as in move.h); if so, p is moved onto that floor. */
+static int free_at(world *w, const scene *sc, const float box[3], float p[3])
+{
+    move_params mp;
+    params(w, box, &mp);
+    const move_state st = {.pos = {p[0], p[1], p[2]}, .grounded = true};
+    static const float still[3] = {0, 0, 0};
+    move_result res;
+    if (controller(w, sc, &mp, &st, still, 0, &res) < 0)
+        return 0;
+    const float *q = res.state.pos;
+    float lo[3] = {q[0] - box[0] * 0.5f, q[1], q[2] - box[2] * 0.5f};
+    float hi[3] = {q[0] + box[0] * 0.5f, q[1] + box[1], q[2] + box[2] * 0.5f};
+    uint32_t n = scene_query(sc, lo, hi, w->handles, WORLD_MAX_CANDIDATES);
+    if (n > WORLD_MAX_CANDIDATES)
+        return 0;
+    for (uint32_t i = 0; i < n; i++) {
+        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
+        int meet = 1;
+        for (int a = 0; a < 3; a++)
+            meet &= b->world.min[a] < hi[a] && lo[a] < b->world.max[a];
+        if (meet)
+            return 0;
+    }
+    memcpy(p, q, sizeof res.state.pos);
+    return 1;
 }
 
 /* Moves p (on the floor, inside the world) to the nearest point free of
@@ -264,23 +313,10 @@ static void apply(world *w, avatar *a, const scene *sc, world_contact_fn *fn, vo
         a->pub.ack_seq = a->request_seq;
     }
     move_params mp;
-    move_params_default(&mp);
-    memcpy(mp.size, a->pub.box, sizeof mp.size);
-    mp.floor_y = w->cfg.min[1];
+    params(w, a->pub.box, &mp);
     move_state st = {.pos = {p[0], p[1], p[2]}, .vy = a->pub.vy, .grounded = a->pub.grounded != 0};
-    float lo[3], hi[3];
-    move_bounds(&mp, &st, disp, w->cfg.tick_dt, lo, hi);
-    uint32_t n = scene_query(sc, lo, hi, w->handles, WORLD_MAX_CANDIDATES);
-    if (n > WORLD_MAX_CANDIDATES)
-        n = WORLD_MAX_CANDIDATES;
-    for (uint32_t i = 0; i < n; i++) {
-        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
-        w->boxes[i] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
-        memcpy(w->boxes[i].min, b->world.min, sizeof b->world.min);
-        memcpy(w->boxes[i].max, b->world.max, sizeof b->world.max);
-    }
     move_result res;
-    if (move_step(&mp, &st, disp, w->cfg.tick_dt, w->boxes, n, &res) < 0)
+    if (controller(w, sc, &mp, &st, disp, w->cfg.tick_dt, &res) < 0)
         return; /* out of the controller's range: stay put */
     float q[3] = {res.state.pos[0], res.state.pos[1], res.state.pos[2]};
     clamp_into_world(w, a->pub.box, q);

@@ -69,8 +69,9 @@ world *world_create(const world_config *cfg);
 void world_destroy(world *w);
 
 /* Adds an avatar at a spawn point: a random point within spawn_radius of
- * the centre, or if the avatar's box would overlap a box of sc there, the
- * nearest free point found searching outward from it (up to
+ * the centre, stood on any floor of sc its feet are a little into there (as
+ * move.h stands it), or if the avatar's box would still overlap a box of sc,
+ * the nearest free point found searching outward from it (up to
  * WORLD_SPAWN_SEARCH metres). *crowded is set to 1 when none was free and
  * the avatar stands inside an object, else 0. name is name_len bytes
  * (<= PROTO_NAME_MAX). Returns the new avatar, or NULL when the world is

@@ -43,7 +43,7 @@ typedef struct ctx {
     double half[3];    /* the avatar's extent from its feet point: hx, sy, hz */
     double floor;
     double step;
-    double start[3]; /* position at the start: boxes overlapping it are ignored */
+    double start[3]; /* position at the start, after stand_on: boxes overlapping it are ignored */
 } ctx;
 
 typedef struct hit {
@@ -304,6 +304,31 @@ static void settle(const ctx *c, const double p[3], float pf[3])
             pf[a] = (float)c->start[a];
 }
 
+/*
+ * The avatar's feet are a little inside a floor or a low surface when the
+ * move starts: lifts the start onto the highest top, at most a step above the
+ * feet, of a box it overlaps, if the lift makes it overlap no box it did not
+ * already overlap. Returns whether it lifted. c->start is the feet before.
+ */
+static bool stand_on(ctx *c)
+{
+    const double from[3] = {c->start[0], c->start[1], c->start[2]};
+    double best = from[1];
+    for (uint32_t i = 0; i < c->nboxes; i++) {
+        double top = c->boxes[i].max[1];
+        if (!(top > best) || top - from[1] > c->step || !overlaps(c, &c->boxes[i], from))
+            continue;
+        const double up[3] = {from[0], top, from[2]};
+        bool room = true;
+        for (uint32_t k = 0; k < c->nboxes && room; k++)
+            room = !overlaps(c, &c->boxes[k], up) || overlaps(c, &c->boxes[k], from);
+        if (room)
+            best = top;
+    }
+    c->start[1] = best;
+    return best > from[1];
+}
+
 /* Whether the avatar with its feet at p stands on the floor or on the top of
  * a box under its footprint. */
 static bool supported(const ctx *c, const double p[3])
@@ -376,7 +401,7 @@ void move_bounds(const move_params *p, const move_state *st, const float disp[3]
     for (int a = 0; a < 3; a++) {
         double from = c.start[a], to = from + m[a];
         double lo = fmin(from, to) - (a == 1 ? GROUND_PROBE : c.half[a]);
-        double hi = fmax(from, to) + c.half[a] + (a == 1 ? MOVE_MAX_STEPS * c.step : 0);
+        double hi = fmax(from, to) + c.half[a] + (a == 1 ? (MOVE_MAX_STEPS + 1) * c.step : 0);
         min[a] = (float)lo - BOUNDS_MARGIN;
         max[a] = (float)hi + BOUNDS_MARGIN;
     }
@@ -405,8 +430,15 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
     c.nboxes = nboxes;
     double m[3], vy;
     begin(&c, p, st, disp, dt, m, &vy);
-    double pos[3] = {c.start[0], c.start[1], c.start[2]};
     bool on_ground = st->grounded, landed = false;
+    if (stand_on(&c)) {
+        on_ground = true; /* as after a step up: stands on the top, the fall dropped */
+        if (m[1] < 0) {
+            m[1] = 0;
+            landed = true;
+        }
+    }
+    double pos[3] = {c.start[0], c.start[1], c.start[2]};
     int slides = 0, steps = 0;
 
     while (slides < MOVE_MAX_SLIDES && (m[0] != 0 || m[1] != 0 || m[2] != 0)) {

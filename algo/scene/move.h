@@ -12,6 +12,16 @@
  *
  * Rules, in the order they apply within a move:
  *
+ *   - Standing on a floor it is sunk into: when the move starts with the
+ *     avatar overlapping boxes whose tops are above its feet by at most
+ *     step_height (a floor slab or a low surface its feet are a few
+ *     millimetres into, e.g. a model whose floor lies just above the world's
+ *     floor), it is first lifted onto the highest such top that has
+ *     headroom: one where it overlaps no box it did not already overlap.
+ *     It then stands there (grounded, the fall of the tick dropped, as after
+ *     a step up), walks on that top like on any other, and nothing is
+ *     reported. This comes after the lift onto the floor (see below) and
+ *     also applies to a move with no displacement.
  *   - The motion of the tick is the requested displacement plus the fall
  *     under gravity, v dt - g dt^2 / 2 (the fall speed is capped at
  *     MOVE_MAX_FALL_SPEED). It is swept as a whole: the avatar stops at the
@@ -27,10 +37,11 @@
  *     a top face under its footprint or the floor, and falls otherwise (from
  *     rest if it stood at some point of the move, e.g. walking off an edge).
  *   - Stepping up: when an avatar on the ground (grounded when the move
- *     starts, or landed during it) is blocked by the side of a box
- *     whose top is at most step_height above its feet, it is lifted onto it
- *     instead, if there is headroom and if the rest of its motion takes its
- *     footprint over the box (not when a wall stands right behind the step).
+ *     starts, stood on a top as above, or landed during it) is blocked by
+ *     the side of a box whose top is at most step_height above its feet, it
+ *     is lifted onto it instead, if there is headroom and if the rest of its
+ *     motion takes its footprint over the box (not when a wall stands right
+ *     behind the step).
  *     Nothing is reported. At most MOVE_MAX_STEPS steps per move. If less
  *     than MOVE_SKIN of motion is left to get onto it, the avatar waits at
  *     the step until the next move, and that is not reported either.
@@ -40,9 +51,10 @@
  *     contact per axis, never two for one box, however it slides.
  *
  * Inside policy. An avatar that overlaps a box when a move starts (spawned
- * there, or the box was placed, moved or refined around it) is never trapped:
- * such boxes neither block nor support it during the move, so it can walk out
- * in any direction, and may also walk deeper in or fall through (refusing
+ * there, or the box was placed, moved or refined around it), once lifted
+ * onto any floor it was sunk into (above), is never trapped: such boxes
+ * neither block nor support it during the move, so it can walk out in any
+ * direction, and may also walk deeper in or fall through (refusing
  * that would need a notion of "deeper" that some box shapes defeat; a box
  * that is ignored cannot trap). Instead, every move that requests a non-zero
  * displacement and still ends overlapping such a box reports an inside
@@ -50,7 +62,9 @@
  * the avatar's centre clamped into the box, its normal points out of the face
  * the avatar is nearest to leaving through (the smallest push-out; the bottom
  * face only if the box does not reach down to the floor). The other boxes
- * still block it. An avatar below the floor is first lifted onto it.
+ * still block it. An avatar below the floor is first lifted onto it. So an
+ * inside contact means an object placed around the avatar: a box whose top
+ * is more than a step above its feet, or a low one with no headroom above.
  */
 #ifndef CVRE_MOVE_H
 #define CVRE_MOVE_H

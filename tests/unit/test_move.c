@@ -400,13 +400,13 @@ static void test_inside_policy_details(void **state)
     assert_false(r.contacts[0].inside);
     assert_int_equal(r.contacts[1].handle, 4);
     assert_true(r.contacts[1].inside);
-    /* Sunk into a platform: it does not hold the avatar up, which falls
-     * through to the floor; the normal points up (the bottom face reaches
-     * the floor, so down is no way out). */
+    /* Sunk into a platform deeper than a step: it does not hold the avatar
+     * up, which falls through to the floor; the normal points up (the bottom
+     * face reaches the floor, so down is no way out). */
     const move_box platform = box(-3, 0, -3, 3, 1, 3, 6);
-    s = (move_state){{0, 0.8f, 0}, 0, true};
+    s = (move_state){{0, 0.6f, 0}, 0, true};
     r = step(&s, 0.1f, 0, 0, &platform, 1);
-    assert_true(r.state.pos[1] < 0.8f);
+    assert_true(r.state.pos[1] < 0.6f);
     assert_false(r.state.grounded);
     assert_int_equal(r.ncontacts, 1);
     assert_normal(&r.contacts[0], 0, 1, 0);
@@ -420,6 +420,103 @@ static void test_inside_policy_details(void **state)
     assert_int_equal(r.ncontacts, 1);
     assert_normal(&r.contacts[0], 0, -1, 0);
     assert_float_equal(r.contacts[0].point[1], 1.5f, EPS);
+}
+
+/* A model's floor 4 mm above the avatar's feet: it is stood on the floor,
+ * not left inside it, and walks on it with nothing to report. */
+static void test_sunk_in_floor_stands_on_it(void **state)
+{
+    (void)state;
+    const move_box slab = box(-10, -0.5f, -10, 10, 0.004f, 10, 3);
+    move_state s = at(0, 0, 0);
+    /* Even a move with no displacement stands it up. */
+    move_result r = step(&s, 0, 0, 0, &slab, 1);
+    assert_int_equal(r.ncontacts, 0);
+    assert_true(r.state.pos[1] == 0.004f && r.state.grounded && r.state.vy == 0);
+    for (int k = 0; k < 20; k++) {
+        r = step(&s, 0.2f, 0, 0.1f, &slab, 1);
+        assert_int_equal(r.ncontacts, 0);
+        assert_true(r.state.pos[1] == 0.004f && r.state.grounded && r.state.vy == 0);
+        s = r.state;
+    }
+    assert_float_equal(s.pos[0], 4, EPS);
+    /* Spawned falling (not grounded): stood on it too. */
+    s = (move_state){{0, 0, 0}, -1, false};
+    r = step(&s, 0.1f, 0, 0, &slab, 1);
+    assert_int_equal(r.ncontacts, 0);
+    assert_true(r.state.pos[1] == 0.004f && r.state.grounded && r.state.vy == 0);
+    /* Stood on it, it is on the ground even with nothing pulling it down:
+     * the step in front of it is climbed, not a wall. */
+    move_params weightless = prm;
+    weightless.gravity = 0;
+    const move_box slab_step[2] = {slab, box(0.5f, 0, -1, 1, 0.3f, 1, 4)};
+    const float d[3] = {0.5f, 0, 0};
+    s = (move_state){{0, 0, 0}, 0, false};
+    assert_int_equal(move_step(&weightless, &s, d, DT, slab_step, 2, &r), 0);
+    assert_int_equal(r.ncontacts, 0);
+    assert_true(r.state.pos[1] == 0.3f && r.state.grounded);
+    /* Walking off its edge: falls to the floor, nothing reported. */
+    s = at(9.6f, 0.004f, 0);
+    for (int k = 0; k < 5; k++)
+        s = step(&s, 0.2f, 0, 0, &slab, 1).state;
+    assert_true(s.pos[1] == 0 && s.grounded);
+}
+
+/* Overlapping low boxes (a step-sized block, a lower one beside it): lifted
+ * onto the highest top, up to the step height, with no contact; one more
+ * millimetre makes a tall box, and the inside contact stays. */
+static void test_sunk_in_step_lifted(void **state)
+{
+    (void)state;
+    const move_box low[2] = {box(-1, 0, -1, 0.1f, 0.2f, 1, 1), box(0, 0, -1, 1, 0.35f, 1, 2)};
+    move_state s = at(0, 0, 0);
+    move_result r = step(&s, 0.1f, 0, 0, low, 2);
+    assert_int_equal(r.ncontacts, 0);
+    assert_true(r.state.pos[1] == 0.35f && r.state.grounded);
+    assert_float_equal(r.state.pos[0], 0.1f, EPS);
+    /* From a floor slab the feet are in, onto a step it also overlaps. */
+    const move_box slab_and_step[2] = {box(-10, -1, -10, 10, 0.01f, 10, 1), box(0.2f, 0, -1, 1, 0.3f, 1, 2)};
+    r = step(&s, 0, 0, 0, slab_and_step, 2);
+    assert_true(r.state.pos[1] == 0.3f && r.state.grounded && r.ncontacts == 0);
+    /* Higher than a step: an object placed around the avatar. */
+    const move_box tall = box(-1, 0, -1, 1, 0.351f, 1, 4);
+    r = step(&s, 0.1f, 0, 0, &tall, 1);
+    assert_int_equal(r.ncontacts, 1);
+    assert_true(r.contacts[0].inside && r.contacts[0].handle == 4);
+    assert_true(r.state.pos[1] == 0);
+    /* A low box the avatar only touches (their faces meet) is not
+     * overlapped: nothing to lift it out of. */
+    const move_box beside = box(0.3f, 0, -1, 1, 0.3f, 1, 5);
+    r = step(&s, 0, 0, 0, &beside, 1);
+    assert_true(r.state.pos[1] == 0 && r.ncontacts == 0);
+}
+
+/* Lifting must not push the avatar's head into a box it was not in: then it
+ * is not lifted (or only onto a lower top that has room), and the inside
+ * contact stays. A box it was already in does not stop the lift. */
+static void test_sunk_needs_headroom(void **state)
+{
+    (void)state;
+    const move_box blocked[2] = {box(-1, 0, -1, 1, 0.2f, 1, 1), box(-1, 1.9f, -1, 1, 3, 1, 2)};
+    move_state s = at(0, 0, 0);
+    move_result r = step(&s, 0.1f, 0, 0, blocked, 2);
+    assert_true(r.state.pos[1] == 0);
+    assert_int_equal(r.ncontacts, 1);
+    assert_true(r.contacts[0].inside && r.contacts[0].handle == 1);
+    /* A lower top with room: lifted onto it; the higher box, still
+     * overlapped, is reported inside. */
+    const move_box two[3] = {box(-1, 0, -1, 1, 0.3f, 1, 1), box(-1, 0, -1, 1, 0.1f, 1, 2),
+                             box(-1, 2, -1, 1, 3, 1, 3)};
+    r = step(&s, 0.1f, 0, 0, two, 3);
+    assert_true(r.state.pos[1] == 0.1f && r.state.grounded);
+    assert_int_equal(r.ncontacts, 1);
+    assert_true(r.contacts[0].inside && r.contacts[0].handle == 1);
+    /* A ceiling the head is already in does not hold it down. */
+    const move_box in_ceiling[2] = {box(-1, 0, -1, 1, 0.2f, 1, 1), box(-1, 1.7f, -1, 1, 3, 1, 2)};
+    r = step(&s, 0.1f, 0, 0, in_ceiling, 2);
+    assert_true(r.state.pos[1] == 0.2f);
+    assert_int_equal(r.ncontacts, 1);
+    assert_true(r.contacts[0].inside && r.contacts[0].handle == 2);
 }
 
 static void test_zero_move_reports_nothing(void **state)
@@ -540,8 +637,9 @@ static int overlapping(const move_state *s, const move_box *b)
 
 /*
  * A random walk among random boxes far from the origin (where floats are
- * coarse): the avatar never ends a move overlapping a box it did not overlap
- * when the move began, never goes below the floor, and the candidates inside
+ * coarse), now and then sunk 4 mm into what it stands on: the avatar never
+ * ends a move overlapping a box it did not overlap when the move began,
+ * never goes below the floor, and the candidates inside
  * move_bounds give exactly the move that all boxes give. Deterministic.
  */
 static void test_random_walk_never_enters(void **state)
@@ -558,7 +656,7 @@ static void test_random_walk_never_enters(void **state)
         all[k] = box(x, y, z, x + sx, y + sy, z + sz, k);
     }
     move_state s = at(ox, 0, oz);
-    int contacts = 0, steps_up = 0, falls = 0;
+    int contacts = 0, steps_up = 0, falls = 0, stood = 0;
     for (int m = 0; m < MOVES; m++) {
         float ang = rnd(&seed) * 6.2831853f, len = rnd(&seed) * 0.3f;
         if (rnd(&seed) < 0.05f)
@@ -568,6 +666,8 @@ static void test_random_walk_never_enters(void **state)
             d[0] = -d[0];
         if (fabsf(s.pos[2] + d[2] - oz) > 7)
             d[2] = -d[2];
+        if (rnd(&seed) < 0.05f) /* now and then sunk a few mm into what it stands on */
+            s.pos[1] -= 0.004f;
         float min[3], max[3];
         move_bounds(&prm, &s, d, DT, min, max);
         uint32_t nc = 0;
@@ -589,11 +689,12 @@ static void test_random_walk_never_enters(void **state)
         assert_true(r.state.pos[1] >= 0);
         contacts += r.ncontacts > 0;
         steps_up += r.state.pos[1] > s.pos[1] + 0.01f && r.ncontacts == 0;
+        stood += s.pos[1] > 0 && r.state.pos[1] > s.pos[1] && r.state.pos[1] < s.pos[1] + 0.005f && r.state.grounded;
         falls += !r.state.grounded;
         s = r.state;
     }
-    /* The walk did meet walls, climb and fall. */
-    assert_true(contacts > 1000 && steps_up > 50 && falls > 50);
+    /* The walk did meet walls, climb, fall and stand up out of a floor. */
+    assert_true(contacts > 1000 && steps_up > 50 && falls > 50 && stood > 50);
 }
 
 /* At the same instant a top face wins over a wall's side, whatever the
@@ -677,6 +778,15 @@ static void test_deterministic(void **state)
     for (uint32_t k = 0; k < a.ncontacts; k++)
         assert_true(memcmp(&a.contacts[k].point, &b.contacts[k].point, sizeof a.contacts[k].point) == 0 &&
                     a.contacts[k].handle == b.contacts[k].handle);
+    /* Sunk into two low boxes, candidates in either order: the same lift. */
+    const move_box sunk[2] = {box(-1, -1, -1, 1, 0.004f, 1, 1), box(0, 0, -1, 1, 0.25f, 1, 2)};
+    const move_box reversed[2] = {sunk[1], sunk[0]};
+    s = at(0.1f, 0, 0);
+    assert_int_equal(move_step(&prm, &s, d, DT, sunk, 2, &a), 0);
+    assert_int_equal(move_step(&prm, &s, d, DT, reversed, 2, &b), 0);
+    assert_true(same_state(&a.state, &b.state) && a.state.pos[1] == 0.25f);
+    assert_int_equal(a.ncontacts, 0);
+    assert_int_equal(b.ncontacts, 0);
 }
 
 int main(void)
@@ -697,6 +807,9 @@ int main(void)
         cmocka_unit_test_setup(test_head_hits_ceiling, setup),
         cmocka_unit_test_setup(test_inside_can_walk_out, setup),
         cmocka_unit_test_setup(test_inside_policy_details, setup),
+        cmocka_unit_test_setup(test_sunk_in_floor_stands_on_it, setup),
+        cmocka_unit_test_setup(test_sunk_in_step_lifted, setup),
+        cmocka_unit_test_setup(test_sunk_needs_headroom, setup),
         cmocka_unit_test_setup(test_zero_move_reports_nothing, setup),
         cmocka_unit_test_setup(test_bad_input_rejected, setup),
         cmocka_unit_test_setup(test_contact_cap, setup),

@@ -1,0 +1,125 @@
+/*
+ * test_world_spawn.c: where the world puts a new avatar (server/world.c,
+ * world_add): on a model's floor that lies a few millimetres above the
+ * world's, stood on it where it spawns, and it walks there with no inside
+ * collision; out of the way of a tall object; inside only when nothing
+ * around is free.
+ */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include <cmocka.h>
+
+#include "world.h"
+
+static const world_config CFG = {.min = {-50, 0, -50}, .max = {50, 20, 50}, .max_speed = 5, .aoi_radius = 10,
+                                 .spawn_radius = 1, .tick_dt = 0.05f, .capacity = 4, .seed = 1};
+static const float AV[3] = {0.6f, 1.8f, 0.6f};
+
+/* A scene with one object of one box, [lo, hi] in world coordinates. */
+static scene *one_box(const float lo[3], const float hi[3])
+{
+    scene *sc = scene_create(CFG.min, CFG.max);
+    assert_non_null(sc);
+    scene_box b = {{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}};
+    float tri[9] = {lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], hi[0], lo[1], hi[2]};
+    scene_object_def d = {.id = 1, .owner = "ann", .name = "o", .at = {.scale = 1}, .ecm_version = 1,
+                          .tri_count = 1, .tris = tri, .box_count = 1, .boxes = &b};
+    assert_int_equal(scene_add(sc, &d), 0);
+    return sc;
+}
+
+static void count(void *ctx, const world_avatar *a, const move_contact *c, const float vel[3])
+{
+    (void)a;
+    (void)vel;
+    int *n = ctx;
+    n[0]++;
+    n[1] += c->inside;
+}
+
+/* A world and its scene of one box [lo, hi], and an avatar added to them,
+ * which must have been crowded (or not) as said. */
+static const world_avatar *spawn(const float lo[3], const float hi[3], int crowded_expected, world **w, scene **sc)
+{
+    *sc = one_box(lo, hi);
+    *w = world_create(&CFG);
+    assert_non_null(*w);
+    int crowded = -1;
+    const world_avatar *a = world_add(*w, *sc, "ann", 3, AV, &crowded);
+    assert_non_null(a);
+    assert_int_equal(crowded, crowded_expected);
+    return a;
+}
+
+/* One step of the world with a walking 0.2 m along x; counts its contacts
+ * (all, inside) into contacts. */
+static void walk(world *w, scene *sc, const world_avatar *a, uint32_t seq, int contacts[2])
+{
+    const float to[3] = {a->pos[0] + 0.2f, 0, a->pos[2]};
+    world_request_move(w, a->id, seq, to);
+    world_step(w, sc, count, contacts);
+}
+
+static void test_stood_on_a_thin_floor(void **state)
+{
+    (void)state;
+    const float lo[3] = {-40, -0.5f, -40}, hi[3] = {40, 0.004f, 40};
+    world *w;
+    scene *sc;
+    const world_avatar *a = spawn(lo, hi, 0, &w, &sc);
+    /* Where it spawned, not searched away from the floor. */
+    assert_true(a->pos[0] * a->pos[0] + a->pos[2] * a->pos[2] <= 1.0f);
+    assert_true(a->pos[1] == 0.004f && a->grounded);
+    int contacts[2] = {0, 0};
+    for (uint32_t k = 1; k <= 40; k++) {
+        walk(w, sc, a, k, contacts);
+        assert_true(a->pos[1] == 0.004f && a->grounded);
+    }
+    assert_int_equal(contacts[0], 0);
+    world_destroy(w);
+    scene_destroy(sc);
+}
+
+static void test_tall_object_searched_around(void **state)
+{
+    (void)state;
+    const float lo[3] = {-3, 0, -3}, hi[3] = {3, 0.5f, 3};
+    world *w;
+    scene *sc;
+    const world_avatar *a = spawn(lo, hi, 0, &w, &sc);
+    /* Higher than a step: not stood on, but beside it, on the floor. */
+    assert_true(a->pos[1] == 0);
+    assert_true(a->pos[0] - 0.3f >= 3 || a->pos[0] + 0.3f <= -3 || a->pos[2] - 0.3f >= 3 || a->pos[2] + 0.3f <= -3);
+    world_destroy(w);
+    scene_destroy(sc);
+}
+
+static void test_crowded_when_nothing_free(void **state)
+{
+    (void)state;
+    /* Covers the whole world: nowhere to stand, the avatar starts inside,
+     * and its moves are inside collisions. */
+    const float lo[3] = {-50, 0, -50}, hi[3] = {50, 3, 50};
+    world *w;
+    scene *sc;
+    const world_avatar *a = spawn(lo, hi, 1, &w, &sc);
+    int contacts[2] = {0, 0};
+    walk(w, sc, a, 1, contacts);
+    assert_int_equal(contacts[0], 1);
+    assert_int_equal(contacts[1], 1);
+    world_destroy(w);
+    scene_destroy(sc);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_stood_on_a_thin_floor),
+        cmocka_unit_test(test_tall_object_searched_around),
+        cmocka_unit_test(test_crowded_when_nothing_free),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
