@@ -1,10 +1,10 @@
 /*
  * refine.c: one refinement round; the steps are described in refine.h.
  *
- * Everything inside a problem box works on cell indices: a box of cells is
- * [lo, hi) per axis. Counts over any such box (occupied cells, wanted cells)
- * come from summed-volume tables in O(1), so shrinking a node, testing a
- * merge or pricing a pair never walks cells.
+ * Everything on the grid works on cell indices: a box of cells is [lo, hi)
+ * per axis. Counts over any such box (cells to cover, pressure, outside
+ * cells) come from summed-volume tables in O(1), so shrinking a node,
+ * testing a merge or pricing a pair never walks cells.
  */
 #include "refine.h"
 
@@ -23,8 +23,9 @@
 _Static_assert(ECM_DEPTH_MIN >= VOXEL_DEPTH_MIN && ECM_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Cell indices, and one past the last, fit 16 bits. */
 _Static_assert(ECM_DEPTH_MAX <= 15, "cell indices are uint16_t");
-/* Counts of a whole grid fit a summed-volume table's uint32_t. */
-_Static_assert(3 * ECM_DEPTH_MAX < 32, "cell counts fit uint32_t");
+/* Sums of a whole grid of pressures (at most PRESSURE_MAX a cell) fit a
+ * summed-volume table's uint32_t. */
+_Static_assert(3 * ECM_DEPTH_MAX + 8 <= 32, "pressure sums fit uint32_t");
 
 /* Boxes a division may hold beyond the budget before merging brings it
  * back (see divide): parts that merging joins again cost nothing in the
@@ -32,10 +33,35 @@ _Static_assert(3 * ECM_DEPTH_MAX < 32, "cell counts fit uint32_t");
  * later rounds nothing to divide with, and merging costs grow with the
  * square of the boxes held. */
 #define DIVIDE_SLACK 8u
+/* Most boxes and waiting nodes a division may hold while it keeps outside
+ * cells out (such cuts are not bounded by the budget): past it the
+ * problem boxes are only tightened (see refine.h). */
+#define NODES_MAX (4u * ECM_MAX_BOXES_LIMIT)
 /* Most cells of the padded array one cluster's wanted space is worked out
  * in: 256^3, an avatar as long as half the grid on each axis (2 MiB of
- * bits). */
+ * bits per array). */
 #define WANTED_CELLS_MAX ((size_t)16 << 20)
+/* A cell's pressure saturates at PRESSURE_MAX; the heaviest cluster
+ * presses with PRESSURE_MAX near its points, the lightest with at least
+ * PRESSURE_NEAR_MIN, and a quarter of that where its region is only
+ * stretched along the axis users cross (at least 1). */
+#define PRESSURE_MAX 255u
+#define PRESSURE_NEAR_MIN 4u
+/* Margin, in cells, far above rounding: a box's cells are those it
+ * overlaps by more than this (see mark_slivers for the rest). */
+#define RANGE_MARGIN 1e-6
+/* Least overlap, in cells, for a box to count as holding a cell (a cell
+ * the box only touches is not its). */
+#define INNER_MARGIN 0.01
+
+/* What a cell of the grid is (work.cls): a problem box overlaps it by
+ * more than RANGE_MARGIN, or by more than INNER_MARGIN; a kept box
+ * overlaps it by more than INNER_MARGIN; it must be covered (a triangle
+ * touches it and a problem box overlaps it, or see mark_slivers); it is
+ * out of bounds for new boxes (not to be covered, and no problem box
+ * overlaps it by INNER_MARGIN: space the map leaves free, or only a kept
+ * box's). */
+enum { CELL_PROBLEM = 1, CELL_INNER = 2, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16 };
 
 /* A box of cells: [lo, hi) on each axis. */
 typedef struct ibox {
@@ -48,23 +74,24 @@ typedef struct ilist {
 } ilist;
 
 /* Summed-volume table over an n^3 grid: t[x + m (y + m z)], m = n + 1, holds
- * the count over cells [0, x) x [0, y) x [0, z). */
+ * the sum over cells [0, x) x [0, y) x [0, z). */
 typedef struct svt {
     uint32_t *t;
     uint32_t m;
 } svt;
 
-/* One problem box being refined. */
+/* The whole refinement's grid, over the hull of the problem boxes. */
 typedef struct work {
     voxel_grid g;
     uint32_t n;
-    svt occ, want;   /* their tables: one block, tables */
+    svt must, press, outside; /* their tables: one block, tables */
     uint32_t *tables;
-    uint8_t *wanted; /* n^3: 1 for a wanted cell */
-    ilist out;       /* its boxes so far: no more division for them */
+    uint8_t *cls;      /* n^3: CELL_* bits */
+    uint8_t *pressure; /* n^3: 0, or how hard users press for the cell to open */
+    ilist out;         /* boxes so far: no more division for them */
     double max_empty;
-    uint32_t budget; /* most boxes it may become */
-    uint32_t capped; /* boxes of out that still hold wanted cells */
+    uint32_t budget;   /* most boxes the problem boxes may become */
+    int any_outside;   /* a cell meets no problem box (else no outside table) */
 } work;
 
 void ecm_params_default(ecm_params *p)
@@ -72,7 +99,8 @@ void ecm_params_default(ecm_params *p)
     *p = (ecm_params){.depth = ECM_DEPTH_DEFAULT,
                       .max_boxes = ECM_MAX_BOXES_DEFAULT,
                       .max_empty = ECM_MAX_EMPTY_DEFAULT,
-                      .avatar = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH}};
+                      .avatar = {AVATAR_WIDTH, AVATAR_HEIGHT, AVATAR_WIDTH},
+                      .step = AVATAR_STEP};
 }
 
 void ecm_result_free(ecm_result *r)
@@ -117,13 +145,14 @@ static int push(ilist *l, const ibox *b)
     return 0;
 }
 
-/* Builds in t ((n + 1)^3 entries) the table of a 0/1 function of the
- * cell, given as a byte array (bytes != NULL) or the grid's bits. One pass: each entry is its row's
- * prefix sum plus the entries below it in y and in z, less the one below
- * both (the previous row and plane are still in cache). */
-static void svt_build(svt *s, uint32_t *t, const voxel_grid *g, const uint8_t *bytes)
+/* Builds in t ((n + 1)^3 entries) the table of a function of the cell
+ * given as bytes: the byte itself (mask 0), or 1 where it has a bit of
+ * mask. One pass: each entry is its row's prefix sum plus the entries
+ * below it in y and in z, less the one below both (the previous row and
+ * plane are still in cache). */
+static void svt_build(svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes, uint8_t mask)
 {
-    uint32_t n = g->n, m = n + 1;
+    uint32_t m = n + 1;
     size_t plane = (size_t)m * m;
     s->m = m;
     s->t = t;
@@ -134,10 +163,11 @@ static void svt_build(svt *s, uint32_t *t, const voxel_grid *g, const uint8_t *b
         for (uint32_t y = 0; y < n; y++) {
             uint32_t *row = p + (size_t)m * (y + 1), *below_y = row - m, *below_z = row - plane,
                      *below_yz = below_z - m;
+            const uint8_t *src = bytes + (size_t)n * (y + (size_t)n * z);
             uint32_t acc = 0;
             row[0] = 0;
             for (uint32_t x = 1; x <= n; x++) {
-                acc += bytes ? bytes[(x - 1) + (size_t)n * (y + (size_t)n * z)] : (uint32_t)voxel_get(g, x - 1, y, z);
+                acc += mask ? (src[x - 1] & mask) != 0 : src[x - 1];
                 row[x] = acc + below_y[x] + below_z[x] - below_yz[x];
             }
         }
@@ -191,10 +221,18 @@ static int shrink(const svt *occ, ibox *b)
     return 1;
 }
 
-/* The price of merging a and b: wanted cells the hull adds, then empty cells
- * it adds (the boxes are disjoint cell sets, or nearly: see merge_all). */
+/* Cells of b outside the problem boxes. */
+static uint32_t outside_in(const work *w, const ibox *b)
+{
+    return w->any_outside ? svt_sum(&w->outside, b) : 0;
+}
+
+/* The price of merging a and b: pressure the hull adds, then empty cells
+ * it adds (the boxes are disjoint cell sets, or nearly: see merge_all);
+ * forbidden when the hull holds a cell outside the problem boxes. */
 typedef struct price {
-    uint64_t wanted, empty, vol;
+    uint64_t pressure, empty, vol;
+    int forbidden;
 } price;
 
 static price price_of(const work *w, const ibox *a, const ibox *b)
@@ -202,25 +240,29 @@ static price price_of(const work *w, const ibox *a, const ibox *b)
     ibox h = hull(a, b);
     price p;
     p.vol = volume(&h);
-    uint64_t empty_h = p.vol - svt_sum(&w->occ, &h);
-    uint64_t empty_ab = (volume(a) - svt_sum(&w->occ, a)) + (volume(b) - svt_sum(&w->occ, b));
+    p.forbidden = outside_in(w, &h) > 0;
+    uint64_t empty_h = p.vol - svt_sum(&w->must, &h);
+    uint64_t empty_ab = (volume(a) - svt_sum(&w->must, a)) + (volume(b) - svt_sum(&w->must, b));
     p.empty = empty_h > empty_ab ? empty_h - empty_ab : 0;
-    uint64_t want_h = svt_sum(&w->want, &h), want_ab = svt_sum(&w->want, a) + svt_sum(&w->want, b);
-    p.wanted = want_h > want_ab ? want_h - want_ab : 0;
+    uint64_t press_h = svt_sum(&w->press, &h), press_ab = (uint64_t)svt_sum(&w->press, a) + svt_sum(&w->press, b);
+    p.pressure = press_h > press_ab ? press_h - press_ab : 0;
     return p;
 }
 
 static int cheaper(const price *a, const price *b)
 {
-    if (a->wanted != b->wanted)
-        return a->wanted < b->wanted;
+    if (a->pressure != b->pressure)
+        return a->pressure < b->pressure;
     return a->empty < b->empty;
 }
 
-/* A merge step 4 allows: no wanted cell, little new empty space. */
-static int allowed(const work *w, const price *p)
+/* A merge step 5 allows: no cell outside the problem boxes, no pressure,
+ * little new empty space; at the cap (any), no cell outside. */
+static int allowed(const work *w, const price *p, int any)
 {
-    return p->wanted == 0 && (double)p->empty <= w->max_empty * (double)p->vol;
+    if (p->forbidden)
+        return 0;
+    return any || (p->pressure == 0 && (double)p->empty <= w->max_empty * (double)p->vol);
 }
 
 /* Per box: its cheapest partner (ties: the lowest index) and the price. */
@@ -237,7 +279,7 @@ static void find_best(const work *w, const ilist *l, uint32_t i, int any, partne
         if (j == i)
             continue;
         price p = price_of(w, &l->b[i], &l->b[j]);
-        if ((any || allowed(w, &p)) && (!out->has || cheaper(&p, &out->p))) {
+        if (allowed(w, &p, any) && (!out->has || cheaper(&p, &out->p))) {
             out->has = 1;
             out->j = j;
             out->p = p;
@@ -247,10 +289,10 @@ static void find_best(const work *w, const ilist *l, uint32_t i, int any, partne
 
 /*
  * Merges the cheapest pair of w->out, again and again: with keep 0, any pair
- * step 4 allows, while there is one; else (the cap) any pair at all, while
- * there are more than keep boxes. Each box remembers its cheapest partner;
- * a merge looks again only for the boxes that pointed at one of the pair.
- * Returns 0 or -ENOMEM.
+ * step 5 allows, while there is one; else (the cap) any pair whose hull
+ * holds no cell outside, while there are more than keep boxes. Each box
+ * remembers its cheapest partner; a merge looks again only for the boxes
+ * that pointed at one of the pair. Returns 0 or -ENOMEM.
  */
 static int merge_all(work *w, uint32_t keep)
 {
@@ -292,7 +334,7 @@ static int merge_all(work *w, uint32_t keep)
                 continue;
             }
             price p = price_of(w, &l->b[k], &l->b[i]);
-            if ((any || allowed(w, &p)) && (!bs[k].has || cheaper(&p, &bs[k].p)))
+            if (allowed(w, &p, any) && (!bs[k].has || cheaper(&p, &bs[k].p)))
                 bs[k] = (partner){.j = i, .p = p, .has = 1};
         }
         find_best(w, l, i, any, &bs[i]);
@@ -301,17 +343,19 @@ static int merge_all(work *w, uint32_t keep)
     return 0;
 }
 
-/* A node waiting for division: the most wanted cells first, then the
- * oldest (so the order, and the result, never depend on anything else). */
+/* A node waiting for division: nodes holding outside cells first (their cuts
+ * are not optional), then the most pressure, then the oldest (so the
+ * order, and the result, never depend on anything else). */
+#define KEY_OUT UINT64_MAX
 typedef struct node {
     ibox b;
-    uint32_t wanted;
+    uint64_t key; /* KEY_OUT, or the node's pressure */
     uint32_t seq;
 } node;
 
 static int node_before(const node *a, const node *b)
 {
-    return a->wanted != b->wanted ? a->wanted > b->wanted : a->seq < b->seq;
+    return a->key != b->key ? a->key > b->key : a->seq < b->seq;
 }
 
 typedef struct heap {
@@ -319,7 +363,7 @@ typedef struct heap {
     uint32_t n, cap, seq;
 } heap;
 
-static int heap_push(heap *h, const ibox *b, uint32_t wanted)
+static int heap_push(heap *h, const ibox *b, uint64_t key)
 {
     if (h->n == h->cap) {
         uint32_t cap = h->cap ? h->cap * 2 : 64;
@@ -330,7 +374,7 @@ static int heap_push(heap *h, const ibox *b, uint32_t wanted)
         h->cap = cap;
     }
     uint32_t i = h->n++;
-    h->v[i] = (node){.b = *b, .wanted = wanted, .seq = h->seq++};
+    h->v[i] = (node){.b = *b, .key = key, .seq = h->seq++};
     while (i && node_before(&h->v[i], &h->v[(i - 1) / 2])) {
         node t = h->v[i];
         h->v[i] = h->v[(i - 1) / 2];
@@ -360,27 +404,29 @@ static node heap_pop(heap *h)
     return top;
 }
 
-/* Files a shrunk, non-empty box: done if it holds no wanted cell, else
- * waiting for division. */
+/* Files a shrunk, non-empty box: waiting for division if it holds an
+ * outside cell or pressure, else done. */
 static int file_node(work *w, heap *h, const ibox *b)
 {
-    uint32_t wanted = svt_sum(&w->want, b);
-    return wanted ? heap_push(h, b, wanted) : push(&w->out, b);
+    if (outside_in(w, b))
+        return heap_push(h, b, KEY_OUT);
+    uint32_t press = svt_sum(&w->press, b);
+    return press ? heap_push(h, b, press) : push(&w->out, b);
 }
 
 /*
- * Cuts b in two (step 3) and shrinks the parts to their occupied cells;
- * returns how many are not empty (their boxes in ch). The plane: a face of
- * the bounding box of b's wanted cells, the one that cuts off the largest
- * slab without wanted cells (a doorway in a wall: the wall on one side,
- * then on the other, and what is left shrinks to the lintel: three boxes);
- * when the wanted cells reach every face of b (it always holds some), the
- * middle of b's longest side.
+ * Cuts b in two (step 4) and shrinks the parts to the cells they must
+ * cover; returns how many are not empty (their boxes in ch). The cells to
+ * cut away are the outside ones if b holds any, else the pressed ones. The
+ * plane: a face of their bounding box, the one that cuts off the largest
+ * slab without them (a doorway in a wall: the wall on one side, then on
+ * the other, and what is left shrinks to the lintel: three boxes); when
+ * they reach every face of b, the middle of b's longest side.
  */
-static int cut(const work *w, const ibox *b, ibox ch[2])
+static int cut(const work *w, const ibox *b, int outside_cells, ibox ch[2])
 {
     ibox want = *b;
-    shrink(&w->want, &want);
+    shrink(outside_cells ? &w->outside : &w->press, &want);
     int axis = -1;
     uint16_t at = 0;
     uint64_t best = 0;
@@ -408,23 +454,26 @@ static int cut(const work *w, const ibox *b, ibox ch[2])
     int n = 0;
     ch[n] = *b;
     ch[n].hi[axis] = at;
-    n += shrink(&w->occ, &ch[n]);
+    n += shrink(&w->must, &ch[n]);
     ch[n] = *b;
     ch[n].lo[axis] = at;
-    n += shrink(&w->occ, &ch[n]);
+    n += shrink(&w->must, &ch[n]);
     return n;
 }
 
 /*
- * Step 3, best first: the node holding the most wanted cells is cut in two
- * (cut), until no node holds a wanted cell or the next cut would pass the
- * budget plus DIVIDE_SLACK even after merging what is done (step 4); nodes
- * left then are kept whole. Then step 4 on everything, and step 5: while
- * there are more boxes than the budget, the pair whose hull adds the fewest
- * wanted cells, then the fewest empty ones, is merged. w->capped counts the
- * boxes that still hold wanted cells. A node holding a wanted cell is never
- * a single cell (wanted cells are empty and nodes are shrunk to occupied
- * ones), so it always divides, and both parts are smaller.
+ * Steps 4 and 5: best first, the first node waiting is cut in two (cut):
+ * nodes holding outside cells always, nodes holding pressure until no node
+ * holds any or the next cut would pass the budget plus DIVIDE_SLACK even
+ * after merging what is done; nodes left then are kept whole. Then the
+ * merges: those step 5 allows, then, while there are more boxes than the
+ * budget, the pair whose hull adds the least pressure, then the fewest
+ * empty cells, and holds no outside cell. Returns 0 with the boxes in w->out,
+ * 1 when they do not fit the budget or NODES_MAX (w->out is then
+ * meaningless), or -ENOMEM. A node holding an outside or pressed cell is
+ * never a single cell (those cells are not to be covered and nodes are
+ * shrunk to cells to cover), so it always divides, and both parts are
+ * smaller.
  */
 static int divide(work *w)
 {
@@ -432,17 +481,19 @@ static int divide(work *w)
     int rc = 0;
     uint32_t n = w->n;
     ibox root = {{0, 0, 0}, {(uint16_t)n, (uint16_t)n, (uint16_t)n}};
-    if (shrink(&w->occ, &root) && (rc = file_node(w, &h, &root)) < 0)
+    if (shrink(&w->must, &root) && (rc = file_node(w, &h, &root)) < 0)
         goto done;
     while (h.n) {
         node nd = heap_pop(&h);
         ibox ch[2];
-        int nch = cut(w, &nd.b, ch);
-        if (w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
+        int outside_cells = nd.key == KEY_OUT;
+        int nch = cut(w, &nd.b, outside_cells, ch);
+        if (!outside_cells && w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
             if ((rc = merge_all(w, 0)) < 0)
                 goto done;
             if (w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
-                /* The budget is spent: what waits stays whole. */
+                /* The budget is spent: what waits stays whole (nothing
+                 * waiting holds an outside cell: those come first). */
                 if ((rc = push(&w->out, &nd.b)) < 0)
                     goto done;
                 while (h.n) {
@@ -453,14 +504,17 @@ static int divide(work *w)
                 break;
             }
         }
+        if (w->out.n + h.n + (uint32_t)nch > NODES_MAX) {
+            rc = 1;
+            goto done;
+        }
         for (int c = 0; c < nch; c++)
             if ((rc = file_node(w, &h, &ch[c])) < 0)
                 goto done;
     }
     if ((rc = merge_all(w, 0)) < 0 || (rc = merge_all(w, w->budget)) < 0)
         goto done;
-    for (uint32_t i = 0; i < w->out.n; i++)
-        w->capped += svt_sum(&w->want, &w->out.b[i]) > 0;
+    rc = w->out.n > w->budget;
 done:
     free(h.v);
     return rc;
@@ -566,11 +620,150 @@ static uint32_t cell_of(const voxel_grid *g, int a, double v, int up)
 }
 
 /*
- * Step 2 for one cluster: marks in w->wanted the empty cells of its region
- * that an avatar-sized box of free cells covers. The opening runs on the
- * region grown by the kernel on each side, cells outside the grid free.
+ * The cells box b (local coordinates) meets, as [lo, hi) per axis: widened
+ * by m cells (m > 0: every cell it may touch, against rounding), or
+ * narrowed (m < 0: the cells it overlaps by more than -m of a cell; on an
+ * axis where it is thinner than that, the cells it may touch). Returns 0
+ * when it meets no cell.
  */
-static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], const float avatar[3])
+static int cell_range(const voxel_grid *g, const float b[6], double m, uint32_t lo[3], uint32_t hi[3])
+{
+    for (int a = 0; a < 3; a++) {
+        double bl = b[a], bh = b[3 + a];
+        if (bh < g->min[a] || bl > g->max[a])
+            return 0;
+        if (!(g->cell[a] > 0)) {
+            lo[a] = 0;
+            hi[a] = g->n;
+            continue;
+        }
+        double c0 = (bl - g->min[a]) / g->cell[a], c1 = (bh - g->min[a]) / g->cell[a];
+        double cl = floor(c0 - m), ch = ceil(c1 + m);
+        if (ch <= cl) {
+            cl = floor(c0 + m);
+            ch = ceil(c1 - m);
+        }
+        if (ch <= 0 || cl >= g->n)
+            return 0;
+        lo[a] = cl <= 0 ? 0 : (uint32_t)cl;
+        hi[a] = ch >= g->n ? g->n : (uint32_t)ch;
+    }
+    return 1;
+}
+
+/* Sets bit in w->cls for every cell of box b's range (cell_range). */
+static void mark_range(work *w, const float b[6], double m, uint8_t bit)
+{
+    uint32_t lo[3], hi[3], n = w->n;
+    if (!cell_range(&w->g, b, m, lo, hi))
+        return;
+    for (uint32_t z = lo[2]; z < hi[2]; z++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++) {
+            uint8_t *row = w->cls + (size_t)n * (y + (size_t)n * z);
+            for (uint32_t x = lo[0]; x < hi[0]; x++)
+                row[x] |= bit;
+        }
+}
+
+/*
+ * A problem box may overlap a cell next to its cells (cell_range narrowed
+ * by RANGE_MARGIN) by less than RANGE_MARGIN of a cell, where rounding put
+ * its face: a triangle may touch that sliver and not the box's cells. Such
+ * a cell, occupied, makes the nearest cell of the box one to cover; boxes
+ * grow by twice RANGE_MARGIN (to_local), so the sliver stays covered.
+ */
+static void mark_slivers(work *w, const float b[6])
+{
+    uint32_t wl[3], wh[3], nl[3], nh[3], n = w->n;
+    if (!cell_range(&w->g, b, RANGE_MARGIN, wl, wh) || !cell_range(&w->g, b, -RANGE_MARGIN, nl, nh))
+        return;
+    for (uint32_t z = wl[2]; z < wh[2]; z++)
+        for (uint32_t y = wl[1]; y < wh[1]; y++) {
+            int inner_zy = z >= nl[2] && z < nh[2] && y >= nl[1] && y < nh[1];
+            for (uint32_t x = wl[0]; x < wh[0]; x++) {
+                if (inner_zy && x >= nl[0] && x < nh[0]) {
+                    x = nh[0] - 1; /* skip the box's own cells */
+                    continue;
+                }
+                if (!voxel_get(&w->g, x, y, z))
+                    continue;
+                uint32_t c[3] = {x, y, z};
+                for (int a = 0; a < 3; a++)
+                    c[a] = c[a] < nl[a] ? nl[a] : c[a] >= nh[a] ? nh[a] - 1 : c[a];
+                w->cls[c[0] + (size_t)n * (c[1] + (size_t)n * c[2])] |= CELL_MUST;
+            }
+        }
+}
+
+/* Step 2: what each cell is (CELL_*). A cell only touching a problem box,
+ * or meeting it by less than INNER_MARGIN of a cell, is outside unless it
+ * must be covered: so a box never grows by a cell into space the map
+ * leaves free next to it. */
+static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const uint8_t *problem)
+{
+    uint32_t n = w->n;
+    for (uint32_t i = 0; i < nboxes; i++) {
+        if (problem[i]) {
+            mark_range(w, boxes[i], -RANGE_MARGIN, CELL_PROBLEM);
+            mark_slivers(w, boxes[i]);
+        }
+        mark_range(w, boxes[i], -INNER_MARGIN, problem[i] ? CELL_INNER : CELL_KEPT);
+    }
+    for (uint32_t z = 0; z < n; z++)
+        for (uint32_t y = 0; y < n; y++) {
+            uint8_t *row = w->cls + (size_t)n * (y + (size_t)n * z);
+            for (uint32_t x = 0; x < n; x++) {
+                if ((row[x] & CELL_PROBLEM) && voxel_get(&w->g, x, y, z))
+                    row[x] |= CELL_MUST;
+                if (!(row[x] & (CELL_MUST | CELL_INNER))) {
+                    row[x] |= CELL_OUT;
+                    w->any_outside = 1;
+                }
+            }
+        }
+}
+
+/* Whether an avatar cannot be in the cell: a triangle touches it, or it
+ * meets a kept box. */
+static int blocked(const work *w, uint32_t x, uint32_t y, uint32_t z)
+{
+    return voxel_get(&w->g, x, y, z) || (w->cls[x + (size_t)w->n * (y + (size_t)w->n * z)] & CELL_KEPT);
+}
+
+/* The padded array's bits, all 1 (the bits past dim[0] 0). */
+static int bits3_init(bits3 *b, const uint32_t dim[3])
+{
+    *b = (bits3){.dim = {dim[0], dim[1], dim[2]}, .w = (dim[0] + 63) / 64};
+    size_t lines = (size_t)dim[1] * dim[2];
+    b->v = cvre_malloc(lines * b->w * sizeof *b->v);
+    if (!b->v)
+        return -ENOMEM;
+    for (size_t l = 0; l < lines; l++) {
+        uint64_t *r = b->v + l * b->w;
+        for (size_t i = 0; i < b->w; i++)
+            r[i] = dim[0] - 64 * i >= 64 ? UINT64_MAX : ((uint64_t)1 << (dim[0] - 64 * i)) - 1;
+    }
+    return 0;
+}
+
+static void bit_clear(bits3 *b, uint32_t t, uint32_t y, uint32_t z)
+{
+    b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] &= ~((uint64_t)1 << (t % 64));
+}
+
+/*
+ * Step 3 for one cluster: adds its pressure to the empty cells of its
+ * region that an avatar-sized box of free cells covers (near: inside the
+ * region before it is stretched along the axis users cross; a quarter of
+ * it beyond). named: the box the cluster names; span: the hull of the
+ * problem boxes it presses on. The opening runs on the region grown by the
+ * kernel on each side, cells outside the grid free; a placement of the
+ * avatar that reaches the step band above the region must stand on
+ * something (a blocked cell, or the floor below the grid, within two
+ * cells) under its footprint.
+ */
+static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], const float span[6], const ecm_params *p,
+                       uint32_t near)
 {
     const voxel_grid *g = &w->g;
     uint32_t n = w->n;
@@ -588,15 +781,14 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         }
     }
     /* Horizontal size: the smaller of x and z, so that any yaw is covered. */
-    double size[3] = {fmin(avatar[0], avatar[2]), avatar[1], fmin(avatar[0], avatar[2])};
-    uint32_t lo[3], hi[3], k[3], dim[3];
-    size_t total = 1;
+    double size[3] = {fmin(p->avatar[0], p->avatar[2]), p->avatar[1], fmin(p->avatar[0], p->avatar[2])};
+    uint32_t lo[3], hi[3], k[3], dim[3], top;
     for (int a = 0; a < 3; a++) {
         if (a == face) {
-            lo[a] = 0;
-            hi[a] = n;
+            lo[a] = cell_of(g, a, span[a], 0);
+            hi[a] = cell_of(g, a, span[3 + a], 1);
         } else {
-            double up = a == 1 ? g->cell[1] : 0;
+            double up = a == 1 ? g->cell[1] + p->step : 0;
             lo[a] = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
             hi[a] = cell_of(g, a, (double)cl->max[a] + size[a] / 2 + up, 1);
         }
@@ -609,11 +801,17 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
         k[a] = kc < 1 ? 1 : kc > n ? n : (uint32_t)kc;
     }
+    /* Where the step band starts: the region's top before the step, a
+     * cell above the avatar (a user stands on a box of the map, whose top
+     * may be a cell above the geometry under it). */
+    top = face == 1 ? hi[1] : cell_of(g, 1, (double)cl->max[1] + size[1] / 2 + g->cell[1], 1);
+    uint32_t near_lo = cell_of(g, face, (double)cl->min[face] - size[face] / 2, 0);
+    uint32_t near_hi = cell_of(g, face, (double)cl->max[face] + size[face] / 2, 1);
     /* Bounded memory: past WANTED_CELLS_MAX the longest kernel is halved
      * (more space counts as wanted, never less; only deep grids with a
      * large avatar get there). */
     for (;;) {
-        total = 1;
+        size_t total = 1;
         for (int a = 0; a < 3; a++) {
             dim[a] = hi[a] - lo[a] + 2 * k[a]; /* index i is cell lo - k + i */
             total *= dim[a];
@@ -623,137 +821,232 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
             break;
         k[longest] /= 2;
     }
-    bits3 b = {.dim = {dim[0], dim[1], dim[2]}, .w = (dim[0] + 63) / 64};
-    size_t lines = (size_t)dim[1] * dim[2];
-    b.v = cvre_malloc(lines * b.w * sizeof *b.v);
-    if (!b.v)
-        return -ENOMEM;
-    /* 1 = free: empty cells, and every cell outside the grid. */
-    for (size_t l = 0; l < lines; l++) {
-        uint64_t *r = b.v + l * b.w;
-        for (size_t i = 0; i < b.w; i++)
-            r[i] = dim[0] - 64 * i >= 64 ? UINT64_MAX : ((uint64_t)1 << (dim[0] - 64 * i)) - 1;
+    /* Placements whose lowest corner is on this padded row or above reach
+     * the step band (none when users cross a horizontal face). */
+    uint32_t band = face == 1 || top >= hi[1] ? dim[1] : top - lo[1] + 1;
+    if (band > dim[1])
+        band = dim[1];
+    bits3 b, u = {0};
+    int rc = bits3_init(&b, dim);
+    if (rc < 0)
+        return rc;
+    if (band < dim[1] && (rc = bits3_init(&u, dim)) < 0) {
+        free(b.v);
+        return rc;
     }
+    /* b: 1 = free (empty cells, and every cell outside the grid); u, in
+     * the band: 1 = nothing to stand on in the two cells under the cell
+     * (the kernel is rounded down, so a placement standing on something
+     * may begin a cell above it). */
+    int64_t x0 = (int64_t)lo[0] - k[0];
     for (uint32_t z = 0; z < dim[2]; z++) {
         int64_t cz = (int64_t)lo[2] - k[2] + z;
-        for (uint32_t y = 0; y < dim[1] && cz >= 0 && cz < n; y++) {
+        int zin = cz >= 0 && cz < n;
+        for (uint32_t y = 0; y < dim[1]; y++) {
             int64_t cy = (int64_t)lo[1] - k[1] + y;
-            if (cy < 0 || cy >= n)
-                continue;
-            uint64_t *row = b.v + b.w * (y + (size_t)dim[1] * z);
-            int64_t x0 = (int64_t)lo[0] - k[0];
-            for (int64_t cx = x0 < 0 ? 0 : x0; cx < n && cx - x0 < dim[0]; cx++)
-                if (voxel_get(g, (uint32_t)cx, (uint32_t)cy, (uint32_t)cz)) {
-                    uint64_t t = (uint64_t)(cx - x0);
-                    row[t / 64] &= ~((uint64_t)1 << (t % 64));
+            if (u.v && y >= band) {
+                for (uint32_t t = 0; t < dim[0]; t++) {
+                    int64_t cx = x0 + t;
+                    int in = zin && cx >= 0 && cx < n;
+                    for (int64_t below = cy - 2; below < cy; below++)
+                        if (below < 0 || (in && below < n && blocked(w, (uint32_t)cx, (uint32_t)below, (uint32_t)cz))) {
+                            bit_clear(&u, t, y, z);
+                            break;
+                        }
                 }
+            }
+            if (!zin || cy < 0 || cy >= n)
+                continue;
+            for (int64_t cx = x0 < 0 ? 0 : x0; cx < n && cx - x0 < dim[0]; cx++)
+                if (blocked(w, (uint32_t)cx, (uint32_t)cy, (uint32_t)cz))
+                    bit_clear(&b, (uint32_t)(cx - x0), y, z);
         }
     }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 1);
+    if (u.v) {
+        /* A placement in the band needs something to stand on under some
+         * cell of its footprint: u eroded along x and z is 1 where nothing
+         * is under the whole footprint. */
+        morph(&u, 0, k[0], 1);
+        morph(&u, 2, k[2], 1);
+        for (uint32_t z = 0; z < dim[2]; z++)
+            for (uint32_t y = band; y < dim[1]; y++) {
+                uint64_t *rb = b.v + b.w * (y + (size_t)dim[1] * z);
+                const uint64_t *ru = u.v + u.w * (y + (size_t)dim[1] * z);
+                for (size_t i = 0; i < b.w; i++)
+                    rb[i] &= ~ru[i];
+            }
+        free(u.v);
+    }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 0);
+    uint32_t far = near / 4 ? near / 4 : 1;
     for (uint32_t z = lo[2]; z < hi[2]; z++)
         for (uint32_t y = lo[1]; y < hi[1]; y++) {
             const uint64_t *row = b.v + b.w * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]));
             for (uint32_t x = lo[0]; x < hi[0]; x++) {
                 uint32_t t = x - lo[0] + k[0];
-                if ((row[t / 64] >> (t % 64)) & 1u)
-                    w->wanted[x + (size_t)n * (y + (size_t)n * z)] = 1;
+                size_t i = x + (size_t)n * (y + (size_t)n * z);
+                if (!((row[t / 64] >> (t % 64)) & 1u) || (w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
+                    continue;
+                uint32_t c = face == 0 ? x : face == 1 ? y : z;
+                uint32_t v = w->pressure[i] + (c >= near_lo && c < near_hi ? near : far);
+                w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
             }
         }
     free(b.v);
     return 0;
 }
 
-static void work_free(work *w)
-{
-    voxel_grid_free(&w->g);
-    free(w->tables);
-    free(w->wanted);
-    free(w->out.b);
-    memset(w, 0, sizeof *w);
-}
-
 /* Whether cluster c presses on box i of boxes: the box it names, or any
- * box its points lie on (their bounding box, grown by a hundredth of the
- * avatar's width for rounding, meets the box): a cluster along a wall of
- * several boxes presses on all of them. */
-static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, const float avatar[3])
+ * box its points lie on or an avatar touching there may reach, stepping
+ * up (their bounding box, grown by a hundredth of the avatar's width for
+ * rounding, and upwards by the avatar's height and a step, meets the box):
+ * a cluster along a wall of several boxes presses on all of them, and on
+ * the box above a step that users would climb into. */
+static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, const ecm_params *p)
 {
     if (c->box == i)
         return 1;
-    double tol = 0.01 * fmin(avatar[0], avatar[2]);
-    for (int a = 0; a < 3; a++)
-        if ((double)c->min[a] - tol > boxes[i][3 + a] || (double)c->max[a] + tol < boxes[i][a])
+    double tol = 0.01 * fmin(p->avatar[0], p->avatar[2]);
+    for (int a = 0; a < 3; a++) {
+        double up = a == 1 ? (double)p->avatar[1] + p->step : 0;
+        if ((double)c->min[a] - tol > boxes[i][3 + a] || (double)c->max[a] + tol + up < boxes[i][a])
             return 0;
+    }
     return 1;
 }
 
-/* Steps 1 to 5 for one problem box, into at most budget boxes (w->out).
- * Adds to the result's counts and times. */
-static int refine_box(work *w, const ecm_params *p, const float (*boxes)[6], uint32_t box_index, const float *tris,
-                      uint32_t ntris, const ecm_cluster *cl, uint32_t ncl, uint32_t budget, ecm_result *r)
+/* Grows bb (min x y z, max x y z) to hold the part of triangle t (9
+ * floats) inside the closed box c (Sutherland-Hodgman, in double: one
+ * vertex more per plane at most). */
+static void clip_into(const float *t, const double c[6], double bb[6])
 {
-    struct timespec t0;
-    clock_gettime(CLOCK_MONOTONIC, &t0);
-    memset(w, 0, sizeof *w);
-    w->max_empty = p->max_empty;
-    w->budget = budget;
-    const float *box = boxes[box_index];
-    int rc = voxel_grid_init(&w->g, p->depth, box, box + 3);
-    if (rc < 0)
-        return rc;
-    if ((rc = voxel_mark(&w->g, tris, ntris)) < 0)
-        return rc;
-    r->voxel_ms += ms_since(&t0);
-    clock_gettime(CLOCK_MONOTONIC, &t0);
-    uint32_t n = w->n = w->g.n;
-    size_t cells = (size_t)n * n * n;
-    ibox all = {{0, 0, 0}, {(uint16_t)n, (uint16_t)n, (uint16_t)n}};
-    /* Both tables in one block (the wanted one only when it is used): two
-     * blocks of 8.6 MiB each at 2^7 were handed back to the system after
-     * each round and faulted in again, page by page, by the next (glibc
-     * keeps a freed block for reuse up to twice the largest one it has
-     * seen returned to it). */
-    size_t table = (size_t)(n + 1) * (n + 1) * (n + 1);
-    w->tables = cvre_malloc((budget == 1 ? 1 : 2) * table * sizeof *w->tables);
-    if (!w->tables)
-        return -ENOMEM;
-    svt_build(&w->occ, w->tables, &w->g, NULL);
-    if (budget == 1) {
-        /* A share of one box: it can only shrink to its occupied cells, so
-         * its wanted space is not worked out; kept whole by the cap. */
-        ibox b = all;
-        if (shrink(&w->occ, &b) && (rc = push(&w->out, &b)) < 0)
-            return rc;
-        r->capped += w->out.n;
-    } else {
-        w->wanted = cvre_calloc(cells, 1);
-        if (!w->wanted)
-            return -ENOMEM;
-        for (uint32_t i = 0; i < ncl; i++)
-            if (presses(&cl[i], boxes, box_index, p->avatar) &&
-                (rc = mark_wanted(w, &cl[i], boxes[cl[i].box], p->avatar)) < 0)
-                return rc;
-        svt_build(&w->want, w->tables + table, &w->g, w->wanted);
-        if ((rc = divide(w)) < 0)
-            return rc;
-        r->wanted += svt_sum(&w->want, &all);
-        r->capped += w->capped;
-    }
-    r->cells += cells;
-    r->occupied += w->g.occupied;
-    r->divide_ms += ms_since(&t0);
+    double poly[2][9][3];
+    int np = 3, cur = 0;
+    for (int v = 0; v < 3; v++)
+        for (int a = 0; a < 3; a++)
+            poly[0][v][a] = t[3 * v + a];
+    for (int a = 0; a < 3 && np; a++)
+        for (int side = 0; side < 2 && np; side++) {
+            double plane = c[3 * side + a];
+            double(*in)[3] = poly[cur], (*o)[3] = poly[!cur];
+            int no = 0;
+            for (int i = 0; i < np; i++) {
+                const double *p = in[i], *q = in[(i + 1) % np];
+                int pin = side ? p[a] <= plane : p[a] >= plane, qin = side ? q[a] <= plane : q[a] >= plane;
+                if (pin)
+                    memcpy(o[no++], p, sizeof o[0]);
+                if (pin != qin) {
+                    double s = (plane - p[a]) / (q[a] - p[a]);
+                    for (int k = 0; k < 3; k++)
+                        o[no][k] = p[k] + s * (q[k] - p[k]);
+                    o[no++][a] = plane;
+                }
+            }
+            np = no;
+            cur = !cur;
+        }
+    for (int i = 0; i < np; i++)
+        for (int a = 0; a < 3; a++) {
+            bb[a] = fmin(bb[a], poly[cur][i][a]);
+            bb[3 + a] = fmax(bb[3 + a], poly[cur][i][a]);
+        }
+}
+
+/* What tighten needs: the triangles, their bounding boxes, the problem
+ * boxes, room for the parts of a box, the margin. */
+typedef struct tight {
+    const float *tris;
+    const float (*tb)[6];
+    uint32_t ntris;
+    const float (*problem)[6];
+    uint32_t nproblem;
+    double (*clip)[6]; /* nproblem */
+    double eps;
+} tight;
+
+static int misses(const float t[6], const double c[6])
+{
+    for (int a = 0; a < 3; a++)
+        if ((double)t[a] > c[3 + a] || (double)t[3 + a] < c[a])
+            return 1;
     return 0;
 }
 
-/* Local float coordinates of a box of cells, rounded outwards and clamped
- * to the problem box. */
+/*
+ * Step 6: shrinks b to the bounding box of the parts of the triangles that
+ * lie inside b and inside a problem box (the parts it must cover), each
+ * part worked out in a box grown by eps against rounding, the result grown
+ * by eps again and rounded outwards to float, then clipped to b. Returns
+ * 0, b unchanged, when no triangle has such a part.
+ */
+static int tighten(const tight *tt, float b[6])
+{
+    uint32_t nc = 0;
+    for (uint32_t i = 0; i < tt->nproblem; i++) {
+        double *c = tt->clip[nc];
+        int empty = 0;
+        for (int a = 0; a < 3; a++) {
+            c[a] = fmax(b[a], tt->problem[i][a]) - tt->eps;
+            c[3 + a] = fmin(b[3 + a], tt->problem[i][3 + a]) + tt->eps;
+            empty |= c[a] > c[3 + a];
+        }
+        nc += !empty;
+    }
+    double bb[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+    double whole[6];
+    for (int a = 0; a < 3; a++) {
+        whole[a] = (double)b[a] - tt->eps;
+        whole[3 + a] = (double)b[3 + a] + tt->eps;
+    }
+    for (uint32_t t = 0; t < tt->ntris; t++) {
+        const float *tb = tt->tb[t];
+        if (misses(tb, whole))
+            continue;
+        for (uint32_t j = 0; j < nc; j++) {
+            const double *c = tt->clip[j];
+            if (misses(tb, c))
+                continue;
+            int inside = 1;
+            for (int a = 0; a < 3; a++)
+                inside &= (double)tb[a] >= c[a] && (double)tb[3 + a] <= c[3 + a];
+            if (inside) {
+                for (int a = 0; a < 3; a++) {
+                    bb[a] = fmin(bb[a], tb[a]);
+                    bb[3 + a] = fmax(bb[3 + a], tb[3 + a]);
+                }
+                break; /* the whole triangle: no other part adds anything */
+            }
+            clip_into(tt->tris + 9 * (size_t)t, c, bb);
+        }
+    }
+    if (!(bb[0] <= bb[3]))
+        return 0;
+    for (int a = 0; a < 3; a++) {
+        double lo = bb[a] - tt->eps, hi = bb[3 + a] + tt->eps;
+        float flo = (float)lo, fhi = (float)hi;
+        if ((double)flo > lo)
+            flo = nextafterf(flo, -INFINITY);
+        if ((double)fhi < hi)
+            fhi = nextafterf(fhi, INFINITY);
+        b[a] = flo > b[a] ? flo : b[a];
+        b[3 + a] = fhi < b[3 + a] ? fhi : b[3 + a];
+        if (b[a] > b[3 + a])
+            b[a] = b[3 + a];
+    }
+    return 1;
+}
+
+/* Local float coordinates of a box of cells grown by twice RANGE_MARGIN
+ * (it then holds the slivers of problem boxes next to its cells: see
+ * classify), rounded outwards and clamped to the grid's box. */
 static void to_local(const voxel_grid *g, const float box[6], const ibox *b, float out[6])
 {
     for (int a = 0; a < 3; a++) {
-        double lo = g->min[a] + g->cell[a] * b->lo[a], hi = g->min[a] + g->cell[a] * b->hi[a];
+        double lo = g->min[a] + g->cell[a] * (b->lo[a] - 2 * RANGE_MARGIN),
+               hi = g->min[a] + g->cell[a] * (b->hi[a] + 2 * RANGE_MARGIN);
         float flo = b->lo[a] == 0 ? box[a] : (float)lo, fhi = b->hi[a] == g->n ? box[3 + a] : (float)hi;
         if ((double)flo > lo)
             flo = nextafterf(flo, -INFINITY);
@@ -764,21 +1057,75 @@ static void to_local(const voxel_grid *g, const float box[6], const ibox *b, flo
     }
 }
 
-/* A problem box's result in local coordinates. */
-typedef struct flist {
-    float (*b)[6];
-    uint32_t n;
-} flist;
-
-/* Moves w's boxes, as local coordinates, into *l. */
-static int take_boxes(const work *w, const float box[6], flist *l)
+static void work_free(work *w)
 {
-    l->n = 0;
-    l->b = cvre_malloc((w->out.n ? w->out.n : 1) * sizeof *l->b);
-    if (!l->b)
+    voxel_grid_free(&w->g);
+    free(w->tables);
+    free(w->cls);
+    free(w->pressure);
+    free(w->out.b);
+    memset(w, 0, sizeof *w);
+}
+
+static void widen(float h[6], const float b[6])
+{
+    for (int a = 0; a < 3; a++) {
+        h[a] = b[a] < h[a] ? b[a] : h[a];
+        h[3 + a] = b[3 + a] > h[3 + a] ? b[3 + a] : h[3 + a];
+    }
+}
+
+static const float EMPTY_HULL[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+
+/* Steps 1 to 3: the grid over the hull of the problem boxes, its cells'
+ * classes and pressures, the three tables. */
+static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6],
+                      uint32_t nboxes, const uint8_t *problem, const float hb[6], const ecm_cluster *cl,
+                      uint32_t ncl, ecm_result *r)
+{
+    struct timespec t0;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = voxel_grid_init(&w->g, p->depth, hb, hb + 3);
+    if (rc < 0 || (rc = voxel_mark(&w->g, tris, ntris)) < 0)
+        return rc;
+    r->voxel_ms += ms_since(&t0);
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    uint32_t n = w->n = w->g.n;
+    size_t cells = (size_t)n * n * n, table = (size_t)(n + 1) * (n + 1) * (n + 1);
+    /* The three tables in one block: separate blocks of 8.6 MiB each at
+     * 2^7 were handed back to the system after each round and faulted in
+     * again, page by page, by the next (glibc keeps a freed block for
+     * reuse up to twice the largest one it has seen returned to it). */
+    w->tables = cvre_malloc(3 * table * sizeof *w->tables);
+    w->cls = cvre_calloc(cells, 1);
+    w->pressure = cvre_calloc(cells, 1);
+    if (!w->tables || !w->cls || !w->pressure)
         return -ENOMEM;
-    for (uint32_t j = 0; j < w->out.n; j++)
-        to_local(&w->g, box, &w->out.b[j], l->b[l->n++]);
+    classify(w, boxes, nboxes, problem);
+    uint32_t wmax = 1;
+    for (uint32_t i = 0; i < ncl; i++)
+        wmax = cl[i].weight > wmax ? cl[i].weight : wmax;
+    for (uint32_t i = 0; i < ncl; i++) {
+        float span[6];
+        memcpy(span, EMPTY_HULL, sizeof span);
+        for (uint32_t b = 0; b < nboxes; b++)
+            if (problem[b] && presses(&cl[i], boxes, b, p))
+                widen(span, boxes[b]);
+        uint32_t weight = cl[i].weight ? cl[i].weight : 1;
+        uint32_t near =
+            PRESSURE_NEAR_MIN + (uint32_t)((uint64_t)(PRESSURE_MAX - PRESSURE_NEAR_MIN) * weight / wmax);
+        if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0)
+            return rc;
+    }
+    for (size_t i = 0; i < cells; i++)
+        r->wanted += w->pressure[i] != 0;
+    svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
+    if (w->any_outside)
+        svt_build(&w->outside, w->tables + table, n, w->cls, CELL_OUT);
+    svt_build(&w->press, w->tables + 2 * table, n, w->pressure, 0);
+    r->cells += cells;
+    r->occupied += w->g.occupied;
+    r->divide_ms += ms_since(&t0);
     return 0;
 }
 
@@ -803,6 +1150,8 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     for (int a = 0; a < 3; a++)
         if (!(p->avatar[a] > 0) || !isfinite(p->avatar[a]))
             return cvre_fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
+    if (!(p->step >= 0) || !isfinite(p->step))
+        return cvre_fail(err, errlen, -EINVAL, "the step height must be finite and not negative");
     if (ntris == 0 || !tris)
         return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
     if (!finite_all(tris, (size_t)ntris * 9))
@@ -824,50 +1173,86 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
             return cvre_fail(err, errlen, -EINVAL, "cluster %u has a coordinate that is not finite", i);
     }
 
+
     int rc = -ENOMEM;
     uint8_t *problem = cvre_calloc(nboxes, 1);
-    flist *lists = cvre_calloc(nboxes, sizeof *lists);
+    float(*tb)[6] = NULL;
+    float(*pb)[6] = NULL;
+    double(*clip)[6] = NULL;
     work w = {0};
-    if (!problem || !lists)
+    if (!problem)
         goto done;
     uint32_t kept = nboxes, nproblem = 0;
+    float hb[6];
+    memcpy(hb, EMPTY_HULL, sizeof hb);
     for (uint32_t i = 0; i < nclusters; i++)
         for (uint32_t b = 0; b < nboxes; b++)
-            if (!problem[b] && presses(&clusters[i], boxes, b, p->avatar)) {
+            if (!problem[b] && presses(&clusters[i], boxes, b, p)) {
                 problem[b] = 1;
                 kept--;
                 nproblem++;
+                widen(hb, boxes[b]);
             }
-    /* Each problem box may become an equal share of what the kept boxes
-     * leave of max_boxes (the first ones get the remainder), at least one. */
-    uint32_t room = p->max_boxes > kept ? p->max_boxes - kept : 0, given = 0;
-    for (uint32_t i = 0; i < nboxes; i++) {
-        if (!problem[i])
-            continue;
-        uint32_t budget = room / nproblem + (given < room % nproblem);
-        given++;
-        if ((rc = refine_box(&w, p, boxes, i, tris, ntris, clusters, nclusters, budget ? budget : 1, out)) < 0 ||
-            (rc = take_boxes(&w, boxes[i], &lists[i])) < 0)
-            goto done;
-        work_free(&w);
-    }
-    uint64_t total = kept;
-    for (uint32_t i = 0; i < nboxes; i++)
-        total += problem[i] ? lists[i].n : 0;
-    out->boxes = cvre_malloc((size_t)total * sizeof *out->boxes);
-    if (!out->boxes) {
-        rc = -ENOMEM;
-        goto done;
-    }
-    for (uint32_t i = 0; i < nboxes; i++)
-        if (!problem[i])
-            memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
-    for (uint32_t i = 0; i < nboxes; i++)
-        if (problem[i]) {
-            memcpy(out->boxes + out->count, lists[i].b, lists[i].n * sizeof *lists[i].b);
-            out->count += lists[i].n;
-        }
     out->problem_boxes = nproblem;
+    int whole = 0; /* 1: the problem boxes are only tightened */
+    if (nproblem) {
+        w.max_empty = p->max_empty;
+        w.budget = p->max_boxes > kept ? p->max_boxes - kept : 0;
+        if ((rc = build_grid(&w, p, tris, ntris, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
+            goto done;
+        struct timespec t0;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        if ((rc = divide(&w)) < 0)
+            goto done;
+        whole = rc;
+        tb = cvre_malloc((size_t)ntris * sizeof *tb);
+        pb = cvre_malloc(nproblem * sizeof *pb);
+        clip = cvre_malloc(nproblem * sizeof *clip);
+        out->boxes = cvre_malloc((size_t)(kept + (whole ? nproblem : w.out.n) + 1) * sizeof *out->boxes);
+        rc = -ENOMEM;
+        if (!tb || !pb || !clip || !out->boxes)
+            goto done;
+        for (uint32_t t = 0; t < ntris; t++) {
+            const float *v = tris + 9 * (size_t)t;
+            for (int a = 0; a < 3; a++) {
+                tb[t][a] = fminf(v[a], fminf(v[3 + a], v[6 + a]));
+                tb[t][3 + a] = fmaxf(v[a], fmaxf(v[3 + a], v[6 + a]));
+            }
+        }
+        double scale = 0;
+        for (int a = 0; a < 6; a++)
+            scale = fmax(scale, fabs((double)hb[a]));
+        for (int a = 0; a < 3; a++)
+            scale = fmax(scale, (double)hb[3 + a] - hb[a]);
+        uint32_t np = 0;
+        for (uint32_t i = 0; i < nboxes; i++)
+            if (problem[i])
+                memcpy(pb[np++], boxes[i], sizeof pb[0]);
+        tight tt = {.tris = tris, .tb = (const float(*)[6])tb, .ntris = ntris, .problem = (const float(*)[6])pb,
+                    .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
+        for (uint32_t i = 0; i < nboxes; i++)
+            if (!problem[i])
+                memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
+        uint32_t nb = whole ? nproblem : w.out.n;
+        for (uint32_t j = 0; j < nb; j++) {
+            float *b = out->boxes[out->count];
+            if (whole)
+                memcpy(b, pb[j], sizeof pb[j]);
+            else
+                to_local(&w.g, hb, &w.out.b[j], b);
+            if (!tighten(&tt, b))
+                continue;
+            out->count++;
+            out->capped += whole || svt_sum(&w.press, &w.out.b[j]) > 0;
+        }
+        out->divide_ms += ms_since(&t0);
+    } else {
+        out->boxes = cvre_malloc((size_t)nboxes * sizeof *out->boxes);
+        if (!out->boxes)
+            goto done;
+        memcpy(out->boxes, boxes, (size_t)nboxes * sizeof *boxes);
+        out->count = nboxes;
+    }
     rc = 0;
 done:
     if (rc == -ENOMEM)
@@ -875,10 +1260,9 @@ done:
     else if (rc < 0)
         cvre_fail(err, errlen, rc, "digitization failed: %s", strerror(-rc));
     work_free(&w);
-    if (lists)
-        for (uint32_t i = 0; i < nboxes; i++)
-            free(lists[i].b);
-    free(lists);
+    free(tb);
+    free(pb);
+    free(clip);
     free(problem);
     if (rc < 0)
         ecm_result_free(out);

@@ -4,57 +4,81 @@
  *
  * Input: the object's triangles and boxes (local coordinates) and the
  * clusters of unexpected collisions. A cluster presses on the box it names
- * and on every box its points lie on (their bounding box, grown by a
- * hundredth of the avatar's width for rounding, meets it): users stopped
- * along a wall that earlier rounds cut into several boxes press on all of
- * them. Each box a cluster presses on (a problem box) is replaced by boxes
- * that hug the geometry where users want to go; every other box is kept as
- * it is. For each problem box:
+ * and on every box its points lie on or an avatar touching there may reach
+ * (their bounding box, grown by a hundredth of the avatar's width for
+ * rounding and upwards by the avatar's height and a step, meets it): users
+ * stopped along a wall that earlier rounds cut into several boxes press on
+ * all of them, and on the box above a step they would climb. The boxes a
+ * cluster presses on (problem boxes) are re-divided together, as one
+ * object; every other box is kept as it is.
  *
- *   1. Digitize (voxel.h): a grid of 2^depth cells per axis over the box,
- *      a cell occupied when a triangle touches it.
- *   2. Wanted space: the empty cells where users were stopped. Each cluster
- *      stands for a region: its points' bounding box, grown by half the
- *      avatar's size, and stretched through the whole box along the axis of
- *      the face it presses on (users walk into the box across that face: a
- *      tunnel under an arch, a room behind a door), and upwards by one
- *      cell more (a user stands on a box of the map, whose top may be a
- *      cell above the geometry under it). Only space an avatar fits in counts (a
- *      morphological opening of the empty cells by the avatar's box, space
- *      outside the grid counting as empty): the hollow between the two
- *      faces of a thick wall is never wanted, so it stays covered.
- *   3. Divide, best first: shrink the box to its occupied cells; while a
- *      node holds wanted cells, cut the one holding the most in two, shrink
- *      the parts to their occupied cells and drop the empty ones. The cut
- *      lies on a face of the bounding box of the node's wanted cells, the
- *      one that cuts off the largest part without wanted cells (a doorway
- *      in a wall: the wall on one side, then on the other, and the rest
- *      shrinks to the lintel: three boxes); when the wanted cells reach
- *      every face of the node, it is halved across its longest side. Nodes
- *      without wanted cells are kept whole: fine near the clusters, down to
- *      single cells, coarse elsewhere; one cut adds at most one box.
- *   4. Merge: two boxes of the same problem box whose hull covers no new
- *      wanted cell and adds at most max_empty of the hull's volume as new
- *      empty space become one, cheapest first, until no pair qualifies.
- *   5. Cap: each problem box may become an equal share of what the
- *      object's other boxes leave of max_boxes (at least one). When the next
- *      cut would pass its share by more than a small slack even after
- *      merging, division stops and the nodes still waiting stay whole,
- *      wanted cells and all; then the cheapest pairs (fewest wanted cells
- *      covered, then fewest empty ones) merge until the share is met.
- *      `capped` counts the boxes left holding wanted cells, and each
- *      problem box whose share is one box (it is only shrunk to its
- *      occupied cells, its wanted space never worked out): the
- *      opening may stay partly closed until the next round, whose
- *      collisions name it again. An object already at the cap can still
- *      grow by one box per problem box beyond it, never more.
+ *   1. Digitize (voxel.h): one grid of 2^depth cells per axis over the hull
+ *      of the problem boxes, a cell occupied when a triangle touches it.
+ *   2. Classes: a cell must be covered when it is occupied and meets a
+ *      problem box; it is outside when it meets no problem box (space the
+ *      map leaves free, or only a kept box's): no new box may hold an
+ *      outside cell, so openings of earlier rounds stay open.
+ *   3. Pressure: each cluster stands for a region: its points' bounding
+ *      box, grown by half the avatar's size, stretched along the axis of
+ *      the face of its box nearest its centroid through the problem boxes
+ *      it presses on (users walk in across that face: a tunnel under an
+ *      arch, a room behind a door), and upwards by one cell (a user stands
+ *      on a box of the map, whose top may be a cell above the geometry)
+ *      and then by the step height. Only space an avatar fits in counts (a
+ *      morphological opening of the cells no triangle touches and no kept
+ *      box meets, space outside the grid counting as empty): the hollow
+ *      inside a thick wall is never wanted. A placement of the avatar that
+ *      reaches into the step band must stand on something (a blocked cell
+ *      right under its footprint, or the floor under the grid): users step
+ *      up onto a base, not into the air. Each wanted cell of a problem box
+ *      gets the cluster's pressure, by its weight: from 4 for the lightest
+ *      to 255 for the heaviest near its points, a quarter of that where the
+ *      region is only stretched; pressures of several clusters add, up to
+ *      255.
+ *   4. Divide, best first: shrink the grid to its cells to cover; cut the
+ *      node first in line in two and shrink the parts (empty parts go).
+ *      Nodes holding outside cells come first and are always cut (the cut
+ *      cuts off outside cells); then the node with the most pressure (the
+ *      pressure of its wanted cells: wanted volume weighted by how hard
+ *      users press), until no node holds pressure. The cut lies on a face
+ *      of the bounding box of the cells to cut off, the one that cuts off
+ *      the largest slab without them (a doorway in a wall: the wall on one
+ *      side, then on the other, and the rest shrinks to the lintel: three
+ *      boxes); when they reach every face of the node, it is halved across
+ *      its longest side. Nodes without pressure are kept whole: fine near
+ *      the clusters, coarse elsewhere; one cut adds at most one box.
+ *   5. Merge and cap: the budget is max_boxes less the kept boxes, for the
+ *      whole object. When the next pressed cut would pass the budget by
+ *      more than a small slack even after merging, division stops and the
+ *      nodes still waiting stay whole. Two boxes (of any problem boxes:
+ *      merges cross the old boxes' borders) whose hull holds no outside
+ *      cell, adds no pressure and adds at most max_empty of its volume as
+ *      new empty space become one, cheapest first: slivers that free no
+ *      wanted cell go back. Then, while there are more boxes than the
+ *      budget, the pair whose hull adds the least pressure, then the fewest
+ *      empty cells, and holds no outside cell, merges. If that cannot meet
+ *      the budget (or keeping outside cells out would take more than
+ *      4 x ECM_MAX_BOXES_LIMIT boxes and nodes), the problem boxes are only
+ *      tightened (step 6): never more boxes than the object had.
+ *   6. Tighten: each box shrinks to the bounding box of the parts of the
+ *      triangles that lie in it and in a problem box (worked out exactly,
+ *      each triangle clipped to the box, in double, with a margin against
+ *      rounding), rounded outwards to float; a box with no such part goes.
+ *      A box never grows: boxes stop at the geometry, not at the cells
+ *      around it, so an opening never narrows by a cell per round.
  *
- * Invariant: every box is a union of whole cells that contains all the
- * occupied cells of its problem box, so the union of the object's boxes
- * still contains every triangle (cells are closed and conservative, and box
- * coordinates are rounded outwards to float, then clamped to the problem
- * box). Refinement only ever removes empty space: no amount of deliberate
- * bumping opens a real wall.
+ * `capped` counts the new boxes left holding pressure (wanted cells), or
+ * every problem box when they were only tightened: the opening may stay
+ * partly closed until a later round, whose collisions name it again.
+ *
+ * Invariant: every point of a triangle in a problem box lies in a cell to
+ * cover (cells are closed and conservative, cell ranges widened against
+ * rounding), every cell to cover lies in a new box (its coordinates rounded
+ * outwards), and tightening keeps every triangle part in the box and in a
+ * problem box; the rest of every triangle lies in the kept boxes. So the
+ * union of the object's boxes still contains every triangle. Refinement
+ * only ever removes space in which no triangle lies: no amount of
+ * deliberate bumping opens a real wall.
  */
 #ifndef CVRE_ECM_REFINE_H
 #define CVRE_ECM_REFINE_H
@@ -64,9 +88,9 @@
 
 #include "voxel.h"
 
-/* Grid depths a refinement accepts: the division keeps two counts per cell
- * (32-bit summed-volume tables), 2 x 64 MiB at 2^8; deeper grids would need
- * a sparse structure. */
+/* Grid depths a refinement accepts: the division keeps three counts per
+ * cell (32-bit summed-volume tables), 3 x 64 MiB at 2^8; deeper grids would
+ * need a sparse structure. */
 #define ECM_DEPTH_MIN 2u
 #define ECM_DEPTH_MAX 8u
 /* 2^7 = 128 cells per axis: a 10 m room gets 8 cm cells, so a 0.9 m doorway
@@ -83,10 +107,11 @@ typedef struct ecm_params {
     uint32_t max_boxes; /* most boxes for the object, 1..ECM_MAX_BOXES_LIMIT */
     double max_empty;   /* share of a merged box that may be new empty space, 0..1 */
     float avatar[3];    /* the avatar's size in object-local units (> 0) */
+    float step;         /* the highest step the avatar climbs, object-local units (>= 0) */
 } ecm_params;
 
-/* Fills p with the defaults above and the default avatar's size (avatar.h;
- * for an object of scale 1: divide by the object's scale). */
+/* Fills p with the defaults above and the default avatar's size and step
+ * (avatar.h; for an object of scale 1: divide by the object's scale). */
 void ecm_params_default(ecm_params *p);
 
 /* A cluster of unexpected collisions, in object-local coordinates. */
@@ -94,6 +119,7 @@ typedef struct ecm_cluster {
     uint32_t box;          /* the problem box: index among the object's boxes */
     float min[3], max[3];  /* bounding box of its points */
     float centroid[3];
+    uint32_t weight;       /* how hard it presses: its collisions (0 counts as 1) */
 } ecm_cluster;
 
 /* What one refinement produced. */
@@ -101,25 +127,26 @@ typedef struct ecm_result {
     float (*boxes)[6];      /* count boxes, local min x y z, max x y z; ecm_result_free */
     uint32_t count;
     uint32_t problem_boxes; /* boxes replaced */
-    uint32_t capped;        /* boxes left holding wanted cells by the cap, and problem
-                             * boxes whose share was one box (only shrunk) */
-    uint64_t cells;         /* cells examined: problem boxes x 2^(3 depth) */
+    uint32_t capped;        /* new boxes left holding wanted cells by the cap, or every
+                             * problem box when they were only tightened (step 5) */
+    uint64_t cells;         /* cells examined: 2^(3 depth), one grid (0: no problem box) */
     uint64_t occupied;      /* of which occupied */
-    uint64_t wanted;        /* of which wanted (step 2) */
+    uint64_t wanted;        /* of which wanted (step 3) */
     double voxel_ms;        /* time in digitization */
-    double divide_ms;       /* time in steps 2 to 5 */
+    double divide_ms;       /* time in steps 2 to 6 */
 } ecm_result;
 
 /*
  * Refines an object (see above). tris: ntris triangles, 9 floats each;
  * boxes: nboxes boxes; clusters: nclusters, each naming a box below nboxes.
  * Boxes without clusters are copied unchanged, in their order, followed by
- * the boxes replacing each problem box, in problem box order; the same
- * input always gives the same output.
+ * the boxes replacing the problem boxes, all inside their hull; the same
+ * input always gives the same output. The count is at most max_boxes, or
+ * the object's own count when its kept boxes leave no room.
  *
  * Returns 0 and fills *out (the caller calls ecm_result_free), or, with
  * *out empty and a one-line reason in err (room for errlen bytes):
- * -EINVAL for bad parameters (depth, max_boxes, max_empty, avatar), no
+ * -EINVAL for bad parameters (depth, max_boxes, max_empty, avatar, step), no
  * triangles, no boxes or more than ECM_MAX_BOXES_LIMIT, a cluster naming no
  * box, or a coordinate that is not finite; -ENOMEM when out of memory.
  */

@@ -150,6 +150,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
         memcpy(clusters[i].min, f[i].c.min, sizeof clusters[i].min);
         memcpy(clusters[i].max, f[i].c.max, sizeof clusters[i].max);
         memcpy(clusters[i].centroid, f[i].c.centroid, sizeof clusters[i].centroid);
+        clusters[i].weight = f[i].c.points;
         cluster_ids[i] = f[i].cluster_id;
     }
     struct timespec t0, t1;
@@ -181,6 +182,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     ecm_params lp = *p;
     for (int a = 0; a < 3; a++)
         lp.avatar[a] = (float)(p->avatar[a] / scale);
+    lp.step = (float)(p->step / scale);
     char why[256];
     if (ecm_refine(&lp, o.tris, o.tri_count, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why,
                    sizeof why) < 0) {
