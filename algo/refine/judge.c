@@ -99,8 +99,9 @@ static int bin_range(const geometry *g, int a, double lo, double hi, uint32_t *b
         return 1;
     }
     double l = floor((lo - g->g.min[a]) / w), h = floor((hi - g->g.min[a]) / w);
-    *blo = l < 0 ? 0 : (uint32_t)l;
-    *bhi = h >= JUDGE_BINS - 1 ? JUDGE_BINS - 1 : (uint32_t)h;
+    /* Clamped both ways: a face on the box's max side is in the last bin. */
+    *blo = l < 0 ? 0 : l > JUDGE_BINS - 1 ? JUDGE_BINS - 1 : (uint32_t)l;
+    *bhi = h < 0 ? 0 : h > JUDGE_BINS - 1 ? JUDGE_BINS - 1 : (uint32_t)h;
     return 1;
 }
 
@@ -297,6 +298,22 @@ static void avatar_box(const move_params *mp, const float f[3], const double gro
     }
 }
 
+/* Whether the move r (from st, asked for disp) was held back by a box: an
+ * inside contact, or a blocking one that left the avatar less than
+ * JUDGE_HELD_BACK of its horizontal motion. Sliding along a face it meets
+ * at a glance is not held back: a map that opens a corridor is not charged
+ * for its walls as if they stopped users. */
+static bool held_back(const move_result *r, const move_state *st, const float disp[3])
+{
+    for (uint32_t i = 0; i < r->ncontacts; i++)
+        if (r->contacts[i].inside)
+            return true;
+    if (r->ncontacts == 0)
+        return false;
+    double moved = hypot((double)r->state.pos[0] - st->pos[0], (double)r->state.pos[2] - st->pos[2]);
+    return moved < JUDGE_HELD_BACK * hypot(disp[0], disp[2]);
+}
+
 /* What one trial counted. */
 typedef struct tally {
     uint64_t phantom, opened;
@@ -327,7 +344,7 @@ static void trial(const judge_params *p, const geometry *g, const double cell[3]
             return; /* out of the controller's range: the trial ends there */
         double blo[3], bhi[3];
         int phantom = 0, opened;
-        if (r.ncontacts) {
+        if (held_back(&r, &st, disp)) {
             avatar_box(&p->move, r.state.pos, grow_lo, cell, blo, bhi);
             phantom = !touches_exactly(g, blo, bhi);
         }

@@ -24,8 +24,10 @@
  * that leads onto a step and on under a box is tried as a user would. Per
  * map, every tick counts as
  *
- *   - a phantom block when a box of the map blocked the avatar (a blocking
- *     contact or an inside contact) while its box, grown by one cell of the
+ *   - a phantom block when a box of the map held the avatar back (an inside
+ *     contact, or a blocking one that left it less than JUDGE_HELD_BACK of
+ *     its horizontal motion: sliding along a wall met at a glance is not
+ *     being stopped) while its box, grown by one cell of the
  *     grid (below) sideways and upwards, its bottom raised by
  *     JUDGE_FLOOR_TOLERANCE (what it stands on is support), touches no
  *     triangle: the map stopped a user where nothing real was
@@ -81,6 +83,15 @@
 /* Ticks a trial takes at most (reach at JUDGE_SPEED_MIN and the shortest
  * tick would be more; the speed is raised to fit). */
 #define JUDGE_TICKS_MAX 400u
+/* A move held back: the avatar made less than half the horizontal motion
+ * it asked for. A user walking 30 degrees off a wall slides on at 87% of
+ * its speed; one walking into it, or 60 degrees off it, is stopped or
+ * halved. Without it, the deflected trials charged a map that opens a
+ * doorway for the walls of the corridor behind it, while the old map
+ * stopped the same users at once and then held them on the door's real
+ * jamb, which is no phantom. */
+#define JUDGE_HELD_BACK 0.5
+
 /* How far the avatar's box may reach down into what it stands on and still
  * not touch it (phantom test), and how far into a triangle it must be to
  * count as let in (opened test): a centimetre, as the scenario checks. */

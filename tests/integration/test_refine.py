@@ -357,13 +357,14 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     assert len(got) == 1 and got[0]["outcome"] == "rejected" and got[0]["version"] == 0, got
     assert got[0]["candidate"] == 1 and got[0]["boxes_after"] > 1, got
     j = got[0]["judge"]
-    assert not j["better"] and j["samples"] == 12 and j["moves"] > 0, j
+    # The three users stood at the same four places: four distinct samples.
+    assert not j["better"] and j["samples"] == 4 and j["moves"] > 0, j
     assert j["phantom_new"] >= j["phantom_old"] and j["opened_new"] == 0, j
     assert db.execute("SELECT ecm_version FROM objects WHERE id = ?", (room,)).fetchone() == (1,)
     assert db.execute("SELECT count(*) FROM ecm_events WHERE object_id = ?", (room,)).fetchone() == (0,)
     cand = db.execute("SELECT candidate, version, run_id, box_count, samples, phantom_old, phantom_new "
                       "FROM ecm_candidates WHERE object_id = ?", (room,)).fetchall()
-    assert cand == [(1, 1, 1, got[0]["boxes_after"], 12, j["phantom_old"], j["phantom_new"])], cand
+    assert cand == [(1, 1, 1, got[0]["boxes_after"], 4, j["phantom_old"], j["phantom_new"])], cand
     assert db.execute("SELECT count(*) FROM ecm_candidate_boxes WHERE object_id = ? AND candidate = 1",
                       (room,)).fetchone() == (got[0]["boxes_after"],)
     assert db.execute("SELECT run_id, cluster_id FROM ecm_candidate_clusters WHERE object_id = ?",

@@ -102,6 +102,49 @@ static void test_doorway_opened_is_better(void **state)
     assert_true(r.phantom_new > r.phantom_old);
 }
 
+/* A room behind the doorway (back wall at z = 4): the candidate opens only
+ * a corridor from the door, the rest of the room in two coarse boxes with
+ * nothing in them. Users sent 30 degrees off their line slide along the
+ * corridor's sides; that is not being stopped, so the map is better. */
+static void test_corridor_behind_a_doorway_is_better(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    cuboid(&m, -3, 0, 4, 3, 3, 4.2f);
+    const float mbr[1][6] = {{-3, 0, 0, 3, 3, 4.2f}};
+    const float cand[6][6] = {{-3, 0, 0, -0.5f, 3, 0.2f}, {0.5f, 0, 0, 3, 3, 0.2f}, {-0.5f, 2.2f, 0, 0.5f, 3, 0.2f},
+                              {-3, 0, 4, 3, 3, 4.2f},     {-3, 0, 0.2f, -0.5f, 3, 4}, {0.5f, 0, 0.2f, 3, 3, 4}};
+    judge_sample s[16];
+    uint32_t ns = in_front(s, 16, -0.15f, 0.15f);
+    judge_input in = input(&m, mbr, 1, cand, 6, s, ns);
+    judge_result r = judged(&in);
+    assert_true(r.phantom_old >= 16 * 3);
+    assert_true(r.phantom_new < r.phantom_old / 10);
+    assert_int_equal(r.opened_new, 0);
+    assert_int_equal(r.better, 1);
+}
+
+/* Users pressed on the far side of the wall, its solid part (sliding along
+ * it, they do not reach the doorway): the face they meet is the bounding
+ * box's max face (the last row of every index), and real, so no map stops
+ * them by a phantom. */
+static void test_wall_on_the_max_face_is_real(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[8];
+    for (uint32_t i = 0; i < 8; i++)
+        s[i] = (judge_sample){.pos = {2.2f + 0.05f * (float)i, 0, 0.501f}, .vel = {0, 0, -1.5f}};
+    judge_input in = input(&m, wall_mbr, 1, wall_parts, 3, s, 8);
+    judge_result r = judged(&in);
+    assert_int_equal(r.samples, 8);
+    assert_int_equal(r.phantom_old, 0);
+    assert_int_equal(r.phantom_new, 0);
+    assert_int_equal(r.better, 0);
+}
+
 /* A garage: a 0.31 m base one steps onto, posts, a roof plate at 2.5 m and
  * a beam at the back reaching down to 1.83 m. The candidate makes the base a
  * box of its own but keeps the roof, beam and posts in one box whose bottom
@@ -284,6 +327,8 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_doorway_opened_is_better),
+        cmocka_unit_test(test_corridor_behind_a_doorway_is_better),
+        cmocka_unit_test(test_wall_on_the_max_face_is_real),
         cmocka_unit_test(test_garage_base_opened_under_a_low_box_is_rejected),
         cmocka_unit_test(test_uncovered_wall_is_rejected),
         cmocka_unit_test(test_deterministic_cap_still_scale),
