@@ -1,25 +1,38 @@
 #include "worker.h"
 
 #include <errno.h>
+#include <poll.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/eventfd.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "alloc.h"
 #include "mailbox.h"
 
+/*
+ * The thread sleeps in poll() on an eventfd, not on a condition variable:
+ * whoever changes what it waits for (a job, the stop under the lock, the
+ * woken flag without it) writes the eventfd afterwards, and the thread
+ * drains the fd before it looks, so no wake-up is lost, and worker_wake
+ * needs no lock.
+ */
 struct worker {
     worker_ops ops;
     pthread_t thread;
     pthread_mutex_t lock;
-    pthread_cond_t wake;
     int stop;
     unsigned char *jobs; /* queue_max slots of job_size bytes, a ring */
     unsigned head, count;
     mailbox *results;
+    int wake_fd;
+    _Atomic int woken;  /* worker_wake: call ops.every now */
+    unsigned next_ms;   /* the worker's thread only: the delay after this call of every */
 };
 
 static uint64_t now_ms(void)
@@ -29,18 +42,27 @@ static uint64_t now_ms(void)
     return (uint64_t)t.tv_sec * 1000u + (uint64_t)t.tv_nsec / 1000000u;
 }
 
-/* Waits (the lock held) for a job, the stop, or the time due (ms on the
- * monotonic clock; 0: no time). */
-static void wait_for_work(worker *w, uint64_t due)
+static void wake(worker *w)
 {
-    while (!w->stop && w->count == 0 && (!due || now_ms() < due)) {
-        if (!due) {
-            pthread_cond_wait(&w->wake, &w->lock);
-            continue;
-        }
-        struct timespec ts = {.tv_sec = (time_t)(due / 1000u), .tv_nsec = (long)(due % 1000u) * 1000000L};
-        pthread_cond_timedwait(&w->wake, &w->lock, &ts);
+    uint64_t one = 1;
+    ssize_t n = write(w->wake_fd, &one, sizeof one);
+    (void)n; /* EAGAIN: the counter is full, so the fd is readable anyway */
+}
+
+/* Sleeps (the lock not held) until the fd is written or the time is due
+ * (ms on the monotonic clock; 0: no time), then drains the fd. */
+static void sleep_until(worker *w, uint64_t due)
+{
+    int timeout = -1;
+    if (due) {
+        uint64_t now = now_ms();
+        timeout = due <= now ? 0 : due - now > 60000u ? 60000 : (int)(due - now);
     }
+    struct pollfd p = {.fd = w->wake_fd, .events = POLLIN};
+    (void)poll(&p, 1, timeout); /* EINTR: the caller looks again */
+    uint64_t drained;
+    ssize_t n = read(w->wake_fd, &drained, sizeof drained);
+    (void)n; /* EAGAIN: nothing was written */
 }
 
 static void *run(void *arg)
@@ -51,13 +73,20 @@ static void *run(void *arg)
 
     pthread_mutex_lock(&w->lock);
     for (;;) {
-        wait_for_work(w, due);
         if (w->stop)
             break;
-        if (w->count == 0) { /* the time is due */
+        if (w->count == 0) {
+            int woken = atomic_exchange(&w->woken, 0);
+            if (!due || (!woken && now_ms() < due)) {
+                pthread_mutex_unlock(&w->lock);
+                sleep_until(w, due);
+                pthread_mutex_lock(&w->lock);
+                continue;
+            }
             pthread_mutex_unlock(&w->lock);
+            w->next_ms = w->ops.period_ms;
             w->ops.every(w->ops.ctx, w);
-            due = now_ms() + w->ops.period_ms;
+            due = now_ms() + w->next_ms;
             pthread_mutex_lock(&w->lock);
             continue;
         }
@@ -68,7 +97,9 @@ static void *run(void *arg)
         w->head = (w->head + 1) % w->ops.queue_max;
         w->count--;
         pthread_mutex_unlock(&w->lock);
-        mailbox_put(w->results, w->ops.run(w->ops.ctx, job));
+        void *result = w->ops.run(w->ops.ctx, job);
+        if (result)
+            mailbox_put(w->results, result);
         pthread_mutex_lock(&w->lock);
     }
     pthread_mutex_unlock(&w->lock);
@@ -84,24 +115,21 @@ worker *worker_start(const worker_ops *ops, char *err, size_t errlen)
     w->ops = *ops;
     w->jobs = cvre_xcalloc(ops->queue_max, ops->job_size);
     w->results = mailbox_create();
-    if (!w->results) {
+    w->wake_fd = w->results ? eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK) : -1;
+    if (w->wake_fd < 0) {
         snprintf(err, errlen, "eventfd: %s", strerror(errno));
+        mailbox_destroy(w->results, NULL);
         free(w->jobs);
         free(w);
         return NULL;
     }
     pthread_mutex_init(&w->lock, NULL);
-    pthread_condattr_t ca; /* timed waits on the monotonic clock: a clock step is no wake-up */
-    pthread_condattr_init(&ca);
-    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
-    pthread_cond_init(&w->wake, &ca);
-    pthread_condattr_destroy(&ca);
     rc = pthread_create(&w->thread, NULL, run, w);
     if (rc != 0) {
         snprintf(err, errlen, "cannot start a worker thread: %s", strerror(rc));
         mailbox_destroy(w->results, NULL);
+        close(w->wake_fd);
         pthread_mutex_destroy(&w->lock);
-        pthread_cond_destroy(&w->wake);
         free(w->jobs);
         free(w);
         return NULL;
@@ -115,15 +143,15 @@ void worker_stop(worker *w)
         return;
     pthread_mutex_lock(&w->lock);
     w->stop = 1;
-    pthread_cond_signal(&w->wake);
     pthread_mutex_unlock(&w->lock);
+    wake(w);
     pthread_join(w->thread, NULL);
     for (; w->count; w->count--, w->head = (w->head + 1) % w->ops.queue_max)
         if (w->ops.drop_job)
             w->ops.drop_job(w->jobs + (size_t)w->head * w->ops.job_size);
     mailbox_destroy(w->results, w->ops.free_result ? w->ops.free_result : free);
+    close(w->wake_fd);
     pthread_mutex_destroy(&w->lock);
-    pthread_cond_destroy(&w->wake);
     free(w->jobs);
     free(w);
 }
@@ -140,11 +168,19 @@ int worker_submit(worker *w, const void *job)
     memcpy(w->jobs + (size_t)((w->head + w->count) % w->ops.queue_max) * w->ops.job_size, job,
            w->ops.job_size);
     w->count++;
-    pthread_cond_signal(&w->wake);
     pthread_mutex_unlock(&w->lock);
+    wake(w);
     return 0;
 }
 
 void *worker_take(worker *w) { return mailbox_take(w->results); }
 
 void worker_put(worker *w, void *result) { mailbox_put(w->results, result); }
+
+void worker_wake(worker *w)
+{
+    atomic_store(&w->woken, 1);
+    wake(w);
+}
+
+void worker_due(worker *w, unsigned ms) { w->next_ms = ms; }

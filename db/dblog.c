@@ -2,21 +2,19 @@
 
 #include <errno.h>
 #include <math.h>
-#include <poll.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/eventfd.h>
 #include <time.h>
-#include <unistd.h>
 
 #include "alloc.h"
 #include "db.h"
 #include "err.h"
 #include "log.h"
+#include "worker.h"
 
 /* Page cache of the writer's connection. The hot set is one leaf per object
  * and per user (where their index entries are appended), the rtree's inner
@@ -115,27 +113,22 @@ struct dblog {
     _Atomic int last_error;
     char pad2[DBLOG_CACHE_LINE];
     /* The writer's wake-up request: 0 while it runs, otherwise the queue
-     * length at which the producer must wake it through efd. */
+     * length at which the producer must wake it (worker_wake). */
     _Atomic uint64_t wake_at;
-    _Atomic int stopping;
     char pad3[DBLOG_CACHE_LINE];
     /* Set at open, read-only afterwards. */
     dblog_row *ring;
     uint64_t mask;
     uint32_t batch_rows, batch_ms;
-    int efd;
     db *store;
     sqlite3 *sql;
     sqlite3_stmt *st[ST_COUNT];
-    pthread_t thread;
-    /* The checkpointer: its connection and thread; ckpt_want and ckpt_stop
-     * under ckpt_mu. */
+    worker *writer;
+    /* The checkpointer: its connection and worker (a job is a request). */
     sqlite3 *ckpt_sql;
-    pthread_t ckpt_thread;
-    int ckpt_started, ckpt_want, ckpt_stop;
-    pthread_mutex_t ckpt_mu;
-    pthread_cond_t ckpt_cv;
+    worker *ckpt;
     /* The writer's own. */
+    uint64_t first_ms; /* when the oldest uncommitted row was seen; 0: none */
     uint64_t reported_dropped, reported_lost;
     uint64_t report_due_ms;
     int failing; /* a batch was lost and none has succeeded since */
@@ -211,11 +204,8 @@ int dblog_push(dblog *log, const dblog_row *row)
     if (used > atomic_load_explicit(&log->high_water, memory_order_relaxed))
         atomic_store_explicit(&log->high_water, used, memory_order_relaxed);
     uint64_t want = atomic_load(&log->wake_at);
-    if (want && used >= want && atomic_exchange(&log->wake_at, 0) != 0) {
-        uint64_t one = 1;
-        ssize_t w = write(log->efd, &one, sizeof one);
-        (void)w; /* EAGAIN means a wake-up is already pending */
-    }
+    if (want && used >= want && atomic_exchange(&log->wake_at, 0) != 0)
+        worker_wake(log->writer);
     return 0;
 }
 
@@ -240,20 +230,16 @@ void dblog_stats_get(const dblog *log, dblog_stats *out)
 
 /* ---- writer side -------------------------------------------------------- */
 
-/* Sleeps until the queue holds at least `rows` rows, stop is requested, or
- * timeout_ms passes (-1: no limit). Wakes early at times; callers re-check. */
-static void wait_for(dblog *l, uint64_t rows, int timeout_ms)
+/* Asks the producer to wake the writer once the queue holds `rows` rows.
+ * Returns 1, or 0 with the request taken back when it holds them already. */
+static int wake_when(dblog *l, uint64_t rows)
 {
     atomic_store(&l->wake_at, rows);
     uint64_t queued = atomic_load(&l->head) - atomic_load_explicit(&l->tail, memory_order_relaxed);
-    if (queued < rows && !atomic_load(&l->stopping)) {
-        struct pollfd p = {.fd = l->efd, .events = POLLIN};
-        poll(&p, 1, timeout_ms);
-    }
+    if (queued < rows)
+        return 1;
     atomic_store(&l->wake_at, 0);
-    uint64_t drain;
-    ssize_t r = read(l->efd, &drain, sizeof drain);
-    (void)r; /* EAGAIN: nothing was pending */
+    return 0;
 }
 
 int64_t dblog_bucket(double at)
@@ -660,46 +646,45 @@ static void report(dblog *l, int force)
     l->report_due_ms = now + DBLOG_REPORT_MS;
 }
 
-/* The writer thread. It sleeps until a first row arrives, then until the
- * batch is full or its time is up; at stop it writes whatever is queued in
- * one last transaction and returns. */
-static void *writer_main(void *arg)
+/* The writer, called on its worker's thread when the producer wakes it
+ * (wake_when), when a batch's time is up (worker_due) and every
+ * DBLOG_CHECK_MS while idle. It commits until it must wait for rows: for a
+ * first one, or until the batch is full or its time is up. The last
+ * transaction, at stop, is dblog_stop's. */
+static void writer_every(void *ctx, worker *w)
 {
-    dblog *l = arg;
-    uint64_t first_ms = 0; /* when the oldest uncommitted row was seen; 0: none */
+    dblog *l = ctx;
+    atomic_store(&l->wake_at, 0);
     for (;;) {
         uint64_t queued = atomic_load_explicit(&l->head, memory_order_acquire) -
                           atomic_load_explicit(&l->tail, memory_order_relaxed);
-        int stopping = atomic_load(&l->stopping);
+        uint64_t now = now_ms();
         if (queued == 0) {
-            if (stopping)
-                break;
-            first_ms = 0;
-            if (now_ms() - l->checked_ms >= DBLOG_CHECK_MS)
+            l->first_ms = 0;
+            if (now - l->checked_ms >= DBLOG_CHECK_MS)
                 check_file(l);
-            wait_for(l, 1, DBLOG_CHECK_MS);
+            if (wake_when(l, 1))
+                return; /* and again DBLOG_CHECK_MS from now: the period */
             continue;
         }
-        uint64_t now = now_ms();
-        if (!first_ms)
-            first_ms = now;
-        uint64_t due = first_ms + l->batch_ms;
-        if (stopping) {
-            commit_rows(l, queued, 1);
-        } else if (queued >= l->batch_rows) {
+        if (!l->first_ms)
+            l->first_ms = now;
+        uint64_t due = l->first_ms + l->batch_ms;
+        if (queued >= l->batch_rows) {
             commit_rows(l, l->batch_rows, 0);
         } else if (now >= due) {
             commit_rows(l, queued, 0);
         } else {
-            wait_for(l, l->batch_rows, (int)(due - now));
+            if (wake_when(l, l->batch_rows)) {
+                worker_due(w, (unsigned)(due - now));
+                return;
+            }
             continue;
         }
         /* Rows still queued arrived after `now`, at the earliest. */
-        first_ms = now;
+        l->first_ms = now;
         report(l, 0);
     }
-    report(l, 1);
-    return NULL;
 }
 
 /* ---- checkpointer ------------------------------------------------------- */
@@ -710,45 +695,20 @@ static int on_wal_commit(void *arg, sqlite3 *conn, const char *name, int pages)
 {
     (void)conn, (void)name;
     dblog *l = arg;
-    if (pages >= DBLOG_WAL_AUTOCHECKPOINT) {
-        pthread_mutex_lock(&l->ckpt_mu);
-        l->ckpt_want = 1;
-        pthread_cond_signal(&l->ckpt_cv);
-        pthread_mutex_unlock(&l->ckpt_mu);
-    }
+    static const char request = 1;
+    if (pages >= DBLOG_WAL_AUTOCHECKPOINT)
+        (void)worker_submit(l->ckpt, &request); /* -EBUSY: one is waiting already */
     return SQLITE_OK;
 }
 
-/* The checkpointer thread: one PASSIVE checkpoint per request, until stop.
- * Its failures (SQLITE_BUSY while another checkpoint runs) are harmless:
- * the next commit asks again. */
-static void *ckpt_main(void *arg)
+/* The checkpointer's job: one PASSIVE checkpoint. Its failures (SQLITE_BUSY
+ * while another checkpoint runs) are harmless: the next commit asks again. */
+static void *checkpoint(void *ctx, void *job)
 {
-    dblog *l = arg;
-    for (;;) {
-        pthread_mutex_lock(&l->ckpt_mu);
-        while (!l->ckpt_want && !l->ckpt_stop)
-            pthread_cond_wait(&l->ckpt_cv, &l->ckpt_mu);
-        int stop = l->ckpt_stop;
-        l->ckpt_want = 0;
-        pthread_mutex_unlock(&l->ckpt_mu);
-        if (stop)
-            break;
-        sqlite3_wal_checkpoint_v2(l->ckpt_sql, NULL, SQLITE_CHECKPOINT_PASSIVE, NULL, NULL);
-    }
+    (void)job;
+    dblog *l = ctx;
+    sqlite3_wal_checkpoint_v2(l->ckpt_sql, NULL, SQLITE_CHECKPOINT_PASSIVE, NULL, NULL);
     return NULL;
-}
-
-static void ckpt_stop(dblog *l)
-{
-    if (!l->ckpt_started)
-        return;
-    pthread_mutex_lock(&l->ckpt_mu);
-    l->ckpt_stop = 1;
-    pthread_cond_signal(&l->ckpt_cv);
-    pthread_mutex_unlock(&l->ckpt_mu);
-    pthread_join(l->ckpt_thread, NULL);
-    l->ckpt_started = 0;
 }
 
 /* ---- life cycle --------------------------------------------------------- */
@@ -766,13 +726,13 @@ static int check_config(const dblog_config *cfg, char *err, size_t errlen)
     return 0;
 }
 
-/* Frees what dblog_open took; the thread must not be running. */
+/* Stops the workers (the writer must be idle: stopped already, or never
+ * woken) and frees what dblog_open took. */
 static void destroy(dblog *l)
 {
-    ckpt_stop(l);
+    worker_stop(l->writer);
+    worker_stop(l->ckpt);
     sqlite3_close(l->ckpt_sql);
-    pthread_mutex_destroy(&l->ckpt_mu);
-    pthread_cond_destroy(&l->ckpt_cv);
     for (int i = 0; i < ST_COUNT; i++)
         sqlite3_finalize(l->st[i]);
     db_close(l->store);
@@ -783,8 +743,6 @@ static void destroy(dblog *l)
     free(l->place);
     free(l->bg);
     free(l->sorted);
-    if (l->efd >= 0)
-        close(l->efd);
     free(l->ring);
     free(l);
 }
@@ -806,9 +764,6 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
         snprintf(err, errlen, "out of memory");
         return NULL;
     }
-    l->efd = -1;
-    pthread_mutex_init(&l->ckpt_mu, NULL);
-    pthread_cond_init(&l->ckpt_cv, NULL);
     l->mask = c.queue_rows - 1u;
     l->batch_rows = c.batch_rows;
     l->batch_ms = c.batch_ms;
@@ -835,11 +790,6 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
     l->cap_rows = c.batch_rows;
     l->gen = 1;
     l->map_bucket = -DBLOG_BUCKET_MAX;
-    l->efd = eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
-    if (l->efd < 0) {
-        snprintf(err, errlen, "eventfd: %s", strerror(errno));
-        goto fail;
-    }
     l->store = db_open(path, DB_READWRITE, err, errlen);
     if (!l->store)
         goto fail;
@@ -872,20 +822,24 @@ dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t e
     sqlite3_finalize(q);
     atomic_store_explicit(&l->committed_id, l->next_id - 1, memory_order_relaxed);
 
-    /* The writer takes no signals: a server that reads them from a signalfd
-     * must find them pending, not delivered to this thread. */
+    /* The workers take no signals: a server that reads them from a
+     * signalfd must find them pending, not delivered to these threads. The
+     * first row wakes the writer. */
     sigset_t all, old;
     sigfillset(&all);
     pthread_sigmask(SIG_SETMASK, &all, &old);
-    int rc = pthread_create(&l->ckpt_thread, NULL, ckpt_main, l);
-    l->ckpt_started = rc == 0;
-    if (rc == 0) {
+    const worker_ops ckpt_ops = {.job_size = 1, .queue_max = 1, .run = checkpoint, .ctx = l};
+    const worker_ops writer_ops = {.every = writer_every, .period_ms = DBLOG_CHECK_MS, .ctx = l};
+    char why[160] = "";
+    l->ckpt = worker_start(&ckpt_ops, why, sizeof why);
+    if (l->ckpt) {
         sqlite3_wal_hook(l->sql, on_wal_commit, l);
-        rc = pthread_create(&l->thread, NULL, writer_main, l);
+        atomic_store(&l->wake_at, 1);
+        l->writer = worker_start(&writer_ops, why, sizeof why);
     }
     pthread_sigmask(SIG_SETMASK, &old, NULL);
-    if (rc != 0) {
-        snprintf(err, errlen, "cannot start the writer threads: %s", strerror(rc));
+    if (!l->writer) {
+        snprintf(err, errlen, "cannot start the collision log's workers: %s", why);
         goto fail;
     }
     return l;
@@ -896,12 +850,17 @@ fail:
 
 int dblog_stop(dblog *log, dblog_stats *final)
 {
-    atomic_store(&log->stopping, 1);
-    uint64_t one = 1;
-    ssize_t w = write(log->efd, &one, sizeof one);
-    (void)w; /* EAGAIN: a wake-up is already pending */
-    pthread_join(log->thread, NULL);
-    ckpt_stop(log);
+    /* The writer finishes what it is doing; the rows still queued go into
+     * one last transaction, on this thread (the pushing one, or after it). */
+    worker_stop(log->writer);
+    log->writer = NULL;
+    uint64_t queued = atomic_load_explicit(&log->head, memory_order_acquire) -
+                      atomic_load_explicit(&log->tail, memory_order_relaxed);
+    if (queued)
+        commit_rows(log, queued, 1);
+    report(log, 1);
+    worker_stop(log->ckpt);
+    log->ckpt = NULL;
     dblog_stats s;
     dblog_stats_get(log, &s);
     if (final)

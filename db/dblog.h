@@ -1,7 +1,8 @@
 /*
  * dblog.h: the collision log writer. The tick thread hands over one row per
- * blocked move; a writer thread of its own, with its own SQLite connection,
- * commits them in batched transactions to `collisions` and its group
+ * blocked move; a writer of its own (a base/worker.h worker, whose thread
+ * has its own SQLite connection) commits them in batched transactions to
+ * `collisions` and its group
  * tables `collision_groups`, `collision_cells` (the R*Tree) and
  * `collision_users` (db/migrations/0002_objects_collisions.sql).
  *
@@ -12,8 +13,9 @@
  * The producer never waits on the disk or on the writer. dblog_push copies
  * the row into a single-producer / single-consumer lock-free ring (no lock,
  * no allocation, no system call except an occasional eventfd write to wake a
- * sleeping writer). Exactly one thread may push, and the same thread (or one
- * that joined it) calls dblog_stop.
+ * sleeping writer: worker_wake, which takes no lock either). Exactly one
+ * thread may push, and the same thread (or one that joined it) calls
+ * dblog_stop.
  *
  * Queue full: the row is dropped and counted. Backpressure would mean
  * stalling the tick, that is every avatar in the world, to save a log row;
@@ -28,8 +30,8 @@
  * transaction that took longer than batch_ms makes the next ones smaller in
  * proportion (a batch is sorted before it is inserted, so it cannot be cut
  * part way), so the write lock is not held much longer than that. A
- * checkpointer thread with its own connection checkpoints the WAL beside
- * the writer. Rows stay in
+ * checkpointer (a second worker, with its own connection) checkpoints the
+ * WAL beside the writer. Rows stay in
  * the ring until their transaction commits, so a failed batch is retried
  * as is: a database error (disk full, locked beyond the busy timeout, a
  * file made read-only) is logged and the same batch retried up to
@@ -210,7 +212,7 @@ typedef struct dblog_stats {
 
 /* Opens a connection to the database at path (creating and migrating it like
  * db_open(DB_READWRITE)) and one for checkpoints, prepares the statements
- * and starts the writer and checkpointer threads with every signal
+ * and starts the writer's and the checkpointer's workers with every signal
  * blocked. cfg may be NULL for the defaults. On
  * failure returns NULL and writes "what went wrong" to err. */
 dblog *dblog_open(const char *path, const dblog_config *cfg, char *err, size_t errlen);
@@ -227,7 +229,8 @@ int dblog_push(dblog *log, const dblog_row *row);
 void dblog_stats_get(const dblog *log, dblog_stats *out);
 
 /* Stops the writer after it has written (or, on persistent errors, given up
- * on) every queued row, in one last transaction, and frees log. Call it from
+ * on) every queued row, in one last transaction (which runs on the calling
+ * thread, once the writer's worker has stopped), and frees log. Call it from
  * the pushing thread, or after that thread stopped pushing. If final is not
  * NULL it receives the last counters. Returns 0 if every row pushed and not
  * dropped was committed, -EIO if some were lost. */

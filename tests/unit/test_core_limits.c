@@ -468,6 +468,82 @@ static void test_worker_every(void **state)
     assert_true(calls >= 3);
 }
 
+/* Waits (up to a minute: a stuck worker, not a slow one) for the worker's
+ * next result, and returns it. */
+static int *next_result(worker *w)
+{
+    int *r;
+    while (!(r = worker_take(w))) {
+        struct pollfd pf = {.fd = worker_fd(w), .events = POLLIN};
+        assert_int_equal(poll(&pf, 1, 60000), 1);
+    }
+    return r;
+}
+
+/* Calls 1 and 2 put their number; call 1 asks for the next one at once
+ * (worker_due), so only a wake-up or that request can bring them within
+ * the hour-long period. */
+static void due_every(void *ctx, worker *w)
+{
+    int *calls = ctx;
+    if (++*calls > 2)
+        return;
+    if (*calls == 1)
+        worker_due(w, 0);
+    int *result = cvre_xmalloc(sizeof *result);
+    *result = *calls;
+    worker_put(w, result);
+}
+
+static void test_worker_wake_and_due(void **state)
+{
+    int calls = 0;
+    const worker_ops ops = {.ctx = &calls, .every = due_every, .period_ms = 3600000};
+    char err[128];
+    worker *w = worker_start(&ops, err, sizeof err);
+
+    (void)state;
+    assert_non_null(w);
+    worker_wake(w);
+    for (int k = 1; k <= 2; k++) {
+        int *r = next_result(w);
+        assert_int_equal(*r, k);
+        free(r);
+    }
+    worker_stop(w);
+    assert_int_equal(calls, 2); /* the third is an hour away */
+}
+
+/* Odd jobs hand nothing over (NULL), even ones their number. */
+static void *odd_silent(void *ctx, void *job)
+{
+    (void)ctx;
+    int n = *(int *)job;
+    if (n % 2)
+        return NULL;
+    int *result = cvre_xmalloc(sizeof *result);
+    *result = n;
+    return result;
+}
+
+static void test_worker_job_without_result(void **state)
+{
+    const worker_ops ops = {.job_size = sizeof(int), .queue_max = 4, .run = odd_silent};
+    char err[128];
+    worker *w = worker_start(&ops, err, sizeof err);
+
+    (void)state;
+    assert_non_null(w);
+    for (int job = 1; job <= 4; job++)
+        assert_int_equal(worker_submit(w, &job), 0);
+    for (int k = 2; k <= 4; k += 2) {
+        int *r = next_result(w);
+        assert_int_equal(*r, k);
+        free(r);
+    }
+    worker_stop(w);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -481,6 +557,8 @@ int main(void)
         cmocka_unit_test(test_worker_full_then_stopped),
         cmocka_unit_test(test_worker_cannot_start),
         cmocka_unit_test(test_worker_every),
+        cmocka_unit_test(test_worker_wake_and_due),
+        cmocka_unit_test(test_worker_job_without_result),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
