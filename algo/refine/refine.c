@@ -60,8 +60,8 @@ _Static_assert(3 * ECM_DEPTH_MAX + 8 <= 32, "pressure sums fit uint32_t");
  * touches it and a problem box overlaps it, or see mark_slivers); it is
  * out of bounds for new boxes (not to be covered, and no problem box
  * overlaps it by INNER_MARGIN: space the map leaves free, or only a kept
- * box's). */
-enum { CELL_PROBLEM = 1, CELL_INNER = 2, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16 };
+ * box's); a triangle touches it. */
+enum { CELL_PROBLEM = 1, CELL_INNER = 2, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16, CELL_OCCUPIED = 32 };
 
 /* A box of cells: [lo, hi) on each axis. */
 typedef struct ibox {
@@ -92,6 +92,7 @@ typedef struct work {
     double max_empty;
     uint32_t budget;   /* most boxes the problem boxes may become */
     int any_outside;   /* a cell meets no problem box (else no outside table) */
+    uint64_t wanted;   /* cells with pressure */
 } work;
 
 void ecm_params_default(ecm_params *p)
@@ -713,8 +714,8 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
         for (uint32_t y = 0; y < n; y++) {
             uint8_t *row = w->cls + (size_t)n * (y + (size_t)n * z);
             for (uint32_t x = 0; x < n; x++) {
-                if ((row[x] & CELL_PROBLEM) && voxel_get(&w->g, x, y, z))
-                    row[x] |= CELL_MUST;
+                if (voxel_get(&w->g, x, y, z))
+                    row[x] |= (row[x] & CELL_PROBLEM) ? CELL_OCCUPIED | CELL_MUST : CELL_OCCUPIED;
                 if (!(row[x] & (CELL_MUST | CELL_INNER))) {
                     row[x] |= CELL_OUT;
                     w->any_outside = 1;
@@ -727,7 +728,7 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
  * meets a kept box. */
 static int blocked(const work *w, uint32_t x, uint32_t y, uint32_t z)
 {
-    return voxel_get(&w->g, x, y, z) || (w->cls[x + (size_t)w->n * (y + (size_t)w->n * z)] & CELL_KEPT);
+    return (w->cls[x + (size_t)w->n * (y + (size_t)w->n * z)] & (CELL_OCCUPIED | CELL_KEPT)) != 0;
 }
 
 /* The padded array's bits, all 1 (the bits past dim[0] 0). */
@@ -891,6 +892,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
                 if (!((row[t / 64] >> (t % 64)) & 1u) || (w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
                     continue;
                 uint32_t c = face == 0 ? x : face == 1 ? y : z;
+                w->wanted += w->pressure[i] == 0;
                 uint32_t v = w->pressure[i] + (c >= near_lo && c < near_hi ? near : far);
                 w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
             }
@@ -965,7 +967,82 @@ typedef struct tight {
     uint32_t nproblem;
     double (*clip)[6]; /* nproblem */
     double eps;
+    /* The triangles meeting the hull, by bucket (BUCKETS^3 over the hull):
+     * bucket k lists list[start[k] .. start[k + 1]); stamp[t] is the last
+     * query that saw triangle t. */
+    uint32_t *start, *list, *stamp, query;
+    double bmin[3], binv[3];
 } tight;
+
+/* Buckets per axis of tight's index: few enough to build in one pass over
+ * the triangles, enough that a box of the map meets a fraction of them. */
+#define BUCKETS 16u
+
+/* The buckets box b (grown by eps) meets, inclusive; 0 if none. */
+static int bucket_range(const tight *tt, const float b[6], uint32_t lo[3], uint32_t hi[3])
+{
+    for (int a = 0; a < 3; a++) {
+        double l = ((double)b[a] - tt->eps - tt->bmin[a]) * tt->binv[a];
+        double h = ((double)b[3 + a] + tt->eps - tt->bmin[a]) * tt->binv[a];
+        if (h < 0 || l >= BUCKETS)
+            return 0;
+        lo[a] = l <= 0 ? 0 : (uint32_t)l;
+        hi[a] = h >= BUCKETS - 1 ? BUCKETS - 1 : (uint32_t)h;
+    }
+    return 1;
+}
+
+/* Builds tt's index over the hull hb: two passes (count, then fill).
+ * Returns 0 or -ENOMEM. */
+static int tight_index(tight *tt, const float hb[6])
+{
+    for (int a = 0; a < 3; a++) {
+        double ext = (double)hb[3 + a] - hb[a];
+        tt->bmin[a] = hb[a];
+        tt->binv[a] = ext > 0 ? BUCKETS / ext : 0;
+    }
+    uint32_t nb = BUCKETS * BUCKETS * BUCKETS;
+    tt->start = cvre_calloc(nb + 1, sizeof *tt->start);
+    tt->stamp = cvre_calloc(tt->ntris ? tt->ntris : 1, sizeof *tt->stamp);
+    if (!tt->start || !tt->stamp)
+        return -ENOMEM;
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t t = 0; t < tt->ntris; t++) {
+            uint32_t lo[3], hi[3];
+            if (!bucket_range(tt, tt->tb[t], lo, hi))
+                continue;
+            for (uint32_t z = lo[2]; z <= hi[2]; z++)
+                for (uint32_t y = lo[1]; y <= hi[1]; y++)
+                    for (uint32_t x = lo[0]; x <= hi[0]; x++) {
+                        uint32_t k = x + BUCKETS * (y + BUCKETS * z);
+                        if (pass == 0)
+                            tt->start[k + 1]++;
+                        else
+                            tt->list[tt->stamp[k]++] = t;
+                    }
+        }
+        if (pass == 0) {
+            for (uint32_t k = 0; k < nb; k++)
+                tt->start[k + 1] += tt->start[k];
+            tt->list = cvre_malloc((tt->start[nb] ? tt->start[nb] : 1) * sizeof *tt->list);
+            free(tt->stamp);
+            /* During the fill, stamp holds each bucket's next free place. */
+            tt->stamp = cvre_malloc((nb > tt->ntris ? nb : tt->ntris) * sizeof *tt->stamp);
+            if (!tt->list || !tt->stamp)
+                return -ENOMEM;
+            memcpy(tt->stamp, tt->start, nb * sizeof *tt->stamp);
+        }
+    }
+    memset(tt->stamp, 0, (nb > tt->ntris ? nb : tt->ntris) * sizeof *tt->stamp);
+    return 0;
+}
+
+static void tight_free(tight *tt)
+{
+    free(tt->start);
+    free(tt->list);
+    free(tt->stamp);
+}
 
 static int misses(const float t[6], const double c[6])
 {
@@ -975,6 +1052,31 @@ static int misses(const float t[6], const double c[6])
     return 0;
 }
 
+/* Grows bb to hold the parts of triangle t in the first nc clip boxes of
+ * tt (whole: their hull). */
+static void add_parts(const tight *tt, uint32_t t, const double whole[6], uint32_t nc, double bb[6])
+{
+    const float *tb = tt->tb[t];
+    if (misses(tb, whole))
+        return;
+    for (uint32_t j = 0; j < nc; j++) {
+        const double *c = tt->clip[j];
+        if (misses(tb, c))
+            continue;
+        int inside = 1;
+        for (int a = 0; a < 3; a++)
+            inside &= (double)tb[a] >= c[a] && (double)tb[3 + a] <= c[3 + a];
+        if (inside) {
+            for (int a = 0; a < 3; a++) {
+                bb[a] = fmin(bb[a], tb[a]);
+                bb[3 + a] = fmax(bb[3 + a], tb[3 + a]);
+            }
+            return; /* the whole triangle: no other part adds anything */
+        }
+        clip_into(tt->tris + 9 * (size_t)t, c, bb);
+    }
+}
+
 /*
  * Step 6: shrinks b to the bounding box of the parts of the triangles that
  * lie inside b and inside a problem box (the parts it must cover), each
@@ -982,7 +1084,7 @@ static int misses(const float t[6], const double c[6])
  * by eps again and rounded outwards to float, then clipped to b. Returns
  * 0, b unchanged, when no triangle has such a part.
  */
-static int tighten(const tight *tt, float b[6])
+static int tighten(tight *tt, float b[6])
 {
     uint32_t nc = 0;
     for (uint32_t i = 0; i < tt->nproblem; i++) {
@@ -1001,27 +1103,21 @@ static int tighten(const tight *tt, float b[6])
         whole[a] = (double)b[a] - tt->eps;
         whole[3 + a] = (double)b[3 + a] + tt->eps;
     }
-    for (uint32_t t = 0; t < tt->ntris; t++) {
-        const float *tb = tt->tb[t];
-        if (misses(tb, whole))
-            continue;
-        for (uint32_t j = 0; j < nc; j++) {
-            const double *c = tt->clip[j];
-            if (misses(tb, c))
-                continue;
-            int inside = 1;
-            for (int a = 0; a < 3; a++)
-                inside &= (double)tb[a] >= c[a] && (double)tb[3 + a] <= c[3 + a];
-            if (inside) {
-                for (int a = 0; a < 3; a++) {
-                    bb[a] = fmin(bb[a], tb[a]);
-                    bb[3 + a] = fmax(bb[3 + a], tb[3 + a]);
+    uint32_t blo[3], bhi[3], q = ++tt->query;
+    if (!bucket_range(tt, b, blo, bhi))
+        return 0;
+    for (uint32_t z = blo[2]; z <= bhi[2]; z++)
+        for (uint32_t y = blo[1]; y <= bhi[1]; y++)
+            for (uint32_t x = blo[0]; x <= bhi[0]; x++) {
+                uint32_t k = x + BUCKETS * (y + BUCKETS * z);
+                for (uint32_t e = tt->start[k]; e < tt->start[k + 1]; e++) {
+                    uint32_t t = tt->list[e];
+                    if (tt->stamp[t] == q)
+                        continue;
+                    tt->stamp[t] = q;
+                    add_parts(tt, t, whole, nc, bb);
                 }
-                break; /* the whole triangle: no other part adds anything */
             }
-            clip_into(tt->tris + 9 * (size_t)t, c, bb);
-        }
-    }
     if (!(bb[0] <= bb[3]))
         return 0;
     for (int a = 0; a < 3; a++) {
@@ -1117,8 +1213,7 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
         if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0)
             return rc;
     }
-    for (size_t i = 0; i < cells; i++)
-        r->wanted += w->pressure[i] != 0;
+    r->wanted += w->wanted;
     svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
     if (w->any_outside)
         svt_build(&w->outside, w->tables + table, n, w->cls, CELL_OUT);
@@ -1180,6 +1275,7 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     float(*pb)[6] = NULL;
     double(*clip)[6] = NULL;
     work w = {0};
+    tight tt = {0};
     if (!problem)
         goto done;
     uint32_t kept = nboxes, nproblem = 0;
@@ -1228,8 +1324,10 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         for (uint32_t i = 0; i < nboxes; i++)
             if (problem[i])
                 memcpy(pb[np++], boxes[i], sizeof pb[0]);
-        tight tt = {.tris = tris, .tb = (const float(*)[6])tb, .ntris = ntris, .problem = (const float(*)[6])pb,
-                    .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
+        tt = (tight){.tris = tris, .tb = (const float(*)[6])tb, .ntris = ntris, .problem = (const float(*)[6])pb,
+                     .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
+        if ((rc = tight_index(&tt, hb)) < 0)
+            goto done;
         for (uint32_t i = 0; i < nboxes; i++)
             if (!problem[i])
                 memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
@@ -1263,6 +1361,7 @@ done:
     free(tb);
     free(pb);
     free(clip);
+    tight_free(&tt);
     free(problem);
     if (rc < 0)
         ecm_result_free(out);
