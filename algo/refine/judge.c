@@ -49,7 +49,8 @@ void judge_params_default(judge_params *p)
     p->reach = JUDGE_REACH_DEFAULT;
     p->speed = JUDGE_SPEED_DEFAULT;
     p->deflect = JUDGE_DEFLECT_DEFAULT;
-    p->depth = ECM_DEPTH_DEFAULT;
+    p->depth = JUDGE_DEPTH_DEFAULT;
+    p->cell_depth = ECM_DEPTH_DEFAULT;
     p->max_samples = JUDGE_SAMPLES_DEFAULT;
 }
 
@@ -379,7 +380,8 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
 {
     if (!(p->dt > 0 && p->dt <= MOVE_MAX_DT) || !(p->reach > 0 && p->reach <= 100) ||
         !(p->speed >= JUDGE_SPEED_MIN && p->speed <= 100) || !(p->deflect >= 0 && p->deflect <= 1.5707964f) ||
-        p->depth < VOXEL_DEPTH_MIN || p->depth > JUDGE_DEPTH_MAX || p->max_samples < 1 ||
+        p->depth < VOXEL_DEPTH_MIN || p->depth > JUDGE_DEPTH_MAX || p->cell_depth < VOXEL_DEPTH_MIN ||
+        p->cell_depth > VOXEL_DEPTH_MAX || p->max_samples < 1 ||
         p->max_samples > JUDGE_SAMPLES_LIMIT)
         return cvre_fail(err, errlen, -EINVAL, "judge parameters out of range");
     if (!in->tris || in->ntris == 0)
@@ -429,7 +431,9 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
         rc = cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
         goto done;
     }
-    const double cell[3] = {g.g.cell[0] * in->scale, g.g.cell[1] * in->scale, g.g.cell[2] * in->scale};
+    const double cells = (double)(1u << jp.cell_depth);
+    const double cell[3] = {(g.g.max[0] - g.g.min[0]) / cells * in->scale, (g.g.max[1] - g.g.min[1]) / cells * in->scale,
+                            (g.g.max[2] - g.g.min[2]) / cells * in->scale};
     /* A user pressing on a box logs the same collision tick after tick:
      * each distinct sample once, in an order of their own. */
     distinct = cvre_malloc(in->nsamples * sizeof *distinct);

@@ -27,8 +27,9 @@
  *   - a phantom block when a box of the map held the avatar back (an inside
  *     contact, or a blocking one that left it less than JUDGE_HELD_BACK of
  *     its horizontal motion: sliding along a wall met at a glance is not
- *     being stopped) while its box, grown by one cell of the
- *     grid (below) sideways and upwards, its bottom raised by
+ *     being stopped) while its box, grown by one cell of the refinement's
+ *     grid over the object's bounding box (cell_depth) sideways and
+ *     upwards, its bottom raised by
  *     JUDGE_FLOOR_TOLERANCE (what it stands on is support), touches no
  *     triangle: the map stopped a user where nothing real was
  *     (tests/bench/scenario.py's phantom check);
@@ -47,7 +48,7 @@
  * from what it stands on is less than a cell.
  *
  * Costs: building the grid is one pass over the triangles (voxel_mark) plus
- * 4 (2^depth + 1)^3 bytes for the table (8.6 MiB at depth 7), sorting the
+ * 4 (2^depth + 1)^3 bytes for the table (1.1 MiB at depth 6), sorting the
  * samples is O(n log n); the bins hold
  * each triangle at most JUDGE_BIN_SPREAD_MAX times. Then at most
  * max_samples x 3 directions x 2 maps x JUDGE_TICKS_MAX ticks, each one
@@ -97,6 +98,11 @@
  * count as let in (opened test): a centimetre, as the scenario checks. */
 #define JUDGE_FLOOR_TOLERANCE 0.01f
 #define JUDGE_LEAK_TOLERANCE 0.01f
+/* The occupancy grid: 2^6 cells a side (1.1 MiB of table, built in a few
+ * milliseconds); at 2^7 its table and marking were most of the judge's
+ * time. A coarser grid only sends more boxes on to the exact test. */
+#define JUDGE_DEPTH_DEFAULT 6u
+
 /* A triangle whose bounding box spans more bins than this is kept on a
  * list every exact test looks at, so that the bins stay within this many
  * entries a triangle. */
@@ -108,12 +114,14 @@ typedef struct judge_params {
     float reach;           /* m a trial walks, in (0, 100] */
     float speed;           /* m/s for samples nearly still, in [JUDGE_SPEED_MIN, 100] */
     float deflect;         /* radians, [0, pi/2]; 0: only the sample's own direction */
-    uint32_t depth;        /* grid depth, VOXEL_DEPTH_MIN..8 */
+    uint32_t depth;        /* the occupancy grid's depth, VOXEL_DEPTH_MIN..8 */
+    uint32_t cell_depth;   /* the grid whose cell is the phantom tolerance, VOXEL_DEPTH_MIN..VOXEL_DEPTH_MAX */
     uint32_t max_samples;  /* 1..JUDGE_SAMPLES_LIMIT */
 } judge_params;
 
-/* Fills p with the defaults above, the default avatar (move.h) and the
- * refinement's grid depth (refine.h: the same cells, the same tolerance). */
+/* Fills p with the defaults above, the default avatar (move.h), an
+ * occupancy grid of JUDGE_DEPTH_DEFAULT and the refinement's grid depth for
+ * the tolerance (refine.h: its cells). */
 void judge_params_default(judge_params *p);
 
 /* A logged collision in the object's metric frame. */
