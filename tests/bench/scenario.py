@@ -59,7 +59,7 @@ except ImportError:  # numpy comes with Debian's python3-numpy: use that python
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "integration"))
-from harness import MODELS, hello, join, move, split_frames  # noqa: E402
+from harness import MODELS, hello, join, move, split_frames, upload_frames  # noqa: E402
 
 AVATAR = (0.6, 1.8, 0.6)
 BAND = (0.01, 1.9)    # heights an avatar's box spans when it stands on the floor
@@ -551,26 +551,62 @@ def model_mbr(rel, z_up):
 
 
 class Scene:
-    """One world: its server, its object, the paths its users walk."""
+    """One world: its server, its object, the paths its users walk. The
+    object of a scene users start inside is placed once they are there
+    (place()): the server spawns nobody inside a box, so a world that held
+    it from the start would put them outside its MBR."""
 
     def __init__(self, a, spec, index):
-        self.name, rel, z_up, scale, floor = spec
-        lo, hi = model_mbr(rel, z_up)
-        x = -scale * (lo[0] + hi[0]) / 2
-        z = -scale * (lo[2] + hi[2]) / 2 if self.name in INSIDE else NORTH - scale * lo[2]
+        self.name, self.rel, self.z_up, self.scale, floor = spec
+        lo, hi = model_mbr(self.rel, self.z_up)
+        x = -self.scale * (lo[0] + hi[0]) / 2
+        z = -self.scale * (lo[2] + hi[2]) / 2 if self.name in INSIDE else NORTH - self.scale * lo[2]
+        self.at = (x, -self.scale * floor, z)
         world = os.path.join(a.out, f"{self.name}.world")
         with open(world, "w") as f:
-            f.write(f"object {model_path(rel)} name {self.name}{' up z' if z_up else ''} "
-                    f"at {x:.4f} {-scale * floor:.4f} {z:.4f} scale {scale}\n")
+            if self.name not in INSIDE:
+                f.write(f"object {model_path(self.rel)} name {self.name}{' up z' if self.z_up else ''} "
+                        f"at {x:.4f} {self.at[1]:.4f} {z:.4f} scale {self.scale}\n")
         self.srv = Server(a.bin, a.out, world, self.name)
         try:
-            self.setup()
+            if self.name not in INSIDE:
+                self.setup()
         except BaseException:
             self.srv.stop()
             raise
 
-    def setup(self):
-        self.id, self.g = load_objects(self.srv.db)[self.name]
+    def place(self, a):
+        """Uploads the object around the users already in the world, as an
+        account (guests may not upload), and waits until it stands."""
+        name, password = "builder", "scenario-builder"
+        p = subprocess.run([os.path.join(a.bin, "cvre-admin"), "--db", self.srv.db, "user", "add", name,
+                            "--password-stdin"], input=password + "\n", capture_output=True, text=True, timeout=60)
+        if p.returncode != 0:
+            raise SystemExit(f"{self.name}: cvre-admin user add: {p.stderr.strip()}")
+        s = socket.create_connection(("127.0.0.1", self.srv.port), timeout=60)
+        with open(model_path(self.rel), "rb") as f:
+            data = f.read()
+        s.sendall(hello() + join(name, AVATAR, password=password))
+        s.sendall(upload_frames(1, data, os.path.basename(self.rel), up=1 if self.z_up else 0, pos=self.at,
+                                scale=self.scale))
+        buf, deadline = b"", time.time() + 120
+        while time.time() < deadline:
+            d = s.recv(1 << 20)
+            if not d:
+                break
+            msgs, buf = split_frames(buf + d)
+            for m in msgs:
+                if m["type"] == "object" and m.get("upload") == 1:
+                    s.close()
+                    self.setup(m["id"])
+                    return
+                if m["type"] in ("rejected", "error"):
+                    raise SystemExit(f"{self.name}: placing the object: {m}")
+        raise SystemExit(f"{self.name}: the object was not placed within 120 s")
+
+    def setup(self, oid=None):
+        objs = load_objects(self.srv.db)
+        self.id, self.g = objs[self.name] if oid is None else next(v for v in objs.values() if v[0] == oid)
         ext = self.g.max - self.g.min
         self.cells = ext / (1 << DEPTH)  # the refinement grid over the MBR, per axis
         self.cell = float(max(self.cells))
@@ -598,10 +634,11 @@ def plan_for(scene, a, index, bumper):
     contact), or, for a bumper, push into the real wall. Users inside the
     MBR, whom the inside policy would let through real geometry, take side
     trips along free space instead: out to a random place and back."""
-    g, state = scene.g, dict(k=index)
+    state = dict(k=index)
     rng = random.Random(f"{a.seed}/{scene.name}/{index}/{bumper}")  # its own: the order users ask in may vary
 
     def plan(user):
+        g = scene.g  # read when the user first moves: a scene's object may be placed after its users joined
         if user.arrived and scene.name in INSIDE and rng.random() < a.accidents:
             trip = g.side_trip(rng, user.pos)
             if trip:
@@ -705,10 +742,12 @@ def run_scenes(a, scenes):
     and pictured; then the report."""
     users = []
     for sc in scenes:
-        print(f"{sc.name}: object {sc.id}, {len(sc.g.tris)} triangles, {len(sc.paths)} paths, "
-              f"refinement cell {sc.cell:.3f} m", flush=True)
         for i in range(a.users):
             users.append(User(sc.srv.port, f"{sc.name}-{i}", sc, plan_for(sc, a, i, False)))
+        if sc.name in INSIDE:
+            sc.place(a)
+        print(f"{sc.name}: object {sc.id}, {len(sc.g.tris)} triangles, {len(sc.paths)} paths, "
+              f"refinement cell {sc.cell:.3f} m", flush=True)
     bump = next((sc for sc in scenes if sc.name == "room"), None) or next(
         (sc for sc in scenes if sc.name not in INSIDE), None)
     if bump:
