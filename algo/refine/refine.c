@@ -1188,16 +1188,19 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
     clock_gettime(CLOCK_MONOTONIC, &t0);
     uint32_t n = w->n = w->g.n;
     size_t cells = (size_t)n * n * n, table = (size_t)(n + 1) * (n + 1) * (n + 1);
-    /* The three tables in one block: separate blocks of 8.6 MiB each at
-     * 2^7 were handed back to the system after each round and faulted in
-     * again, page by page, by the next (glibc keeps a freed block for
-     * reuse up to twice the largest one it has seen returned to it). */
-    w->tables = cvre_malloc(3 * table * sizeof *w->tables);
     w->cls = cvre_calloc(cells, 1);
     w->pressure = cvre_calloc(cells, 1);
-    if (!w->tables || !w->cls || !w->pressure)
+    if (!w->cls || !w->pressure)
         return -ENOMEM;
     classify(w, boxes, nboxes, problem);
+    /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
+     * were handed back to the system after each round and faulted in
+     * again, page by page, by the next (glibc keeps a freed block for
+     * reuse up to twice the largest one it has seen returned to it). The
+     * outside table only when a cell is outside (never for one box). */
+    w->tables = cvre_malloc((w->any_outside ? 3 : 2) * table * sizeof *w->tables);
+    if (!w->tables)
+        return -ENOMEM;
     uint32_t wmax = 1;
     for (uint32_t i = 0; i < ncl; i++)
         wmax = cl[i].weight > wmax ? cl[i].weight : wmax;
@@ -1215,9 +1218,9 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
     }
     r->wanted += w->wanted;
     svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
+    svt_build(&w->press, w->tables + table, n, w->pressure, 0);
     if (w->any_outside)
-        svt_build(&w->outside, w->tables + table, n, w->cls, CELL_OUT);
-    svt_build(&w->press, w->tables + 2 * table, n, w->pressure, 0);
+        svt_build(&w->outside, w->tables + 2 * table, n, w->cls, CELL_OUT);
     r->cells += cells;
     r->occupied += w->g.occupied;
     r->divide_ms += ms_since(&t0);
