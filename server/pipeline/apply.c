@@ -75,6 +75,25 @@ void ecm_judge_line(const judge_result *j, char *buf, size_t len)
              (unsigned long long)j->opened_new, j->ms);
 }
 
+static int cmp_box(const void *a, const void *b) { return memcmp(a, b, 6 * sizeof(float)); }
+
+/* Whether two maps hold the same boxes, in any order: a refinement that
+ * only lists the boxes in force in another order changes nothing. */
+static int same_boxes(const float (*a)[6], uint32_t na, const float (*b)[6], uint32_t nb)
+{
+    if (na != nb)
+        return 0;
+    float(*sa)[6] = cvre_xmalloc((na ? na : 1) * sizeof *sa), (*sb)[6] = cvre_xmalloc((nb ? nb : 1) * sizeof *sb);
+    memcpy(sa, a, na * sizeof *sa);
+    memcpy(sb, b, nb * sizeof *sb);
+    qsort(sa, na, sizeof *sa, cmp_box);
+    qsort(sb, nb, sizeof *sb, cmp_box);
+    int same = memcmp(sa, sb, na * sizeof *sa) == 0;
+    free(sa);
+    free(sb);
+    return same;
+}
+
 /* Whether local point p lies in one of the clusters' extents. */
 static int in_a_cluster(const cluster_found *f, uint32_t n, const float p[3])
 {
@@ -193,7 +212,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     out->stats = r;
     out->stats.boxes = NULL;
     out->boxes_after = r.count;
-    if (r.count == o.box_count && memcmp(r.boxes, o.boxes, r.count * sizeof *r.boxes) == 0)
+    if (same_boxes((const float(*)[6])r.boxes, r.count, (const float(*)[6])o.boxes, o.box_count))
         goto done; /* unchanged: rc is 0, out->version 0 */
     if ((rc = load_samples(d, f, n, &at, &samples, &nsamples, err, errlen)) < 0)
         goto done;

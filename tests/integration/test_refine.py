@@ -279,20 +279,21 @@ def test_offline_apply_is_published_live():
     assert srv.stop() == 0
 
 
-def insert_collisions(db, at, groups, users=3, each=4):
+def insert_collisions(db, at, groups, users=3, each=4, version=1, step=(0, 0, 0.01)):
     """Collisions as the log writer stores them, in one segment: for each
     (object, local contact, feet in world, velocity) of groups, users x each
-    rows a centimetre apart in z, against the object's version 1."""
+    rows `step` apart (a centimetre in z), against the object's version."""
     rows = []
     for oid, local, feet, vel in groups:
         for u in range(users):
             for k in range(each):
-                rows.append((oid, u + 1, local[0], local[1], local[2] + 0.01 * k, feet[0], feet[1],
-                             feet[2] + 0.01 * k, at, *vel))
+                d = [k * s for s in step]
+                rows.append((oid, u + 1, local[0] + d[0], local[1] + d[1], local[2] + d[2], feet[0] + d[0],
+                             feet[1] + d[1], feet[2] + d[2], at, *vel, version))
     db.executemany("INSERT INTO collisions(g, at, session_id, user_id, avatar_id, object_id, ecm_version, "
                    "box_index, inside, avatar_x, avatar_y, avatar_z, world_x, world_y, world_z, local_x, local_y, "
                    "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
-                   "VALUES (0, ?9, 1, ?2, 1, ?1, 1, 0, 0, ?6, ?7, ?8, 0, 0, 0, ?3, ?4, ?5, 1, 0, 0, ?10, ?11, ?12)",
+                   "VALUES (0, ?9, 1, ?2, 1, ?1, ?13, 0, 0, ?6, ?7, ?8, 0, 0, 0, ?3, ?4, ?5, 1, 0, 0, ?10, ?11, ?12)",
                    rows)
     db.execute("INSERT INTO collision_segments SELECT min(id), max(id), ? FROM collisions", (int(at // 10),))
     db.commit()
@@ -388,8 +389,44 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     db.close()
 
 
+def test_the_same_boxes_in_another_order_are_unchanged():
+    """Two flat plates, each a box of its own (version 2, the pressed one
+    first); users press on the first, which is all geometry. Refinement
+    keeps the other box and puts the pressed one, unchanged, after it: the
+    same map in another order, which is no change (no version, no
+    candidate)."""
+    srv = Server(A.bin, "--world", ROOM_WORLD)
+    assert srv.stop() == 0
+    db = sqlite3.connect(srv.db)
+    owner = db.execute("SELECT owner_id FROM objects").fetchone()[0]
+    plates = [(0, 0, 0, 0.5, 0.5, 0), (2, 0, 0, 2.5, 0.5, 0)]
+    tris = b"".join(struct.pack("<18f", x0, y0, 0, x1, y0, 0, x1, y1, 0, x0, y0, 0, x1, y1, 0, x0, y1, 0)
+                    for x0, y0, _, x1, y1, _ in plates)
+    oid = db.execute("INSERT INTO objects(owner_id, name, format, created_at, pos_x, pos_y, pos_z, yaw, scale, "
+                     "ecm_version, tri_count, min_x, min_y, min_z, max_x, max_y, max_z) "
+                     "VALUES (?, 'plates', 'stl', 0, 0, 0, 40, 0, 1, 2, 4, 0, 0, 0, 2.5, 0.5, 0)", (owner,)).lastrowid
+    db.execute("INSERT INTO meshes VALUES (?, ?)", (oid, tris))
+    now = time.time()
+    for v, boxes in ((1, [(0, 0, 0, 2.5, 0.5, 0)]), (2, plates)):
+        db.execute("INSERT INTO ecm_versions(object_id, version, created_at, reason, box_count) "
+                   "VALUES (?, ?, ?, 'import', ?)", (oid, v, now - 100, len(boxes)))
+        for i, b in enumerate(boxes):
+            db.execute("INSERT INTO ecm_boxes VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (oid, v, i, *b))
+    # Walking +z onto the first plate's face, along x.
+    insert_collisions(db, now, [(oid, (0.1, 0.25, 0), (0.1, 0, 40 - 0.301), (0, 0, 2))], version=2,
+                      step=(0.1, 0, 0))
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--object", str(oid), "--apply",
+                       "--json")
+    assert rc == 0, (rc, out, err)
+    got = json.loads(out)["refined"]
+    assert [(r["outcome"], r["boxes_after"]) for r in got] == [("unchanged", 2)], got
+    assert db.execute("SELECT count(*) FROM ecm_candidates").fetchone() == (0,)
+    assert db.execute("SELECT max(version) FROM ecm_versions WHERE object_id = ?", (oid,)).fetchone() == (2,)
+    db.close()
+
+
 if __name__ == "__main__":
     run([test_doorway_opens_live_and_walls_stay, test_archway_opens_and_stays_solid_at_its_sides,
          test_moved_object_keeps_its_boxes_and_rollback_reaches_clients, test_offline_apply_is_published_live,
          test_bad_parameters_and_an_object_without_triangles,
-         test_a_map_no_better_is_kept_as_a_rejected_candidate])
+         test_a_map_no_better_is_kept_as_a_rejected_candidate, test_the_same_boxes_in_another_order_are_unchanged])
