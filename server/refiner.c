@@ -224,42 +224,55 @@ static void settle(tracked *t, const cluster_found *f, size_t k)
     t->has_settled = 1;
 }
 
-/* Refines one object from its clusters (found[0..k)) of run run_id. */
-static void refine_one(refiner *r, tracked *t, int64_t run_id, const cluster_found *f, size_t k)
+/* A round's ecm_apply_round callback context: the refiner, and the run
+ * (set before the first object is refined). */
+typedef struct round_ctx {
+    refiner *r;
+    int64_t run_id;
+} round_ctx;
+
+/* What became of one object of the round (ecm_round_fn): its k clusters f,
+ * ecm_apply's rc and what it filled in a. */
+static int refined_one(void *ctx, const cluster_found *f, uint32_t k, int rc, const ecm_applied *a, const char *err)
 {
-    ecm_applied a;
-    char err[512], figures[160];
-    int rc = ecm_apply(r->db, &r->cfg.ecm, run_id, f, (uint32_t)k, &a, err, sizeof err);
-    ecm_judge_line(&a.judge, figures, sizeof figures);
-    if (rc == 0 && a.version) {
+    const round_ctx *c = ctx;
+    refiner *r = c->r;
+    tracked *t = track(r, f[0].object_id);
+    long long run_id = (long long)c->run_id;
+    char figures[160];
+    ecm_judge_line(&a->judge, figures, sizeof figures);
+    if (rc == 0 && a->version) {
         atomic_fetch_add_explicit(&r->versions_written, 1, memory_order_relaxed);
-        log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %zu clusters of run %lld "
+        log_info("object %lld: collision map v%u -> v%u, %u -> %u boxes, from %u clusters of run %lld "
                  "(digitize %.1f ms, divide %.1f ms, in all %.1f ms); %s",
-                 (long long)t->id, t->version, a.version, a.boxes_before, a.boxes_after, k, (long long)run_id,
-                 a.stats.voxel_ms, a.stats.divide_ms, a.total_ms, figures);
-    } else if (rc == 0 && a.candidate) {
+                 (long long)t->id, t->version, a->version, a->boxes_before, a->boxes_after, k, run_id,
+                 a->stats.voxel_ms, a->stats.divide_ms, a->total_ms, figures);
+    } else if (rc == 0 && a->candidate) {
         /* Not better: the same clusters would make the same candidate. */
-        if (a.judged_before)
-            log_info("object %lld v%u: %zu clusters of run %lld are those of candidate %u, rejected before; "
+        if (a->judged_before)
+            log_info("object %lld v%u: %u clusters of run %lld are those of candidate %u, rejected before; "
                      "map unchanged",
-                     (long long)t->id, t->version, k, (long long)run_id, a.candidate);
+                     (long long)t->id, t->version, k, run_id, a->candidate);
         else
-            log_info("object %lld v%u: refined map (%u -> %u boxes) from %zu clusters of run %lld rejected as "
+            log_info("object %lld v%u: refined map (%u -> %u boxes) from %u clusters of run %lld rejected as "
                      "candidate %u, not published (%s: it must block fewer moves and let none into geometry)",
-                     (long long)t->id, t->version, a.boxes_before, a.boxes_after, k, (long long)run_id, a.candidate,
+                     (long long)t->id, t->version, a->boxes_before, a->boxes_after, k, run_id, a->candidate,
                      figures);
         settle(t, f, k);
     } else if (rc == 0) { /* unchanged */
-        log_info("object %lld v%u: %zu clusters of run %lld press on real geometry only; map unchanged",
-                 (long long)t->id, t->version, k, (long long)run_id);
+        log_info("object %lld v%u: %u clusters of run %lld press on real geometry only; map unchanged",
+                 (long long)t->id, t->version, k, run_id);
         settle(t, f, k);
     } else if (rc == -ESTALE)
         log_info("object %lld: changed while it was refined; the next round uses the new version", (long long)t->id);
     else
         log_error("refiner: %s", err);
+    return 0; /* the next object's refinement does not depend on this one's */
 }
 
-/* One round of the online loop. */
+/* One round of the online loop: the collisions since the last, each object
+ * with new ones clustered (unless its clusters are those it settled on),
+ * then recorded, refined, judged and stored (apply.h). */
 static void examine(refiner *r)
 {
     if (read_collisions(r) < 0)
@@ -268,10 +281,6 @@ static void examine(refiner *r)
     cluster_run run = {.started = db_now(), .params = r->cfg.cluster};
     cluster_found *found = NULL;
     size_t nfound = 0;
-    /* Per object with clusters: where its clusters start in found. */
-    uint32_t *which = cvre_xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *which);
-    size_t *from = cvre_xmalloc((r->nobjs ? r->nobjs : 1) * sizeof *from);
-    uint32_t nwhich = 0;
     for (uint32_t i = 0; i < r->nobjs; i++) {
         tracked *t = &r->objs[i];
         if (t->gone || t->fresh == 0 || t->pts.n < r->cfg.cluster.min_points)
@@ -281,30 +290,18 @@ static void examine(refiner *r)
         run.points += t->pts.n;
         size_t before = nfound;
         int k = cluster_one(r, t, &found, &nfound);
-        if (k <= 0)
-            continue;
-        if (settled_again(t, found + before, (size_t)k)) {
+        if (k > 0 && settled_again(t, found + before, (size_t)k))
             nfound = before;
-            continue;
-        }
-        which[nwhich] = i;
-        from[nwhich++] = before;
     }
     if (nfound) {
         run.finished = db_now();
-        int64_t run_id;
+        round_ctx ctx = {.r = r};
         char err[512];
-        if (cluster_record(r->db, &run, found, nfound, &run_id, err, sizeof err) < 0)
+        if (ecm_apply_round(r->db, &r->cfg.ecm, &run, found, nfound, 1, refined_one, &ctx, &ctx.run_id, err,
+                            sizeof err) < 0)
             log_error("refiner: %s", err);
-        else
-            for (uint32_t w = 0; w < nwhich; w++) {
-                size_t end = w + 1 < nwhich ? from[w + 1] : nfound;
-                refine_one(r, &r->objs[which[w]], run_id, found + from[w], end - from[w]);
-            }
     }
     free(found);
-    free(which);
-    free(from);
 }
 
 /* What the worker does every REFINER_FEED_MS: follows the feed, and runs a

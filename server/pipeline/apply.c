@@ -262,3 +262,19 @@ done:
     free(cluster_ids);
     return rc;
 }
+
+int ecm_apply_round(db *d, const ecm_params *p, const cluster_run *run, const cluster_found *found, size_t n,
+                    int apply, ecm_round_fn *fn, void *ctx, int64_t *run_id, char *err, size_t errlen)
+{
+    int rc = cluster_record(d, run, found, n, run_id, err, errlen);
+    for (size_t k = 0; rc == 0 && apply && k < n;) {
+        size_t first = k;
+        while (k < n && found[k].object_id == found[first].object_id)
+            k++;
+        ecm_applied a;
+        char why[512] = "";
+        int arc = ecm_apply(d, p, *run_id, found + first, (uint32_t)(k - first), &a, why, sizeof why);
+        rc = fn(ctx, found + first, (uint32_t)(k - first), arc, &a, why);
+    }
+    return rc;
+}

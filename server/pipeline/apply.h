@@ -70,4 +70,22 @@ void ecm_judge_line(const judge_result *j, char *buf, size_t len);
 int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f, uint32_t n, ecm_applied *out,
               char *err, size_t errlen);
 
+/* What became of one object of a round: its n clusters f, ecm_apply's
+ * result rc, what it filled in a, and its message in err when rc < 0.
+ * Returns 0 to go on, non-zero to end the round there. */
+typedef int ecm_round_fn(void *ctx, const cluster_found *f, uint32_t n, int rc, const ecm_applied *a,
+                         const char *err);
+
+/*
+ * The end of a round, the same for the online loop (server/refiner.c) and
+ * the offline job (cvre-cluster): records the run and its n clusters
+ * (record.h; sets *run_id) and then, if apply, refines, judges and stores
+ * each object they name (ecm_apply above; the clusters of one object are
+ * consecutive in found, as cluster_find appends them), calling fn after
+ * each. Returns 0; cluster_record's negative errno with the message in err
+ * (nothing recorded, nothing refined); or the non-zero fn returned.
+ */
+int ecm_apply_round(db *d, const ecm_params *p, const cluster_run *run, const cluster_found *found, size_t n,
+                    int apply, ecm_round_fn *fn, void *ctx, int64_t *run_id, char *err, size_t errlen);
+
 #endif

@@ -71,7 +71,39 @@ typedef struct object_row {
     uint32_t version;
     float (*boxes)[6];
     uint32_t nboxes;
+    int outcome;         /* ecm_apply's; 1: not refined (no clusters, or no --apply) */
+    ecm_applied applied; /* with --apply */
 } object_row;
+
+/* The objects a round refines, for its callback (refined). */
+typedef struct job_round {
+    object_row *objs;
+    size_t nobjs, at; /* found follows objs' order: the next object is at or after at */
+    const char *path;
+    int refused;
+} job_round;
+
+/* What became of one object (ecm_round_fn): kept for the report; a refusal
+ * is counted and told, a failing store ends the round (1). */
+static int refined(void *ctx, const cluster_found *f, uint32_t n, int rc, const ecm_applied *a, const char *err)
+{
+    (void)n;
+    job_round *j = ctx;
+    while (j->at < j->nobjs && j->objs[j->at].id != f[0].object_id)
+        j->at++;
+    if (j->at == j->nobjs) /* cannot happen: every cluster is of an object read */
+        return 1;
+    j->objs[j->at].outcome = rc;
+    j->objs[j->at].applied = *a;
+    if (rc == -EINVAL) {
+        fprintf(stderr, "cvre-cluster: %s; not refined\n", err);
+        j->refused++;
+    } else if (rc < 0 && rc != -ESTALE) {
+        fprintf(stderr, "cvre-cluster: %s: %s\n", j->path, err);
+        return 1;
+    }
+    return 0;
+}
 
 static int fail_usage(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 static int fail_usage(const char *fmt, ...)
@@ -192,8 +224,7 @@ int main(int argc, char **argv)
     int64_t run_id = 0;
     cluster_found *found = NULL;
     size_t nfound = 0;
-    ecm_applied *applied = NULL; /* per object, with --apply */
-    int *outcome = NULL, refused = 0;
+    int refused = 0;
 
     /* One read snapshot for everything read. */
     if (sqlite3_exec(sql, "BEGIN", NULL, NULL, NULL) != SQLITE_OK)
@@ -213,7 +244,7 @@ int main(int argc, char **argv)
             continue;
         if (!nobjs || objs[nobjs - 1].id != id) {
             objs = cvre_xrealloc(objs, (nobjs + 1) * sizeof *objs);
-            objs[nobjs++] = (object_row){.id = id, .version = (uint32_t)sqlite3_column_int64(st, 1)};
+            objs[nobjs++] = (object_row){.id = id, .version = (uint32_t)sqlite3_column_int64(st, 1), .outcome = 1};
         }
         object_row *r = &objs[nobjs - 1];
         r->boxes = cvre_xrealloc(r->boxes, (r->nboxes + 1) * sizeof *r->boxes);
@@ -276,34 +307,18 @@ int main(int argc, char **argv)
     cluster_run run = {.started = started, .finished = db_now(), .params = prm, .has_since = has_since,
                        .has_until = has_until, .since = since, .until = until, .objects = nobjs,
                        .points = total_points};
-    if (cluster_record(d, &run, found, nfound, &run_id, err, sizeof err) < 0) {
-        fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
+    /* The run recorded; with --apply each object its clusters name refined,
+     * judged and stored (apply.h), as the online loop does. */
+    job_round jr = {.objs = objs, .nobjs = nobjs, .path = path};
+    int round = ecm_apply_round(d, &ep, &run, found, nfound, apply, refined, &jr, &run_id, err, sizeof err);
+    if (round != 0) {
+        if (round < 0)
+            fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
         rc = EXIT_DB;
         goto done;
     }
+    refused = jr.refused;
     uint64_t problem_boxes = cluster_problem_boxes(found, nfound);
-
-    /* --apply: each object's clusters (consecutive in found) refine it. */
-    applied = cvre_xcalloc(nobjs ? nobjs : 1, sizeof *applied);
-    outcome = cvre_xcalloc(nobjs ? nobjs : 1, sizeof *outcome);
-    for (size_t i = 0, k = 0; apply && i < nobjs; i++) {
-        size_t first = k;
-        while (k < nfound && found[k].object_id == objs[i].id)
-            k++;
-        outcome[i] = 1; /* no clusters: not refined (ecm_apply answers 0 or a negative errno) */
-        if (k == first)
-            continue;
-        outcome[i] = ecm_apply(d, &ep, run_id, found + first, (uint32_t)(k - first), &applied[i], err, sizeof err);
-        if (outcome[i] < 0 && outcome[i] != -ESTALE && outcome[i] != -EINVAL) { /* the store failed */
-            fprintf(stderr, "cvre-cluster: %s: %s\n", path, err);
-            rc = EXIT_DB;
-            goto done;
-        }
-        if (outcome[i] == -EINVAL) {
-            fprintf(stderr, "cvre-cluster: %s; not refined\n", err);
-            refused++;
-        }
-    }
 
     if (json) {
         printf("{\"run\":%lld,\"objects\":%zu,\"points\":%llu,\"clusters\":[", (long long)run_id, nobjs,
@@ -320,9 +335,9 @@ int main(int argc, char **argv)
         printf("],\"problem_boxes\":%llu,\"refined\":[", (unsigned long long)problem_boxes);
         int first = 1;
         for (size_t i = 0; i < nobjs; i++) {
-            if (!apply || outcome[i] > 0)
+            if (!apply || objs[i].outcome > 0)
                 continue;
-            const ecm_applied *a = &applied[i];
+            const ecm_applied *a = &objs[i].applied;
             const judge_result *j = &a->judge;
             printf("%s{\"object\":%lld,\"from\":%u,\"outcome\":\"%s\",\"version\":%u,\"candidate\":%u,"
                    "\"boxes_before\":%u,\"boxes_after\":%u,\"capped\":%u,\"voxel_ms\":%.3f,\"divide_ms\":%.3f,"
@@ -330,8 +345,8 @@ int main(int argc, char **argv)
                    "\"phantom_old\":%llu,\"phantom_new\":%llu,\"opened_old\":%llu,\"opened_new\":%llu,"
                    "\"ms\":%.3f}}",
                    first ? "" : ",", (long long)objs[i].id, objs[i].version,
-                   outcome[i] == -EINVAL   ? "refused"
-                   : outcome[i] == -ESTALE ? "stale"
+                   objs[i].outcome == -EINVAL   ? "refused"
+                   : objs[i].outcome == -ESTALE ? "stale"
                    : a->version            ? "written"
                    : a->judged_before      ? "rejected before"
                    : a->candidate          ? "rejected"
@@ -356,24 +371,24 @@ int main(int argc, char **argv)
                    (double)f->c.centroid[0], (double)f->c.centroid[1], (double)f->c.centroid[2], f->box);
         }
         for (size_t i = 0; apply && i < nobjs; i++) {
-            const ecm_applied *a = &applied[i];
+            const ecm_applied *a = &objs[i].applied;
             char figures[160];
             ecm_judge_line(&a->judge, figures, sizeof figures);
-            if (outcome[i] == 0 && a->version)
+            if (objs[i].outcome == 0 && a->version)
                 printf("  object %lld: v%u -> v%u, %u -> %u boxes (%.1f ms; %s)\n", (long long)objs[i].id,
                        objs[i].version, a->version, a->boxes_before, a->boxes_after, a->total_ms, figures);
-            else if (outcome[i] == 0 && a->judged_before)
+            else if (objs[i].outcome == 0 && a->judged_before)
                 printf("  object %lld: v%u unchanged: its clusters are those of candidate %u, rejected before\n",
                        (long long)objs[i].id, objs[i].version, a->candidate);
-            else if (outcome[i] == 0 && a->candidate)
+            else if (objs[i].outcome == 0 && a->candidate)
                 printf("  object %lld: v%u kept: the refined map (%u -> %u boxes) is no better, stored as candidate "
                        "%u (%s)\n",
                        (long long)objs[i].id, objs[i].version, a->boxes_before, a->boxes_after, a->candidate,
                        figures);
-            else if (outcome[i] == 0)
+            else if (objs[i].outcome == 0)
                 printf("  object %lld: v%u unchanged: its clusters press on real geometry only\n",
                        (long long)objs[i].id, objs[i].version);
-            else if (outcome[i] == -ESTALE)
+            else if (objs[i].outcome == -ESTALE)
                 printf("  object %lld: changed meanwhile; not refined\n", (long long)objs[i].id);
         }
     }
@@ -395,7 +410,5 @@ done:
     free(objs);
     object_points_free(&pt);
     free(found);
-    free(applied);
-    free(outcome);
     return rc;
 }
