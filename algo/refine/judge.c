@@ -10,6 +10,7 @@
 #include "alloc.h"
 #include "err.h"
 #include "refine.h"
+#include "tribins.h"
 #include "voxel.h"
 
 /* The table's counts: a whole grid's cells fit uint32_t. */
@@ -26,10 +27,7 @@ _Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes")
 typedef struct geometry {
     voxel_grid g;
     uint32_t *svt;      /* (n + 1)^3: occupied cells in [0, x) x [0, y) x [0, z) */
-    uint32_t *bin_first; /* JUDGE_BINS^3 + 1 offsets into bin_tris */
-    uint32_t *bin_tris;
-    uint32_t *big;       /* triangles spanning more than JUDGE_BIN_SPREAD_MAX bins */
-    uint32_t nbig;
+    tribins bins;        /* JUDGE_BINS^3 over the grid's box */
     float (*tbox)[6];    /* each triangle's bounding box: most exact tests end there */
     const float *tris;
     double scale;
@@ -58,9 +56,7 @@ static void geometry_free(geometry *g)
 {
     voxel_grid_free(&g->g);
     free(g->svt);
-    free(g->bin_first);
-    free(g->bin_tris);
-    free(g->big);
+    tribins_free(&g->bins);
     free(g->tbox);
 }
 
@@ -86,78 +82,6 @@ static void build_svt(geometry *g)
         for (uint32_t y = 1; y <= n; y++)
             for (uint32_t x = 1; x <= n; x++)
                 g->svt[svt_at(m, x, y, z)] += g->svt[svt_at(m, x, y, z - 1)];
-}
-
-/* The bin range [lo, hi] of a local interval on axis a; 0 if it misses the
- * object's bounding box. */
-static int bin_range(const geometry *g, int a, double lo, double hi, uint32_t *blo, uint32_t *bhi)
-{
-    if (hi < g->g.min[a] || lo > g->g.max[a])
-        return 0;
-    double w = (g->g.max[a] - g->g.min[a]) / JUDGE_BINS;
-    if (w <= 0) {
-        *blo = *bhi = 0;
-        return 1;
-    }
-    double l = floor((lo - g->g.min[a]) / w), h = floor((hi - g->g.min[a]) / w);
-    /* Clamped both ways: a face on the box's max side is in the last bin. */
-    *blo = l < 0 ? 0 : l > JUDGE_BINS - 1 ? JUDGE_BINS - 1 : (uint32_t)l;
-    *bhi = h < 0 ? 0 : h > JUDGE_BINS - 1 ? JUDGE_BINS - 1 : (uint32_t)h;
-    return 1;
-}
-
-/* The bins of triangle i's bounding box; their count, 0 if none. */
-static uint64_t tri_bins(const geometry *g, uint32_t i, uint32_t lo[3], uint32_t hi[3])
-{
-    uint64_t count = 1;
-    for (int a = 0; a < 3; a++) {
-        if (!bin_range(g, a, g->tbox[i][a], g->tbox[i][3 + a], &lo[a], &hi[a]))
-            return 0;
-        count *= hi[a] - lo[a] + 1;
-    }
-    return count;
-}
-
-/* Fills the triangle bins: counts, offsets, then the triangles. */
-static int build_bins(geometry *g, uint32_t ntris)
-{
-    const uint32_t nb = JUDGE_BINS * JUDGE_BINS * JUDGE_BINS;
-    g->bin_first = cvre_calloc(nb + 1, sizeof *g->bin_first);
-    g->big = cvre_malloc((ntris ? ntris : 1) * sizeof *g->big);
-    if (!g->bin_first || !g->big)
-        return -ENOMEM;
-    uint32_t lo[3], hi[3];
-    for (int pass = 0; pass < 2; pass++) {
-        for (uint32_t i = 0; i < ntris; i++) {
-            uint64_t c = tri_bins(g, i, lo, hi);
-            if (c > JUDGE_BIN_SPREAD_MAX) {
-                if (pass == 0)
-                    g->big[g->nbig++] = i;
-                continue;
-            }
-            for (uint32_t z = lo[2]; c && z <= hi[2]; z++)
-                for (uint32_t y = lo[1]; y <= hi[1]; y++)
-                    for (uint32_t x = lo[0]; x <= hi[0]; x++) {
-                        uint32_t b = x + JUDGE_BINS * (y + JUDGE_BINS * z);
-                        if (pass == 0)
-                            g->bin_first[b + 1]++;
-                        else
-                            g->bin_tris[g->bin_first[b]++] = i;
-                    }
-        }
-        if (pass == 0) {
-            for (uint32_t b = 0; b < nb; b++)
-                g->bin_first[b + 1] += g->bin_first[b];
-            /* At most JUDGE_BIN_SPREAD_MAX entries a triangle: fits. */
-            g->bin_tris = cvre_malloc((g->bin_first[nb] ? g->bin_first[nb] : 1) * sizeof *g->bin_tris);
-            if (!g->bin_tris)
-                return -ENOMEM;
-        }
-    }
-    /* The second pass moved each offset to its bin's end: shift back. */
-    memmove(g->bin_first + 1, g->bin_first, nb * sizeof *g->bin_first);
-    g->bin_first[0] = 0;
-    return 0;
 }
 
 static int geometry_init(geometry *g, const judge_params *p, const judge_input *in)
@@ -187,7 +111,9 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
     if (!g->svt)
         return -ENOMEM;
     build_svt(g);
-    return build_bins(g, in->ntris);
+    const double region[6] = {g->g.min[0], g->g.min[1], g->g.min[2], g->g.max[0], g->g.max[1], g->g.max[2]};
+    return tribins_build(&g->bins, region, JUDGE_BINS, (const float(*)[6])g->tbox, in->ntris, 0,
+                         JUDGE_BIN_SPREAD_MAX);
 }
 
 /* The cells of a local interval on axis a: [lo, hi], closed cells, so a box
@@ -237,29 +163,20 @@ static int tri_overlaps(const geometry *g, uint32_t i, const double lo[3], const
 }
 
 /* Whether the metric box [lo, hi] overlaps a triangle, exactly. */
-static int touches_exactly(const geometry *g, const double lo[3], const double hi[3])
+static int touches_exactly(geometry *g, const double lo[3], const double hi[3])
 {
     if (!maybe_touches(g, lo, hi))
         return 0;
     double l[3], h[3];
-    uint32_t a[3], b[3];
     for (int k = 0; k < 3; k++) {
         l[k] = lo[k] / g->scale;
         h[k] = hi[k] / g->scale;
-        if (!bin_range(g, k, l[k], h[k], &a[k], &b[k]))
-            return 0;
     }
-    for (uint32_t i = 0; i < g->nbig; i++)
-        if (tri_overlaps(g, g->big[i], l, h))
+    tribins_iter it;
+    tribins_query(&g->bins, l, h, &it);
+    for (uint32_t t; (t = tribins_next(&it)) != TRIBINS_END;)
+        if (tri_overlaps(g, t, l, h))
             return 1;
-    for (uint32_t z = a[2]; z <= b[2]; z++)
-        for (uint32_t y = a[1]; y <= b[1]; y++)
-            for (uint32_t x = a[0]; x <= b[0]; x++) {
-                uint32_t bin = x + JUDGE_BINS * (y + JUDGE_BINS * z);
-                for (uint32_t k = g->bin_first[bin]; k < g->bin_first[bin + 1]; k++)
-                    if (tri_overlaps(g, g->bin_tris[k], l, h))
-                        return 1;
-            }
     return 0;
 }
 
@@ -322,7 +239,7 @@ typedef struct tally {
 
 /* Walks the avatar from s along (dx, dz) (a unit vector) at speed for
  * ticks ticks against m; adds what it finds to *t. */
-static void trial(const judge_params *p, const geometry *g, const double cell[3], map *m, const judge_sample *s,
+static void trial(const judge_params *p, geometry *g, const double cell[3], map *m, const judge_sample *s,
                   float dx, float dz, float speed, uint32_t ticks, tally *t)
 {
     /* Its bottom raised: what it stands on is support, not what stopped it. */

@@ -19,6 +19,7 @@
 #include "alloc.h"
 #include "avatar.h"
 #include "err.h"
+#include "tribins.h"
 
 _Static_assert(ECM_DEPTH_MIN >= VOXEL_DEPTH_MIN && ECM_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Cell indices, and one past the last, fit 16 bits. */
@@ -962,87 +963,16 @@ static void clip_into(const float *t, const double c[6], double bb[6])
 typedef struct tight {
     const float *tris;
     const float (*tb)[6];
-    uint32_t ntris;
     const float (*problem)[6];
     uint32_t nproblem;
     double (*clip)[6]; /* nproblem */
     double eps;
-    /* The triangles meeting the hull, by bucket (BUCKETS^3 over the hull):
-     * bucket k lists list[start[k] .. start[k + 1]); stamp[t] is the last
-     * query that saw triangle t. */
-    uint32_t *start, *list, *stamp, query;
-    double bmin[3], binv[3];
+    tribins bins; /* the triangles meeting the hull (grown by eps), BUCKETS^3 over it */
 } tight;
 
 /* Buckets per axis of tight's index: few enough to build in one pass over
  * the triangles, enough that a box of the map meets a fraction of them. */
 #define BUCKETS 16u
-
-/* The buckets box b (grown by eps) meets, inclusive; 0 if none. */
-static int bucket_range(const tight *tt, const float b[6], uint32_t lo[3], uint32_t hi[3])
-{
-    for (int a = 0; a < 3; a++) {
-        double l = ((double)b[a] - tt->eps - tt->bmin[a]) * tt->binv[a];
-        double h = ((double)b[3 + a] + tt->eps - tt->bmin[a]) * tt->binv[a];
-        if (h < 0 || l >= BUCKETS)
-            return 0;
-        lo[a] = l <= 0 ? 0 : (uint32_t)l;
-        hi[a] = h >= BUCKETS - 1 ? BUCKETS - 1 : (uint32_t)h;
-    }
-    return 1;
-}
-
-/* Builds tt's index over the hull hb: two passes (count, then fill).
- * Returns 0 or -ENOMEM. */
-static int tight_index(tight *tt, const float hb[6])
-{
-    for (int a = 0; a < 3; a++) {
-        double ext = (double)hb[3 + a] - hb[a];
-        tt->bmin[a] = hb[a];
-        tt->binv[a] = ext > 0 ? BUCKETS / ext : 0;
-    }
-    uint32_t nb = BUCKETS * BUCKETS * BUCKETS;
-    tt->start = cvre_calloc(nb + 1, sizeof *tt->start);
-    tt->stamp = cvre_calloc(tt->ntris ? tt->ntris : 1, sizeof *tt->stamp);
-    if (!tt->start || !tt->stamp)
-        return -ENOMEM;
-    for (int pass = 0; pass < 2; pass++) {
-        for (uint32_t t = 0; t < tt->ntris; t++) {
-            uint32_t lo[3], hi[3];
-            if (!bucket_range(tt, tt->tb[t], lo, hi))
-                continue;
-            for (uint32_t z = lo[2]; z <= hi[2]; z++)
-                for (uint32_t y = lo[1]; y <= hi[1]; y++)
-                    for (uint32_t x = lo[0]; x <= hi[0]; x++) {
-                        uint32_t k = x + BUCKETS * (y + BUCKETS * z);
-                        if (pass == 0)
-                            tt->start[k + 1]++;
-                        else
-                            tt->list[tt->stamp[k]++] = t;
-                    }
-        }
-        if (pass == 0) {
-            for (uint32_t k = 0; k < nb; k++)
-                tt->start[k + 1] += tt->start[k];
-            tt->list = cvre_malloc((tt->start[nb] ? tt->start[nb] : 1) * sizeof *tt->list);
-            free(tt->stamp);
-            /* During the fill, stamp holds each bucket's next free place. */
-            tt->stamp = cvre_malloc((nb > tt->ntris ? nb : tt->ntris) * sizeof *tt->stamp);
-            if (!tt->list || !tt->stamp)
-                return -ENOMEM;
-            memcpy(tt->stamp, tt->start, nb * sizeof *tt->stamp);
-        }
-    }
-    memset(tt->stamp, 0, (nb > tt->ntris ? nb : tt->ntris) * sizeof *tt->stamp);
-    return 0;
-}
-
-static void tight_free(tight *tt)
-{
-    free(tt->start);
-    free(tt->list);
-    free(tt->stamp);
-}
 
 static int misses(const float t[6], const double c[6])
 {
@@ -1103,21 +1033,10 @@ static int tighten(tight *tt, float b[6])
         whole[a] = (double)b[a] - tt->eps;
         whole[3 + a] = (double)b[3 + a] + tt->eps;
     }
-    uint32_t blo[3], bhi[3], q = ++tt->query;
-    if (!bucket_range(tt, b, blo, bhi))
-        return 0;
-    for (uint32_t z = blo[2]; z <= bhi[2]; z++)
-        for (uint32_t y = blo[1]; y <= bhi[1]; y++)
-            for (uint32_t x = blo[0]; x <= bhi[0]; x++) {
-                uint32_t k = x + BUCKETS * (y + BUCKETS * z);
-                for (uint32_t e = tt->start[k]; e < tt->start[k + 1]; e++) {
-                    uint32_t t = tt->list[e];
-                    if (tt->stamp[t] == q)
-                        continue;
-                    tt->stamp[t] = q;
-                    add_parts(tt, t, whole, nc, bb);
-                }
-            }
+    tribins_iter it;
+    tribins_query(&tt->bins, whole, whole + 3, &it);
+    for (uint32_t t; (t = tribins_next(&it)) != TRIBINS_END;)
+        add_parts(tt, t, whole, nc, bb);
     if (!(bb[0] <= bb[3]))
         return 0;
     for (int a = 0; a < 3; a++) {
@@ -1327,9 +1246,10 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         for (uint32_t i = 0; i < nboxes; i++)
             if (problem[i])
                 memcpy(pb[np++], boxes[i], sizeof pb[0]);
-        tt = (tight){.tris = tris, .tb = (const float(*)[6])tb, .ntris = ntris, .problem = (const float(*)[6])pb,
+        tt = (tight){.tris = tris, .tb = (const float(*)[6])tb, .problem = (const float(*)[6])pb,
                      .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
-        if ((rc = tight_index(&tt, hb)) < 0)
+        const double hull[6] = {hb[0], hb[1], hb[2], hb[3], hb[4], hb[5]};
+        if ((rc = tribins_build(&tt.bins, hull, BUCKETS, tt.tb, ntris, tt.eps, 0)) < 0)
             goto done;
         for (uint32_t i = 0; i < nboxes; i++)
             if (!problem[i])
@@ -1364,7 +1284,7 @@ done:
     free(tb);
     free(pb);
     free(clip);
-    tight_free(&tt);
+    tribins_free(&tt.bins);
     free(problem);
     if (rc < 0)
         ecm_result_free(out);
