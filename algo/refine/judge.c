@@ -26,7 +26,7 @@ _Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes")
  * coordinates: boxes in the metric frame are divided by the scale. */
 typedef struct geometry {
     voxel_grid g;
-    uint32_t *svt;      /* (n + 1)^3: occupied cells in [0, x) x [0, y) x [0, z) */
+    voxel_svt svt;       /* occupied cells */
     tribins bins;        /* JUDGE_BINS^3 over the grid's box */
     float (*tbox)[6];    /* each triangle's bounding box: most exact tests end there */
     const float *tris;
@@ -55,33 +55,28 @@ void judge_params_default(judge_params *p)
 static void geometry_free(geometry *g)
 {
     voxel_grid_free(&g->g);
-    free(g->svt);
+    free(g->svt.t);
     tribins_free(&g->bins);
     free(g->tbox);
 }
 
-static size_t svt_at(uint32_t m, uint32_t x, uint32_t y, uint32_t z)
-{
-    return (size_t)x + (size_t)m * ((size_t)y + (size_t)m * z);
-}
-
-/* The table, as three running sums: along x, then y, then z. */
-static void build_svt(geometry *g)
+/* The table of occupied cells, from the grid's bits made bytes. */
+static int build_svt(geometry *g)
 {
     uint32_t n = g->g.n, m = n + 1;
-    for (uint32_t z = 0; z < n; z++)
+    uint8_t *cells = cvre_malloc((size_t)n * n * n);
+    g->svt.t = cvre_malloc((size_t)m * m * m * sizeof *g->svt.t);
+    if (!cells || !g->svt.t) {
+        free(cells);
+        return -ENOMEM;
+    }
+    for (uint32_t z = 0, i = 0; z < n; z++)
         for (uint32_t y = 0; y < n; y++)
             for (uint32_t x = 0; x < n; x++)
-                g->svt[svt_at(m, x + 1, y + 1, z + 1)] =
-                    g->svt[svt_at(m, x, y + 1, z + 1)] + (uint32_t)voxel_get(&g->g, x, y, z);
-    for (uint32_t z = 1; z <= n; z++)
-        for (uint32_t y = 1; y <= n; y++)
-            for (uint32_t x = 1; x <= n; x++)
-                g->svt[svt_at(m, x, y, z)] += g->svt[svt_at(m, x, y - 1, z)];
-    for (uint32_t z = 1; z <= n; z++)
-        for (uint32_t y = 1; y <= n; y++)
-            for (uint32_t x = 1; x <= n; x++)
-                g->svt[svt_at(m, x, y, z)] += g->svt[svt_at(m, x, y, z - 1)];
+                cells[i++] = (uint8_t)voxel_get(&g->g, x, y, z);
+    voxel_svt_build(&g->svt, g->svt.t, n, cells, 0);
+    free(cells);
+    return 0;
 }
 
 static int geometry_init(geometry *g, const judge_params *p, const judge_input *in)
@@ -106,11 +101,8 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
         return rc;
     if ((rc = voxel_mark(&g->g, in->tris, in->ntris)) < 0)
         return rc;
-    uint32_t m = g->g.n + 1;
-    g->svt = cvre_calloc((size_t)m * m * m, sizeof *g->svt);
-    if (!g->svt)
-        return -ENOMEM;
-    build_svt(g);
+    if ((rc = build_svt(g)) < 0)
+        return rc;
     const double region[6] = {g->g.min[0], g->g.min[1], g->g.min[2], g->g.max[0], g->g.max[1], g->g.max[2]};
     return tribins_build(&g->bins, region, JUDGE_BINS, (const float(*)[6])g->tbox, in->ntris, 0,
                          JUDGE_BIN_SPREAD_MAX);
@@ -142,13 +134,8 @@ static int maybe_touches(const geometry *g, const double lo[3], const double hi[
     for (int k = 0; k < 3; k++)
         if (!cell_range(g, k, lo[k] / g->scale, hi[k] / g->scale, &a[k], &b[k]))
             return 0;
-    uint32_t m = g->g.n + 1;
-    const uint32_t *t = g->svt;
     b[0]++, b[1]++, b[2]++;
-    int64_t v = (int64_t)t[svt_at(m, b[0], b[1], b[2])] - t[svt_at(m, a[0], b[1], b[2])] -
-                t[svt_at(m, b[0], a[1], b[2])] - t[svt_at(m, b[0], b[1], a[2])] + t[svt_at(m, a[0], a[1], b[2])] +
-                t[svt_at(m, a[0], b[1], a[2])] + t[svt_at(m, b[0], a[1], a[2])] - t[svt_at(m, a[0], a[1], a[2])];
-    return v > 0;
+    return voxel_svt_sum(&g->svt, a, b) > 0;
 }
 
 static int tri_overlaps(const geometry *g, uint32_t i, const double lo[3], const double hi[3])

@@ -48,7 +48,8 @@
  * from what it stands on is less than a cell.
  *
  * Costs: building the grid is one pass over the triangles (voxel_mark) plus
- * 4 (2^depth + 1)^3 bytes for the table (1.1 MiB at depth 6), sorting the
+ * 4 (2^depth + 1)^3 bytes for the table (1.1 MiB at depth 6; 2^(3 depth)
+ * more while it is built), sorting the
  * samples is O(n log n); the bins hold
  * each triangle at most JUDGE_BIN_SPREAD_MAX times. Then at most
  * max_samples x 3 directions x 2 maps x JUDGE_TICKS_MAX ticks, each one

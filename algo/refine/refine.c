@@ -74,18 +74,11 @@ typedef struct ilist {
     uint32_t n, cap;
 } ilist;
 
-/* Summed-volume table over an n^3 grid: t[x + m (y + m z)], m = n + 1, holds
- * the sum over cells [0, x) x [0, y) x [0, z). */
-typedef struct svt {
-    uint32_t *t;
-    uint32_t m;
-} svt;
-
 /* The whole refinement's grid, over the hull of the problem boxes. */
 typedef struct work {
     voxel_grid g;
     uint32_t n;
-    svt must, press, outside; /* their tables: one block, tables */
+    voxel_svt must, press, outside; /* their tables: one block, tables */
     uint32_t *tables;
     uint8_t *cls;      /* n^3: CELL_* bits */
     uint8_t *pressure; /* n^3: 0, or how hard users press for the cell to open */
@@ -147,48 +140,14 @@ static int push(ilist *l, const ibox *b)
     return 0;
 }
 
-/* Builds in t ((n + 1)^3 entries) the table of a function of the cell
- * given as bytes: the byte itself (mask 0), or 1 where it has a bit of
- * mask. One pass: each entry is its row's prefix sum plus the entries
- * below it in y and in z, less the one below both (the previous row and
- * plane are still in cache). */
-static void svt_build(svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes, uint8_t mask)
+static uint32_t svt_sum(const voxel_svt *s, const ibox *b)
 {
-    uint32_t m = n + 1;
-    size_t plane = (size_t)m * m;
-    s->m = m;
-    s->t = t;
-    memset(s->t, 0, plane * sizeof *s->t);
-    for (uint32_t z = 0; z < n; z++) {
-        uint32_t *p = s->t + plane * (z + 1);
-        memset(p, 0, m * sizeof *p);
-        for (uint32_t y = 0; y < n; y++) {
-            uint32_t *row = p + (size_t)m * (y + 1), *below_y = row - m, *below_z = row - plane,
-                     *below_yz = below_z - m;
-            const uint8_t *src = bytes + (size_t)n * (y + (size_t)n * z);
-            uint32_t acc = 0;
-            row[0] = 0;
-            for (uint32_t x = 1; x <= n; x++) {
-                acc += mask ? (src[x - 1] & mask) != 0 : src[x - 1];
-                row[x] = acc + below_y[x] + below_z[x] - below_yz[x];
-            }
-        }
-    }
-}
-
-static uint32_t svt_sum(const svt *s, const ibox *b)
-{
-    size_t m = s->m;
-#define T(x, y, z) s->t[(size_t)(x) + m * ((size_t)(y) + m * (size_t)(z))]
-    int64_t v = (int64_t)T(b->hi[0], b->hi[1], b->hi[2]) - T(b->lo[0], b->hi[1], b->hi[2]) -
-                T(b->hi[0], b->lo[1], b->hi[2]) - T(b->hi[0], b->hi[1], b->lo[2]) + T(b->lo[0], b->lo[1], b->hi[2]) +
-                T(b->lo[0], b->hi[1], b->lo[2]) + T(b->hi[0], b->lo[1], b->lo[2]) - T(b->lo[0], b->lo[1], b->lo[2]);
-#undef T
-    return (uint32_t)v;
+    const uint32_t lo[3] = {b->lo[0], b->lo[1], b->lo[2]}, hi[3] = {b->hi[0], b->hi[1], b->hi[2]};
+    return voxel_svt_sum(s, lo, hi);
 }
 
 /* Shrinks b to the bounding box of its occupied cells; 0 if it has none. */
-static int shrink(const svt *occ, ibox *b)
+static int shrink(const voxel_svt *occ, ibox *b)
 {
     if (svt_sum(occ, b) == 0)
         return 0;
@@ -1136,10 +1095,10 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
             return rc;
     }
     r->wanted += w->wanted;
-    svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
-    svt_build(&w->press, w->tables + table, n, w->pressure, 0);
+    voxel_svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
+    voxel_svt_build(&w->press, w->tables + table, n, w->pressure, 0);
     if (w->any_outside)
-        svt_build(&w->outside, w->tables + 2 * table, n, w->cls, CELL_OUT);
+        voxel_svt_build(&w->outside, w->tables + 2 * table, n, w->cls, CELL_OUT);
     r->cells += cells;
     r->occupied += w->g.occupied;
     r->divide_ms += ms_since(&t0);

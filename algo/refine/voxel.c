@@ -620,3 +620,30 @@ int voxel_tri_box_overlap(const double t[9], const double min[3], const double m
     }
     return 1;
 }
+
+/* One pass: each entry is its row's prefix sum plus the entries
+ * below it in y and in z, less the one below both (the previous row and
+ * plane are still in cache). */
+void voxel_svt_build(voxel_svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes, uint8_t mask)
+{
+    uint32_t m = n + 1;
+    size_t plane = (size_t)m * m;
+    s->m = m;
+    s->t = t;
+    memset(s->t, 0, plane * sizeof *s->t);
+    for (uint32_t z = 0; z < n; z++) {
+        uint32_t *p = s->t + plane * (z + 1);
+        memset(p, 0, m * sizeof *p);
+        for (uint32_t y = 0; y < n; y++) {
+            uint32_t *row = p + (size_t)m * (y + 1), *below_y = row - m, *below_z = row - plane,
+                     *below_yz = below_z - m;
+            const uint8_t *src = bytes + (size_t)n * (y + (size_t)n * z);
+            uint32_t acc = 0;
+            row[0] = 0;
+            for (uint32_t x = 1; x <= n; x++) {
+                acc += mask ? (src[x - 1] & mask) != 0 : src[x - 1];
+                row[x] = acc + below_y[x] + below_z[x] - below_yz[x];
+            }
+        }
+    }
+}

@@ -62,6 +62,32 @@ static inline int voxel_get(const voxel_grid *g, uint32_t x, uint32_t y, uint32_
     return (int)((g->bits[i >> 6] >> (i & 63)) & 1u);
 }
 
+/* A summed-volume table over an n^3 grid of counts: t[x + m (y + m z)],
+ * m = n + 1, holds the sum over cells [0, x) x [0, y) x [0, z), so that a
+ * box of cells sums in 8 reads. Its (n + 1)^3 entries are the caller's. */
+typedef struct voxel_svt {
+    uint32_t *t;
+    uint32_t m;
+} voxel_svt;
+
+/* Builds s in t from n^3 bytes (cell x + n (y + n z)): the byte itself
+ * (mask 0), or 1 where it has a bit of mask. The whole grid's sum must fit
+ * uint32_t. */
+void voxel_svt_build(voxel_svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes, uint8_t mask);
+
+/* The sum over the cells [lo, hi) on each axis (lo <= hi <= n). Inline:
+ * the refinement's division asks it at every split it weighs. */
+static inline uint32_t voxel_svt_sum(const voxel_svt *s, const uint32_t lo[3], const uint32_t hi[3])
+{
+    size_t m = s->m;
+#define T(x, y, z) s->t[(size_t)(x) + m * ((size_t)(y) + m * (size_t)(z))]
+    int64_t v = (int64_t)T(hi[0], hi[1], hi[2]) - T(lo[0], hi[1], hi[2]) - T(hi[0], lo[1], hi[2]) -
+                T(hi[0], hi[1], lo[2]) + T(lo[0], lo[1], hi[2]) + T(lo[0], hi[1], lo[2]) + T(hi[0], lo[1], lo[2]) -
+                T(lo[0], lo[1], lo[2]);
+#undef T
+    return (uint32_t)v;
+}
+
 /* Most threads voxel_mark_threads uses: beyond the cores of any machine
  * the server runs on, and a bound on its per-thread state (on the stack). */
 #ifndef VOXEL_MAX_THREADS

@@ -838,6 +838,41 @@ static float *load_model(const char *rel, import_mesh *m)
     return m->tris;
 }
 
+/* The summed-volume table against sums cell by cell, for every box of a
+ * small grid of random bytes, taken whole and through a mask. */
+static void test_svt_against_sums(void **state)
+{
+    (void)state;
+    enum { N = 5 };
+    uint8_t bytes[N * N * N];
+    uint32_t t[(N + 1) * (N + 1) * (N + 1)], seed = 7;
+    for (size_t i = 0; i < sizeof bytes; i++) {
+        seed = seed * 1664525u + 1013904223u;
+        bytes[i] = (uint8_t)(seed >> 24);
+    }
+    const uint8_t masks[] = {0, 0x12};
+    for (int k = 0; k < 2; k++) {
+        voxel_svt s;
+        voxel_svt_build(&s, t, N, bytes, masks[k]);
+        uint32_t lo[3], hi[3];
+        for (lo[0] = 0; lo[0] <= N; lo[0]++)
+            for (hi[0] = lo[0]; hi[0] <= N; hi[0]++)
+                for (lo[1] = 0; lo[1] <= N; lo[1]++)
+                    for (hi[1] = lo[1]; hi[1] <= N; hi[1]++)
+                        for (lo[2] = 0; lo[2] <= N; lo[2]++)
+                            for (hi[2] = lo[2]; hi[2] <= N; hi[2]++) {
+                                uint32_t want = 0;
+                                for (uint32_t z = lo[2]; z < hi[2]; z++)
+                                    for (uint32_t y = lo[1]; y < hi[1]; y++)
+                                        for (uint32_t x = lo[0]; x < hi[0]; x++) {
+                                            uint8_t b = bytes[x + N * (y + N * z)];
+                                            want += masks[k] ? (b & masks[k]) != 0 : b;
+                                        }
+                                assert_int_equal(voxel_svt_sum(&s, lo, hi), want);
+                            }
+    }
+}
+
 /* The real model's test, named after its file (tests/models.h). */
 #define BUNNY "classic/stanford-bunny.obj"
 
@@ -917,6 +952,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_large_triangles_against_reference),
         cmocka_unit_test(test_one_call_equals_union),
         cmocka_unit_test(test_threads_equal_one_thread),
+        cmocka_unit_test(test_svt_against_sums),
         {BUNNY, test_bunny, NULL, NULL, NULL},
     };
     return models_run("test_voxel", tests, sizeof tests / sizeof tests[0], &sel);
