@@ -58,9 +58,7 @@ static int key_valid(const char *key)
     return (b64_digit(key[21]) & 0xF) == 0;
 }
 
-/* True if the comma-separated list holds token (any case), blanks around
- * the items allowed. */
-static int has_token(const char *list, const char *token)
+int ws_list_has(const char *list, const char *token)
 {
     size_t tlen = strlen(token);
     for (const char *p = list; *p;) {
@@ -76,7 +74,7 @@ static int has_token(const char *list, const char *token)
     return 0;
 }
 
-int ws_asks_upgrade(const char *upgrade) { return upgrade && has_token(upgrade, "websocket"); }
+int ws_asks_upgrade(const char *upgrade) { return upgrade && ws_list_has(upgrade, "websocket"); }
 
 int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, size_t errlen)
 {
@@ -86,7 +84,7 @@ int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, si
         return cvre_fail(err, errlen, -EINVAL, "a WebSocket needs HTTP/1.1, not HTTP/1.%d", u->http_minor);
     if (!ws_asks_upgrade(u->upgrade))
         return cvre_fail(err, errlen, -EINVAL, "no \"Upgrade: websocket\"");
-    if (!u->connection || !has_token(u->connection, "upgrade"))
+    if (!u->connection || !ws_list_has(u->connection, "upgrade"))
         return cvre_fail(err, errlen, -EINVAL, "no \"Connection: Upgrade\"");
     if (!u->version)
         return cvre_fail(err, errlen, -EPROTONOSUPPORT, "no Sec-WebSocket-Version");
@@ -438,7 +436,7 @@ int ws_client_response(const uint8_t *data, size_t len, const char *key, char *e
     }
     if (!ws_asks_upgrade(upgrade))
         return cvre_fail(err, errlen, -EPROTO, "no \"Upgrade: websocket\" in the 101");
-    if (!connection || !has_token(connection, "upgrade"))
+    if (!connection || !ws_list_has(connection, "upgrade"))
         return cvre_fail(err, errlen, -EPROTO, "no \"Connection: Upgrade\" in the 101");
     char want[WS_ACCEPT_SIZE];
     if (ws_accept_key(key, strlen(key), want) < 0)

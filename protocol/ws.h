@@ -81,6 +81,11 @@ typedef struct ws_upgrade {
  * goes to err. */
 int ws_handshake(const ws_upgrade *u, char accept[WS_ACCEPT_SIZE], char *err, size_t errlen);
 
+/* True if the comma-separated list (a header's value: Connection, Upgrade,
+ * or a list of the server's own such as --web-origin) holds token, in any
+ * case, blanks around the items allowed. */
+int ws_list_has(const char *list, const char *token);
+
 /* True if an Upgrade header's value names websocket: the request asks for
  * one (and ws_handshake decides). Another upgrade (h2c) may be ignored
  * and the request served as plain HTTP. NULL: false. */

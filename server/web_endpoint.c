@@ -37,23 +37,6 @@ static char *switching(const char *accept, size_t *len)
     return out;
 }
 
-/* Whether list (comma-separated, spaces around items ignored) holds item,
- * in any case, or is "*". */
-static int listed(const char *list, const char *item, size_t len)
-{
-    for (const char *p = list; p && *p;) {
-        p += strspn(p, " ,");
-        size_t n = strcspn(p, ",");
-        size_t m = n;
-        while (m && p[m - 1] == ' ')
-            m--;
-        if ((m == 1 && *p == '*') || (m == len && m && strncasecmp(p, item, m) == 0))
-            return 1;
-        p += n;
-    }
-    return 0;
-}
-
 /* Whether a page of this Origin may open a WebSocket: a browser sends
  * Origin, so a page elsewhere that the user happens to visit cannot play
  * in their name on a server their browser reaches (127.0.0.1 included)
@@ -70,7 +53,8 @@ static int origin_allowed(const server *s, const char *origin, const char *host)
                                                                   : NULL;
     if (rest && host && strcasecmp(rest, host) == 0)
         return 1;
-    return listed(s->cfg.web_origins, origin, strlen(origin));
+    const char *list = s->cfg.web_origins;
+    return list && (ws_list_has(list, "*") || ws_list_has(list, origin));
 }
 
 static void upgrade(server *s, const http_request *req, http_reply *rep)
