@@ -10,8 +10,11 @@
  * For each model, a cluster of users stopped at the middle of the MBR's
  * +z face (the side a visitor walks into), at 0.9 m, and 64 logged
  * collisions there for the judge: the median over N runs of each stage, in
- * ms. The issue's target: a 100k-triangle object at 128^3
- * under 50 ms end to end.
+ * ms: digitize and divide (ecm_result), judge (judge_result), load+write
+ * (the rest of ecm_apply: the store's read of the object and its samples,
+ * the write of the version or candidate), publish and the total (wall
+ * clock). The issue's target: every object under 50 ms in total; exits 1,
+ * after the whole table, naming each object that misses it.
  */
 #include <errno.h>
 #include <getopt.h>
@@ -118,16 +121,19 @@ static int log_evidence(db *d, int64_t id, const cluster_found *cl, float feet_y
     return rc;
 }
 
-typedef struct stage {
-    double load_refine_write, voxel, divide, publish, total;
-} stage;
+/* The target for one object's refinement, end to end, ms. */
+#define TARGET_MS 50.0
+
+/* Stages of one run, ms (see the top comment). */
+enum { T_VOXEL, T_DIVIDE, T_JUDGE, T_LOAD_WRITE, T_PUBLISH, T_TOTAL, T_STAGES };
 
 /* One model: a fresh database with the object at version 1, refined repeat
  * times (each time from version 1 again: the later versions are rolled back
  * by resetting objects.ecm_version, and rejected candidates deleted, so
- * every run does the same work). */
+ * every run does the same work). *total gets the median total, ms.
+ * Returns 0 or -1. */
 static int bench_model(const char *dir, const char *label, const char *rel, int z_up, uint32_t limit, int depth,
-                       int repeat)
+                       int repeat, double *total)
 {
     import_mesh m;
     if (load(dir, rel, z_up, limit, &m) < 0)
@@ -168,8 +174,8 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
                             .boxes = (const scene_box *)box};
     if (!sc || scene_add(sc, &def) < 0)
         return -1;
-    double *t[5];
-    for (int k = 0; k < 5; k++)
+    double *t[T_STAGES];
+    for (int k = 0; k < T_STAGES; k++)
         t[k] = calloc((size_t)repeat, sizeof(double));
     uint32_t boxes_after = 0;
     int rejected = 0; /* the judge turned the refined map down: not published */
@@ -193,11 +199,12 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         }
         double t1 = bench_now_ms();
         rejected = !a.version;
-        t[0][r] = t1 - t0;
-        t[1][r] = a.stats.voxel_ms;
-        t[2][r] = a.stats.divide_ms;
-        t[3][r] = 0;
-        t[4][r] = t1 - t0;
+        t[T_VOXEL][r] = a.stats.voxel_ms;
+        t[T_DIVIDE][r] = a.stats.divide_ms;
+        t[T_JUDGE][r] = a.judge.ms;
+        t[T_LOAD_WRITE][r] = (t1 - t0) - a.stats.voxel_ms - a.stats.divide_ms - a.judge.ms;
+        t[T_PUBLISH][r] = 0;
+        t[T_TOTAL][r] = t1 - t0;
         boxes_after = a.boxes_after;
         if (rejected)
             continue; /* nothing to publish */
@@ -224,13 +231,17 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         free(hi);
         free(nb);
         double t2 = bench_now_ms();
-        t[3][r] = t2 - t1;
-        t[4][r] = t2 - t0;
+        t[T_PUBLISH][r] = t2 - t1;
+        t[T_TOTAL][r] = t2 - t0;
     }
-    printf("| %-22s | %7u | %4u^3 | %5u | %8.1f | %8.1f | %12.1f | %7.2f | %8.1f |%s\n", label, m.ntris,
-           1u << depth, boxes_after, bench_median(t[1], repeat), bench_median(t[2], repeat), bench_median(t[0], repeat),
-           bench_median(t[3], repeat), bench_median(t[4], repeat), rejected ? " rejected by the judge" : "");
-    for (int k = 0; k < 5; k++)
+    double med[T_STAGES];
+    for (int k = 0; k < T_STAGES; k++)
+        med[k] = bench_median(t[k], repeat);
+    *total = med[T_TOTAL];
+    printf("| %-22s | %7u | %4u^3 | %5u | %8.1f | %8.1f | %6.1f | %10.1f | %7.2f | %8.1f |%s\n", label, m.ntris,
+           1u << depth, boxes_after, med[T_VOXEL], med[T_DIVIDE], med[T_JUDGE], med[T_LOAD_WRITE], med[T_PUBLISH],
+           med[T_TOTAL], rejected ? " rejected by the judge" : "");
+    for (int k = 0; k < T_STAGES; k++)
         free(t[k]);
     free(frame);
     scene_destroy(sc);
@@ -263,9 +274,9 @@ int main(int argc, char **argv)
     }
     const char *dir = argv[optind];
     printf("End-to-end refinement of one object (median of %d; ms)\n\n", repeat);
-    printf("| %-22s | %7s | %6s | %5s | %8s | %8s | %12s | %7s | %8s |\n", "object", "tris", "grid", "boxes",
-           "digitize", "divide", "load+ref+wr", "publish", "total");
-    printf("|------------------------|---------|--------|-------|----------|----------|--------------|"
+    printf("| %-22s | %7s | %6s | %5s | %8s | %8s | %6s | %10s | %7s | %8s |\n", "object", "tris", "grid", "boxes",
+           "digitize", "divide", "judge", "load+write", "publish", "total");
+    printf("|------------------------|---------|--------|-------|----------|----------|--------|------------|"
            "---------|----------|\n");
     struct {
         const char *label, *rel;
@@ -278,8 +289,17 @@ int main(int argc, char **argv)
         {"city block, 100k part", "scenes/openfoam_windAroundBuildings.obj", 1, 100000},
         {"city block", "scenes/openfoam_windAroundBuildings.obj", 1, 0},
     };
-    for (size_t i = 0; i < sizeof models / sizeof models[0]; i++)
-        if (bench_model(dir, models[i].label, models[i].rel, models[i].z_up, models[i].limit, depth, repeat) < 0)
+    enum { NMODELS = sizeof models / sizeof models[0] };
+    double total[NMODELS];
+    for (size_t i = 0; i < NMODELS; i++)
+        if (bench_model(dir, models[i].label, models[i].rel, models[i].z_up, models[i].limit, depth, repeat,
+                        &total[i]) < 0)
             return 1;
-    return 0;
+    int missed = 0;
+    for (size_t i = 0; i < NMODELS; i++)
+        if (total[i] >= TARGET_MS) {
+            printf("%s: %.1f ms, target %.0f ms: missed\n", models[i].label, total[i], TARGET_MS);
+            missed = 1;
+        }
+    return missed;
 }
