@@ -1,6 +1,7 @@
 #include "judge.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdbool.h>
 #include <stdlib.h>
@@ -23,13 +24,20 @@ _Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes")
 #define JUDGE_BINS 32u
 
 /* The geometry, asked "does this box touch a triangle?". Local
- * coordinates: boxes in the metric frame are divided by the scale. */
+ * coordinates: boxes in the metric frame are divided by the scale. Only the
+ * triangles whose bounding box meets the region the trials can reach (near:
+ * see trial_region) are indexed, copied into tris; a box outside that
+ * region, which no trial asks by move.h's contract, is still answered
+ * exactly, from all the triangles. */
 typedef struct geometry {
-    voxel_grid g;
+    voxel_grid g;        /* over the indexed triangles (none: no grid) */
     voxel_svt svt;       /* occupied cells */
     tribins bins;        /* JUDGE_BINS^3 over the grid's box */
-    float (*tbox)[6];    /* each triangle's bounding box: most exact tests end there */
-    const float *tris;
+    float (*tbox)[6];    /* each indexed triangle's bounding box: most exact tests end there */
+    float *tris;         /* the indexed triangles, 9 floats each */
+    uint32_t ntris;
+    double near[6];      /* local min x y z, max x y z: the region indexed */
+    const judge_input *in;
     double scale;
 } geometry;
 
@@ -58,6 +66,34 @@ static void geometry_free(geometry *g)
     free(g->svt.t);
     tribins_free(&g->bins);
     free(g->tbox);
+    free(g->tris);
+}
+
+/* Inline: fminf and fmaxf are library calls on baseline x86-64, and every
+ * value here is finite. */
+static inline float fmin2(float a, float b) { return a < b ? a : b; }
+static inline float fmax2(float a, float b) { return a > b ? a : b; }
+
+static void tri_box(const float *t, float b[6])
+{
+    for (int a = 0; a < 3; a++) {
+        b[a] = fmin2(fmin2(t[a], t[3 + a]), t[6 + a]);
+        b[3 + a] = fmax2(fmax2(t[a], t[3 + a]), t[6 + a]);
+    }
+}
+
+/* The bounding box of all the triangles, lo and hi. */
+static void tris_bounds(const judge_input *in, float lo[3], float hi[3])
+{
+    for (int a = 0; a < 3; a++) {
+        lo[a] = in->tris[a];
+        hi[a] = in->tris[a];
+    }
+    for (size_t v = 1; v < (size_t)in->ntris * 3; v++)
+        for (int a = 0; a < 3; a++) {
+            lo[a] = fmin2(lo[a], in->tris[3 * v + (size_t)a]);
+            hi[a] = fmax2(hi[a], in->tris[3 * v + (size_t)a]);
+        }
 }
 
 /* The table of occupied cells, from the grid's bits made bytes. */
@@ -79,32 +115,58 @@ static int build_svt(geometry *g)
     return 0;
 }
 
-static int geometry_init(geometry *g, const judge_params *p, const judge_input *in)
+static int meets(const float b[6], const double r[6])
 {
+    for (int a = 0; a < 3; a++)
+        if ((double)b[a] > r[3 + a] || (double)b[3 + a] < r[a])
+            return 0;
+    return 1;
+}
+
+/* Indexes the triangles whose bounding box meets near (local): copies them,
+ * digitizes them over their bounding box and bins them. */
+static int geometry_init(geometry *g, const judge_params *p, const judge_input *in, const double near[6])
+{
+    memcpy(g->near, near, sizeof g->near);
+    g->in = in;
+    g->scale = in->scale;
+    uint32_t cap = 0;
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    g->tbox = cvre_malloc(in->ntris * sizeof *g->tbox);
-    if (!g->tbox)
-        return -ENOMEM;
     for (uint32_t i = 0; i < in->ntris; i++) {
         const float *t = in->tris + 9 * (size_t)i;
+        float b[6];
+        tri_box(t, b);
+        if (!meets(b, near))
+            continue;
+        if (g->ntris == cap) {
+            cap = cap ? 2 * cap : 1024;
+            float(*nb)[6] = cvre_realloc(g->tbox, (size_t)cap * sizeof *nb);
+            if (nb)
+                g->tbox = nb;
+            float *nt = nb ? cvre_realloc(g->tris, (size_t)cap * 9 * sizeof *nt) : NULL;
+            if (!nt)
+                return -ENOMEM;
+            g->tris = nt;
+        }
+        memcpy(g->tbox[g->ntris], b, sizeof b);
+        memcpy(g->tris + 9 * (size_t)g->ntris, t, 9 * sizeof *t);
+        g->ntris++;
         for (int a = 0; a < 3; a++) {
-            g->tbox[i][a] = fminf(fminf(t[a], t[3 + a]), t[6 + a]);
-            g->tbox[i][3 + a] = fmaxf(fmaxf(t[a], t[3 + a]), t[6 + a]);
-            lo[a] = fminf(lo[a], g->tbox[i][a]);
-            hi[a] = fmaxf(hi[a], g->tbox[i][3 + a]);
+            lo[a] = fmin2(lo[a], b[a]);
+            hi[a] = fmax2(hi[a], b[3 + a]);
         }
     }
-    g->tris = in->tris;
-    g->scale = in->scale;
+    if (g->ntris == 0)
+        return 0;
     int rc = voxel_grid_init(&g->g, p->depth, lo, hi);
     if (rc < 0)
         return rc;
-    if ((rc = voxel_mark(&g->g, in->tris, in->ntris)) < 0)
+    if ((rc = voxel_mark(&g->g, g->tris, g->ntris)) < 0)
         return rc;
     if ((rc = build_svt(g)) < 0)
         return rc;
     const double region[6] = {g->g.min[0], g->g.min[1], g->g.min[2], g->g.max[0], g->g.max[1], g->g.max[2]};
-    return tribins_build(&g->bins, region, JUDGE_BINS, (const float(*)[6])g->tbox, in->ntris, 0,
+    return tribins_build(&g->bins, region, JUDGE_BINS, (const float(*)[6])g->tbox, g->ntris, 0,
                          JUDGE_BIN_SPREAD_MAX);
 }
 
@@ -138,31 +200,44 @@ static int maybe_touches(const geometry *g, const double lo[3], const double hi[
     return voxel_svt_sum(&g->svt, a, b) > 0;
 }
 
-static int tri_overlaps(const geometry *g, uint32_t i, const double lo[3], const double hi[3])
+/* Whether triangle t (9 floats) with bounding box b overlaps the local box
+ * [lo, hi]. */
+static int tri_overlaps(const float *t, const float b[6], const double lo[3], const double hi[3])
 {
-    const float *b = g->tbox[i];
     if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
         return 0;
-    double t[9];
+    double v[9];
     for (int k = 0; k < 9; k++)
-        t[k] = g->tris[9 * (size_t)i + (size_t)k];
-    return voxel_tri_box_overlap(t, lo, hi);
+        v[k] = t[k];
+    return voxel_tri_box_overlap(v, lo, hi);
 }
 
 /* Whether the metric box [lo, hi] overlaps a triangle, exactly. */
 static int touches_exactly(geometry *g, const double lo[3], const double hi[3])
 {
-    if (!maybe_touches(g, lo, hi))
-        return 0;
     double l[3], h[3];
+    int inside = 1;
     for (int k = 0; k < 3; k++) {
         l[k] = lo[k] / g->scale;
         h[k] = hi[k] / g->scale;
+        inside &= l[k] >= g->near[k] && h[k] <= g->near[3 + k];
     }
+    if (!inside) { /* beyond the triangles indexed: all of them, one by one */
+        for (uint32_t i = 0; i < g->in->ntris; i++) {
+            const float *t = g->in->tris + 9 * (size_t)i;
+            float b[6];
+            tri_box(t, b);
+            if (tri_overlaps(t, b, l, h))
+                return 1;
+        }
+        return 0;
+    }
+    if (g->ntris == 0 || !maybe_touches(g, lo, hi))
+        return 0;
     tribins_iter it;
     tribins_query(&g->bins, l, h, &it);
     for (uint32_t t; (t = tribins_next(&it)) != TRIBINS_END;)
-        if (tri_overlaps(g, t, l, h))
+        if (tri_overlaps(g->tris + 9 * (size_t)t, g->tbox[t], l, h))
             return 1;
     return 0;
 }
@@ -267,6 +342,49 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
     }
 }
 
+/* The pace of a sample walking at horizontal speed h (> 0): its speed
+ * (JUDGE_SPEED_MIN and up, raised so that JUDGE_TICKS_MAX ticks cover the
+ * reach) and the ticks that cover the reach. */
+static void pace(const judge_params *p, float h, float *speed, uint32_t *ticks)
+{
+    float v = h < JUDGE_SPEED_MIN ? p->speed : h;
+    if (v * p->dt * JUDGE_TICKS_MAX < p->reach)
+        v = p->reach / (p->dt * JUDGE_TICKS_MAX);
+    *speed = v;
+    *ticks = (uint32_t)ceilf(p->reach / (v * p->dt));
+}
+
+/*
+ * The local region every box the trials of the n samples chosen from the m
+ * of distinct test can lie in (geometry's near), at any height: a move
+ * takes the avatar at most its displacement sideways (move.h: falls, lifts
+ * and steps are vertical, slides shorten it), to which rounding adds less
+ * than twice the spacing of floats at MOVE_MAX_COORD a tick; a test box
+ * reaches half the avatar and a cell (the metric cell) further.
+ */
+static void trial_region(const judge_params *p, const judge_sample *distinct, uint32_t m, uint32_t n,
+                         const double cell[3], double scale, double near[6])
+{
+    near[0] = near[2] = INFINITY;
+    near[3] = near[5] = -INFINITY;
+    near[1] = -INFINITY;
+    near[4] = INFINITY;
+    for (uint32_t i = 0; i < n; i++) {
+        const judge_sample *s = &distinct[(uint64_t)i * m / n];
+        float h = hypotf(s->vel[0], s->vel[2]), speed;
+        uint32_t ticks;
+        if (!(h > 0))
+            continue; /* not walked */
+        pace(p, h, &speed, &ticks);
+        double walk = 1.001 * speed * p->dt * ticks + 2.0 * ticks * MOVE_MAX_COORD * FLT_EPSILON;
+        for (int a = 0; a <= 2; a += 2) {
+            double r = walk + p->move.size[a] / 2.0 + cell[a];
+            near[a] = fmin(near[a], (s->pos[a] - r) / scale);
+            near[3 + a] = fmax(near[3 + a], (s->pos[a] + r) / scale);
+        }
+    }
+}
+
 /* Samples in a fixed order: their bytes (judge_sample is six floats, no
  * padding). */
 static int cmp_sample(const void *a, const void *b) { return memcmp(a, b, sizeof(judge_sample)); }
@@ -290,9 +408,10 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
         return cvre_fail(err, errlen, -EINVAL, "judge parameters out of range");
     if (!in->tris || in->ntris == 0)
         return cvre_fail(err, errlen, -EINVAL, "no triangles to judge against");
-    for (size_t i = 0; i < (size_t)in->ntris * 9; i++)
-        if (!isfinite(in->tris[i]))
-            return cvre_fail(err, errlen, -EINVAL, "triangle %zu: a coordinate is not finite", i / 9);
+    if (!voxel_finite(in->tris, (size_t)in->ntris * 9))
+        for (size_t i = 0;; i++) /* which one */
+            if (!isfinite(in->tris[i]))
+                return cvre_fail(err, errlen, -EINVAL, "triangle %zu: a coordinate is not finite", i / 9);
     if (!(in->scale > 0) || !isfinite(in->scale) || !isfinite(in->pose_y))
         return cvre_fail(err, errlen, -EINVAL, "scale %g or height %g unusable", in->scale, in->pose_y);
     const float (*maps[2])[6] = {in->old_boxes, in->new_boxes};
@@ -328,19 +447,9 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
     jp.move.floor_y = (float)-in->pose_y;
     geometry g = {0};
     map maps[2] = {{0}, {0}};
-    judge_sample *distinct = NULL;
-    if ((rc = geometry_init(&g, &jp, in)) < 0 || (rc = map_init(&maps[0], in->old_boxes, in->nold, in->scale)) < 0 ||
-        (rc = map_init(&maps[1], in->new_boxes, in->nnew, in->scale)) < 0) {
-        /* The input was checked: what is left is memory. */
-        rc = cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
-        goto done;
-    }
-    const double cells = (double)(1u << jp.cell_depth);
-    const double cell[3] = {(g.g.max[0] - g.g.min[0]) / cells * in->scale, (g.g.max[1] - g.g.min[1]) / cells * in->scale,
-                            (g.g.max[2] - g.g.min[2]) / cells * in->scale};
     /* A user pressing on a box logs the same collision tick after tick:
      * each distinct sample once, in an order of their own. */
-    distinct = cvre_malloc(in->nsamples * sizeof *distinct);
+    judge_sample *distinct = cvre_malloc(in->nsamples * sizeof *distinct);
     if (!distinct) {
         rc = cvre_fail(err, errlen, -ENOMEM, "judging: %s", strerror(ENOMEM));
         goto done;
@@ -352,20 +461,32 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
         if (m == 0 || cmp_sample(&distinct[m - 1], &distinct[i]) != 0)
             distinct[m++] = distinct[i];
     uint32_t n = m < jp.max_samples ? m : jp.max_samples;
+    float lo[3], hi[3];
+    tris_bounds(in, lo, hi);
+    const double cells = (double)(1u << jp.cell_depth);
+    const double cell[3] = {((double)hi[0] - lo[0]) / cells * in->scale, ((double)hi[1] - lo[1]) / cells * in->scale,
+                            ((double)hi[2] - lo[2]) / cells * in->scale};
+    double near[6];
+    trial_region(&jp, distinct, m, n, cell, in->scale, near);
+    if ((rc = geometry_init(&g, &jp, in, near)) < 0 ||
+        (rc = map_init(&maps[0], in->old_boxes, in->nold, in->scale)) < 0 ||
+        (rc = map_init(&maps[1], in->new_boxes, in->nnew, in->scale)) < 0) {
+        /* The input was checked: what is left is memory. */
+        rc = cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
+        goto done;
+    }
     const float turns[3] = {0, jp.deflect, -jp.deflect};
     int nturns = jp.deflect > 0 ? 3 : 1;
     tally t[2] = {{0, 0}, {0, 0}};
     for (uint32_t i = 0; i < n; i++) {
         const judge_sample *s = &distinct[(uint64_t)i * m / n];
-        float h = hypotf(s->vel[0], s->vel[2]);
+        float h = hypotf(s->vel[0], s->vel[2]), speed;
+        uint32_t ticks;
         if (!(h > 0)) {
             out->still++;
             continue;
         }
-        float speed = h < JUDGE_SPEED_MIN ? jp.speed : h;
-        if (speed * jp.dt * JUDGE_TICKS_MAX < jp.reach)
-            speed = jp.reach / (jp.dt * JUDGE_TICKS_MAX);
-        uint32_t ticks = (uint32_t)ceilf(jp.reach / (speed * jp.dt));
+        pace(&jp, h, &speed, &ticks);
         for (int d = 0; d < nturns; d++) {
             float c = cosf(turns[d]), sn = sinf(turns[d]);
             float dx = (s->vel[0] * c - s->vel[2] * sn) / h, dz = (s->vel[0] * sn + s->vel[2] * c) / h;

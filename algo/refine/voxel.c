@@ -476,6 +476,8 @@ static void mark_all(marker *m, const voxel_grid *g, const float *tris, size_t n
     }
 }
 
+int voxel_finite(const float *p, size_t n) { return all_finite(p, n); }
+
 static int args_ok(const voxel_grid *g, const float *tris, size_t ntris)
 {
     return g && g->bits && (!ntris || tris) && ntris <= SIZE_MAX / 9 && all_finite(tris, 9 * ntris);

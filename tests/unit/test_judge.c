@@ -145,6 +145,43 @@ static void test_wall_on_the_max_face_is_real(void **state)
     assert_int_equal(r.better, 0);
 }
 
+/* Users behind the doorway walk 2.8 m on to a back wall, at the end of the
+ * judge's reach; a block tower stands 20 m to the side. The judge indexes
+ * only the triangles the trials can reach: the back wall is among them
+ * (both maps stop users there, and it is real), and the tower is left out
+ * without changing a figure. */
+static void test_wall_at_the_end_of_the_reach_is_real(void **state)
+{
+    (void)state;
+    static mesh m;
+    const float map[4][6] = {{-3, 0, 0, -0.5f, 3, 0.2f}, {0.5f, 0, 0, 3, 3, 0.2f}, {-0.5f, 2.2f, 0, 0.5f, 3, 0.2f},
+                             {-3, 0, 3.6f, 3, 3, 3.8f}};
+    judge_sample s[8];
+    for (uint32_t i = 0; i < 8; i++)
+        s[i] = (judge_sample){.pos = {-0.2f + 0.05f * (float)i, 0, 0.8f}, .vel = {0, 0, 1.5f}};
+    judge_result r[2];
+    for (int tower = 0; tower < 2; tower++) {
+        wall(&m);
+        cuboid(&m, -3, 0, 3.6f, 3, 3, 3.8f);
+        /* The tower, or a plate as wide and high, so that the bounding box
+         * (and the phantom test's cell) is the same. */
+        for (int k = 0; k < (tower ? 10 : 1); k++)
+            cuboid(&m, 20, tower ? 0.3f * (float)k : 0, 1, 21, tower ? 0.3f * (float)(k + 1) : 3, 2);
+        judge_input in = input(&m, map, 4, map, 4, s, 8);
+        r[tower] = judged(&in);
+    }
+    assert_true(r[0].moves > 0);
+    assert_int_equal(r[0].phantom_old, 0);
+    assert_int_equal(r[0].phantom_new, 0);
+    assert_int_equal(r[0].opened_old, 0);
+    assert_int_equal(r[0].opened_new, 0);
+    assert_int_equal(r[1].moves, r[0].moves);
+    assert_int_equal(r[1].phantom_old, 0);
+    assert_int_equal(r[1].phantom_new, 0);
+    assert_int_equal(r[1].opened_old, 0);
+    assert_int_equal(r[1].opened_new, 0);
+}
+
 /* A garage: a 0.31 m base one steps onto, posts, a roof plate at 2.5 m and
  * a beam at the back reaching down to 1.83 m. The candidate makes the base a
  * box of its own but keeps the roof, beam and posts in one box whose bottom
@@ -329,6 +366,7 @@ int main(void)
         cmocka_unit_test(test_doorway_opened_is_better),
         cmocka_unit_test(test_corridor_behind_a_doorway_is_better),
         cmocka_unit_test(test_wall_on_the_max_face_is_real),
+        cmocka_unit_test(test_wall_at_the_end_of_the_reach_is_real),
         cmocka_unit_test(test_garage_base_opened_under_a_low_box_is_rejected),
         cmocka_unit_test(test_uncovered_wall_is_rejected),
         cmocka_unit_test(test_deterministic_cap_still_scale),
