@@ -880,6 +880,13 @@ static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, co
     return 1;
 }
 
+/* fmin, fmax and their float forms are library calls on baseline x86-64
+ * (their rules for NaNs); every value here is finite. */
+static inline double dmin(double a, double b) { return a < b ? a : b; }
+static inline double dmax(double a, double b) { return a > b ? a : b; }
+static inline float min3f(float a, float b, float c) { return a < b ? (a < c ? a : c) : (b < c ? b : c); }
+static inline float max3f(float a, float b, float c) { return a > b ? (a > c ? a : c) : (b > c ? b : c); }
+
 /* Grows bb (min x y z, max x y z) to hold the part of triangle t (9
  * floats) inside the closed box c (Sutherland-Hodgman, in double: one
  * vertex more per plane at most). */
@@ -912,8 +919,8 @@ static void clip_into(const float *t, const double c[6], double bb[6])
         }
     for (int i = 0; i < np; i++)
         for (int a = 0; a < 3; a++) {
-            bb[a] = fmin(bb[a], poly[cur][i][a]);
-            bb[3 + a] = fmax(bb[3 + a], poly[cur][i][a]);
+            bb[a] = dmin(bb[a], poly[cur][i][a]);
+            bb[3 + a] = dmax(bb[3 + a], poly[cur][i][a]);
         }
 }
 
@@ -957,8 +964,8 @@ static void add_parts(const tight *tt, uint32_t t, const double whole[6], uint32
             inside &= (double)tb[a] >= c[a] && (double)tb[3 + a] <= c[3 + a];
         if (inside) {
             for (int a = 0; a < 3; a++) {
-                bb[a] = fmin(bb[a], tb[a]);
-                bb[3 + a] = fmax(bb[3 + a], tb[3 + a]);
+                bb[a] = dmin(bb[a], tb[a]);
+                bb[3 + a] = dmax(bb[3 + a], tb[3 + a]);
             }
             return; /* the whole triangle: no other part adds anything */
         }
@@ -980,8 +987,8 @@ static int tighten(tight *tt, float b[6])
         double *c = tt->clip[nc];
         int empty = 0;
         for (int a = 0; a < 3; a++) {
-            c[a] = fmax(b[a], tt->problem[i][a]) - tt->eps;
-            c[3 + a] = fmin(b[3 + a], tt->problem[i][3 + a]) + tt->eps;
+            c[a] = dmax(b[a], tt->problem[i][a]) - tt->eps;
+            c[3 + a] = dmin(b[3 + a], tt->problem[i][3 + a]) + tt->eps;
             empty |= c[a] > c[3 + a];
         }
         nc += !empty;
@@ -1192,8 +1199,8 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         for (uint32_t t = 0; t < ntris; t++) {
             const float *v = tris + 9 * (size_t)t;
             for (int a = 0; a < 3; a++) {
-                tb[t][a] = fminf(v[a], fminf(v[3 + a], v[6 + a]));
-                tb[t][3 + a] = fmaxf(v[a], fmaxf(v[3 + a], v[6 + a]));
+                tb[t][a] = min3f(v[a], v[3 + a], v[6 + a]);
+                tb[t][3 + a] = max3f(v[a], v[3 + a], v[6 + a]);
             }
         }
         double scale = 0;

@@ -51,39 +51,55 @@ int tribins_build(tribins *b, const double region[6], uint32_t per_axis, const f
     const uint32_t nb = per_axis * per_axis * per_axis;
     b->start = cvre_calloc(nb + 1, sizeof *b->start);
     b->seen = cvre_calloc(ntris ? ntris : 1, sizeof *b->seen);
-    if (!b->start || !b->seen)
+    /* Each triangle's bins, found once for both passes (bins fit a byte:
+     * per_axis <= 256); lo > hi on x for a triangle in no bin: lo 2 when it
+     * goes to the big list, 1 when it misses the region. */
+    uint8_t(*rng)[6] = cvre_malloc((ntris ? ntris : 1) * sizeof *rng);
+    if (!b->start || !b->seen || !rng) {
+        free(rng);
         return -ENOMEM;
-    uint32_t lo[3], hi[3];
-    for (int pass = 0; pass < 2; pass++) {
-        for (uint32_t i = 0; i < ntris; i++) {
-            uint64_t c = box_bins(b, box[i], grow, lo, hi);
-            if (spread_max && c > spread_max) {
-                if (pass == 0)
-                    b->nbig++;
-                else
-                    b->big[b->nbig++] = i;
-                continue;
-            }
-            for (uint32_t z = lo[2]; c && z <= hi[2]; z++)
-                for (uint32_t y = lo[1]; y <= hi[1]; y++)
-                    for (uint32_t x = lo[0]; x <= hi[0]; x++) {
-                        uint32_t k = x + per_axis * (y + per_axis * z);
-                        if (pass == 0)
-                            b->start[k + 1]++;
-                        else
-                            b->list[b->start[k]++] = i;
-                    }
+    }
+    for (uint32_t i = 0; i < ntris; i++) {
+        uint32_t lo[3], hi[3];
+        uint64_t c = box_bins(b, box[i], grow, lo, hi);
+        rng[i][0] = 1;
+        rng[i][3] = 0;
+        if (spread_max && c > spread_max) {
+            rng[i][0] = 2;
+            b->nbig++;
+            continue;
         }
-        if (pass == 0) {
-            for (uint32_t k = 0; k < nb; k++)
-                b->start[k + 1] += b->start[k];
-            b->list = cvre_malloc((b->start[nb] ? b->start[nb] : 1) * sizeof *b->list);
-            b->big = cvre_malloc((b->nbig ? b->nbig : 1) * sizeof *b->big);
-            if (!b->list || !b->big)
-                return -ENOMEM;
-            b->nbig = 0;
+        for (uint32_t z = lo[2]; c && z <= hi[2]; z++)
+            for (uint32_t y = lo[1]; y <= hi[1]; y++)
+                for (uint32_t x = lo[0]; x <= hi[0]; x++)
+                    b->start[x + per_axis * (y + per_axis * z) + 1]++;
+        for (int a = 0; c && a < 3; a++) {
+            rng[i][a] = (uint8_t)lo[a];
+            rng[i][3 + a] = (uint8_t)hi[a];
         }
     }
+    for (uint32_t k = 0; k < nb; k++)
+        b->start[k + 1] += b->start[k];
+    b->list = cvre_malloc((b->start[nb] ? b->start[nb] : 1) * sizeof *b->list);
+    b->big = cvre_malloc((b->nbig ? b->nbig : 1) * sizeof *b->big);
+    if (!b->list || !b->big) {
+        free(rng);
+        return -ENOMEM;
+    }
+    b->nbig = 0;
+    for (uint32_t i = 0; i < ntris; i++) {
+        const uint8_t *r = rng[i];
+        if (r[0] > r[3]) {
+            if (r[0] == 2)
+                b->big[b->nbig++] = i;
+            continue;
+        }
+        for (uint32_t z = r[2]; z <= r[5]; z++)
+            for (uint32_t y = r[1]; y <= r[4]; y++)
+                for (uint32_t x = r[0]; x <= r[3]; x++)
+                    b->list[b->start[x + per_axis * (y + per_axis * z)]++] = i;
+    }
+    free(rng);
     /* The fill moved each offset to its bin's end: shift back. */
     memmove(b->start + 1, b->start, nb * sizeof *b->start);
     b->start[0] = 0;

@@ -2,9 +2,10 @@
  * tribins.h: triangles by bin, asked "which triangles may touch this box?".
  * A uniform grid of per_axis^3 bins spans a region; each bin lists the
  * triangles whose bounding box (grown by a margin) meets it. Built in two
- * passes over the boxes: count per bin, then fill one list (bin k holds
- * list[start[k] .. start[k + 1])). Used by the refinement (tightening boxes
- * to the triangles inside them) and by its judge (the exact contact test).
+ * passes over the boxes (each box's bins found once): count per bin, then
+ * fill one list (bin k holds list[start[k] .. start[k + 1])). Used by the
+ * refinement (tightening boxes to the triangles inside them) and by its
+ * judge (the exact contact test).
  * Pure module: no I/O, no global state.
  *
  * Conservative: bins are closed (a box on the face between two bins meets

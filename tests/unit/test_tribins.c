@@ -142,7 +142,7 @@ static void test_edges(void **state)
         failed += rc == -ENOMEM;
         tribins_free(&b);
     }
-    assert_int_equal(failed, 4);
+    assert_int_equal(failed, 5);
 }
 
 int main(void)
