@@ -151,7 +151,7 @@ typedef struct judge_result {
     uint64_t moves;       /* ticks per map */
     uint64_t phantom_old, phantom_new;
     uint64_t opened_old, opened_new;
-    double ms;
+    double ms;            /* the calling thread's CPU time (CLOCK_THREAD_CPUTIME_ID) */
 } judge_result;
 
 /*

@@ -132,8 +132,10 @@ typedef struct ecm_result {
     uint64_t cells;         /* cells examined: 2^(3 depth), one grid (0: no problem box) */
     uint64_t occupied;      /* of which occupied */
     uint64_t wanted;        /* of which wanted (step 3) */
-    double voxel_ms;        /* time in digitization */
-    double divide_ms;       /* time in steps 2 to 6 */
+    double voxel_ms;        /* ms in digitization, and */
+    double divide_ms;       /* in steps 2 to 6: the calling thread's CPU time
+                             * (CLOCK_THREAD_CPUTIME_ID, page faults included),
+                             * what the work costs on a loaded machine too */
 } ecm_result;
 
 /*
