@@ -1046,7 +1046,7 @@ static void to_local(const voxel_grid *g, const float box[6], const ibox *b, flo
 static void work_free(work *w)
 {
     voxel_grid_free(&w->g);
-    free(w->tables);
+    voxel_svt_free(w->tables);
     free(w->cls);
     free(w->pressure);
     free(w->out.b);
@@ -1086,9 +1086,10 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
     /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
      * were handed back to the system after each round and faulted in
      * again, page by page, by the next (glibc keeps a freed block for
-     * reuse up to twice the largest one it has seen returned to it). The
-     * outside table only when a cell is outside (never for one box). */
-    w->tables = cvre_malloc((w->any_outside ? 3 : 2) * table * sizeof *w->tables);
+     * reuse up to twice the largest one it has seen returned to it); in
+     * huge pages where the system has them (voxel_svt_alloc). The outside
+     * table only when a cell is outside (never for one box). */
+    w->tables = voxel_svt_alloc((w->any_outside ? 3 : 2) * table);
     if (!w->tables)
         return -ENOMEM;
     uint32_t wmax = 1;

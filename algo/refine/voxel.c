@@ -53,6 +53,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include "alloc.h"
@@ -621,6 +622,39 @@ int voxel_tri_box_overlap(const double t[9], const double min[3], const double m
                 return 0;
     }
     return 1;
+}
+
+/* A huge page (x86-64, and the usual size elsewhere); the block is
+ * allocated this much larger, and the table starts at the first multiple
+ * of it past a header that remembers the block. */
+#define HUGE_PAGE ((size_t)2 << 20)
+
+uint32_t *voxel_svt_alloc(size_t count)
+{
+    size_t bytes = count * sizeof(uint32_t);
+    if (count > (SIZE_MAX - 2 * HUGE_PAGE) / sizeof(uint32_t))
+        return NULL;
+    char *block = cvre_malloc(bytes + HUGE_PAGE + sizeof(void *));
+    if (!block)
+        return NULL;
+    uintptr_t at = ((uintptr_t)block + sizeof(void *) + HUGE_PAGE - 1) & ~(uintptr_t)(HUGE_PAGE - 1);
+    char *t = block + (at - (uintptr_t)block);
+    memcpy(t - sizeof(void *), &block, sizeof block);
+    /* Only whole huge pages; glibc keeps the block for the next
+     * refinement of a long-lived process, whose pages are then in. */
+    size_t whole = bytes & ~(HUGE_PAGE - 1);
+    if (whole)
+        madvise(t, whole, MADV_HUGEPAGE);
+    return (uint32_t *)(void *)t;
+}
+
+void voxel_svt_free(uint32_t *t)
+{
+    if (!t)
+        return;
+    char *block;
+    memcpy(&block, (char *)t - sizeof(void *), sizeof block);
+    free(block);
 }
 
 /* One pass: each entry is its row's prefix sum plus the entries
