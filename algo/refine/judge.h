@@ -40,14 +40,20 @@
  * no more than the old one (none where the old one opened nothing).
  *
  * "Touches a triangle" is answered by an occupancy grid of 2^depth cells per
- * axis over the object's bounding box (voxel.h, conservative: a cell a
- * triangle may touch is occupied) with a summed-volume table, so a box far
- * from the geometry costs O(1); a "maybe" is then confirmed with the exact
- * triangle-box test on the triangles binned near the avatar. Both tests
- * need the exact one: the centimetre by which the avatar's box is raised
- * from what it stands on is less than a cell.
+ * axis (voxel.h, conservative: a cell a triangle may touch is occupied)
+ * with a summed-volume table, so a box far from the geometry costs O(1); a
+ * "maybe" is then confirmed with the exact triangle-box test on the
+ * triangles binned near the avatar. Both tests need the exact one: the
+ * centimetre by which the avatar's box is raised from what it stands on is
+ * less than a cell. The grid and the bins hold only the triangles whose
+ * bounding box meets the region the trials can reach sideways (the samples'
+ * walks, grown by half the avatar and a cell; any height): a move takes
+ * the avatar no further sideways than it asks (move.h). A box outside that
+ * region would be tested against every triangle, so the figures never
+ * depend on it.
  *
- * Costs: building the grid is one pass over the triangles (voxel_mark) plus
+ * Costs: a pass over the triangles for their bounds and one for those near
+ * the samples; building the grid is one pass over those (voxel_mark) plus
  * 4 (2^depth + 1)^3 bytes for the table (1.1 MiB at depth 6; 2^(3 depth)
  * more while it is built), sorting the
  * samples is O(n log n); the bins hold
