@@ -204,9 +204,9 @@ typedef struct price {
 static price price_of(const work *w, const ibox *a, const ibox *b)
 {
     ibox h = hull(a, b);
-    price p;
-    p.vol = volume(&h);
-    p.forbidden = outside_in(w, &h) > 0;
+    price p = {.vol = volume(&h), .forbidden = outside_in(w, &h) > 0};
+    if (p.forbidden)
+        return p; /* never merged: no need for its other sums (most pairs far apart) */
     uint64_t empty_h = p.vol - svt_sum(&w->must, &h);
     uint64_t empty_ab = (volume(a) - svt_sum(&w->must, a)) + (volume(b) - svt_sum(&w->must, b));
     p.empty = empty_h > empty_ab ? empty_h - empty_ab : 0;
