@@ -594,7 +594,7 @@ static int separates(const double L[3], const double v[3][3], const double s[3])
         else
             bhi += q;
     }
-    return fmin(p[0], fmin(p[1], p[2])) > bhi || fmax(p[0], fmax(p[1], p[2])) < blo;
+    return dmin(p[0], dmin(p[1], p[2])) > bhi || dmax(p[0], dmax(p[1], p[2])) < blo;
 }
 
 int voxel_tri_box_overlap(const double t[9], const double min[3], const double max[3])
@@ -604,7 +604,7 @@ int voxel_tri_box_overlap(const double t[9], const double min[3], const double m
         s[a] = max[a] - min[a];
         for (int i = 0; i < 3; i++)
             v[i][a] = t[3 * i + a] - min[a];
-        if (fmin(v[0][a], fmin(v[1][a], v[2][a])) > s[a] || fmax(v[0][a], fmax(v[1][a], v[2][a])) < 0.0)
+        if (dmin(v[0][a], dmin(v[1][a], v[2][a])) > s[a] || dmax(v[0][a], dmax(v[1][a], v[2][a])) < 0.0)
             return 0;
     }
     for (int i = 0; i < 3; i++)
