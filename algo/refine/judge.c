@@ -451,6 +451,13 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
     return 0;
 }
 
+int judge_better(const judge_result *r)
+{
+    return r->phantom_new < r->phantom_old &&
+           (r->phantom_old - r->phantom_new) * JUDGE_GAIN_DEN >= r->phantom_old * JUDGE_GAIN_NUM &&
+           r->opened_new <= r->opened_old;
+}
+
 int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen)
 {
     struct timespec t0, t1; /* this thread's CPU time: see judge_result */
@@ -516,7 +523,7 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
     out->phantom_new = t[1].phantom;
     out->opened_old = t[0].opened;
     out->opened_new = t[1].opened;
-    out->better = t[1].phantom < t[0].phantom && t[1].opened <= t[0].opened;
+    out->better = judge_better(out);
 done:
     free(distinct);
     geometry_free(&g);

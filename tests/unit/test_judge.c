@@ -1,6 +1,7 @@
 /* The judge: a doorway opened is better, a garage's base opened under a
  * coarse roof box is not, a map that uncovers a wall is not, the same input
- * gives the same figures, and bad input gets a clear refusal. */
+ * gives the same figures, a marginal gain is no gain, and bad input gets a
+ * clear refusal. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -299,6 +300,31 @@ static void test_deterministic_cap_still_scale(void **state)
     assert_true(b.phantom_old < a.phantom_old / 10);
 }
 
+/* The verdict: a map must remove a quarter of the old map's phantom
+ * blocks (and at least one), and open nothing more. */
+static void test_verdict_needs_a_clear_gain(void **state)
+{
+    (void)state;
+    judge_result r = {.phantom_old = 864, .phantom_new = 861};
+    assert_int_equal(judge_better(&r), 0); /* the scenario's desk, seed 1 */
+    r = (judge_result){.phantom_old = 29, .phantom_new = 25};
+    assert_int_equal(judge_better(&r), 0); /* and seed 3 */
+    r = (judge_result){.phantom_old = 1829, .phantom_new = 775};
+    assert_int_equal(judge_better(&r), 1);
+    r = (judge_result){.phantom_old = 4, .phantom_new = 3};
+    assert_int_equal(judge_better(&r), 1); /* exactly a quarter */
+    r = (judge_result){.phantom_old = 5, .phantom_new = 4};
+    assert_int_equal(judge_better(&r), 0);
+    r = (judge_result){.phantom_old = 1, .phantom_new = 0};
+    assert_int_equal(judge_better(&r), 1);
+    r = (judge_result){.phantom_old = 0, .phantom_new = 0};
+    assert_int_equal(judge_better(&r), 0); /* nothing to gain */
+    r = (judge_result){.phantom_old = 100, .phantom_new = 0, .opened_old = 0, .opened_new = 1};
+    assert_int_equal(judge_better(&r), 0); /* opens a wall */
+    r = (judge_result){.phantom_old = 100, .phantom_new = 10, .opened_old = 3, .opened_new = 3};
+    assert_int_equal(judge_better(&r), 1);
+}
+
 static void test_bad_input(void **state)
 {
     (void)state;
@@ -370,6 +396,7 @@ int main(void)
         cmocka_unit_test(test_garage_base_opened_under_a_low_box_is_rejected),
         cmocka_unit_test(test_uncovered_wall_is_rejected),
         cmocka_unit_test(test_deterministic_cap_still_scale),
+        cmocka_unit_test(test_verdict_needs_a_clear_gain),
         cmocka_unit_test(test_bad_input),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
