@@ -1025,6 +1025,246 @@ static int tighten(tight *tt, float b[6])
     return 1;
 }
 
+/* Step 7's least gain: a split must free more than this share of a box's
+ * volume, and more than max_empty (what a merge may add: a split never
+ * undoes a merge step 5 allowed). */
+#define SPLIT_GAIN_MIN 0.25
+
+/* Step 7 leaves a 1/SPLIT_RESERVE share of max boxes unspent: boxes it
+ * splits where no user is stopped later are kept as they are, and a
+ * round-1 Sponza map split to the cap left later rounds one box for a
+ * cluster pressing on half the building. */
+#define SPLIT_RESERVE 4u
+
+/* Most triangles a box may meet for step 7 to price its splits (sorting
+ * them three times is its cost). Boxes of many small triangles already
+ * follow their surface to the cell; the space step 7 frees lies along
+ * large faces that one cell border cut, such as a desk's side panel and
+ * the end of its back board, 116 triangles in all. */
+#define SPLIT_PARTS_MAX 512u
+
+/* A split of a box (step 7): the plane at `at` across axis `axis`, and the
+ * volume the parts are expected to have (from the triangles' bounding
+ * boxes, clipped to the box). */
+typedef struct split {
+    int axis;
+    float at;
+    double volume;
+} split;
+
+static double box_volume(const float lo[3], const float hi[3])
+{
+    double v = 1;
+    for (int a = 0; a < 3; a++)
+        v *= (double)hi[a] - lo[a];
+    return v;
+}
+
+/* A triangle's bounding box clipped to the box being split. */
+typedef struct part_box {
+    float lo[3], hi[3];
+} part_box;
+
+/* A sort key and the part it belongs to. */
+typedef struct keyed {
+    float key;
+    uint32_t i;
+} keyed;
+
+static int by_key(const void *x, const void *y)
+{
+    float a = ((const keyed *)x)->key, b = ((const keyed *)y)->key;
+    if (a != b)
+        return a < b ? -1 : 1;
+    uint32_t i = ((const keyed *)x)->i, j = ((const keyed *)y)->i;
+    return (i > j) - (i < j);
+}
+
+/* Grows the bounds lo, hi (min x y z, max x y z) to hold part q. */
+static void part_grow(float lo[3], float hi[3], const part_box *q)
+{
+    for (int a = 0; a < 3; a++) {
+        lo[a] = q->lo[a] < lo[a] ? q->lo[a] : lo[a];
+        hi[a] = q->hi[a] > hi[a] ? q->hi[a] : hi[a];
+    }
+}
+
+/* The volume of the bounds after k parts (prefix bounds pl, ph), the axis
+ * clamped to at from above (below = 1) or below; 0 for no part. */
+static double prefix_volume(const float (*pl)[3], const float (*ph)[3], uint32_t k, int axis, float at, int below)
+{
+    if (k == 0)
+        return 0;
+    double v = 1;
+    for (int a = 0; a < 3; a++) {
+        double lo = pl[k - 1][a], hi = ph[k - 1][a];
+        if (a == axis) {
+            if (below)
+                hi = hi < at ? hi : at;
+            else
+                lo = lo > at ? lo : at;
+        }
+        v *= hi > lo ? hi - lo : 0;
+    }
+    return v;
+}
+
+/*
+ * The best plane to split box b (step 7) across any axis: for each axis,
+ * the parts sorted by where they start, with the bounds of every prefix,
+ * and by where they end (from the far side), so that each plane at a
+ * part's start is priced in O(log n): the parts below it and those above
+ * it, each side's bounds clamped to the plane. Fills *best and returns 1
+ * when a plane leaves the two sides less volume than b has; 0 otherwise
+ * (or when b meets more than SPLIT_PARTS_MAX triangles); -ENOMEM.
+ */
+static int best_split(tight *tt, const float b[6], split *best)
+{
+    double whole[6];
+    for (int a = 0; a < 3; a++) {
+        whole[a] = b[a];
+        whole[3 + a] = b[3 + a];
+    }
+    uint32_t n = 0, cap = 0;
+    part_box *parts = NULL;
+    tribins_iter it;
+    tribins_query(&tt->bins, whole, whole + 3, &it);
+    for (uint32_t t; (t = tribins_next(&it)) != TRIBINS_END;) {
+        const float *tb = tt->tb[t];
+        if (misses(tb, whole))
+            continue;
+        if (n == SPLIT_PARTS_MAX) {
+            free(parts);
+            return 0;
+        }
+        if (n == cap) {
+            cap = cap ? 2 * cap : 256;
+            part_box *np = cvre_realloc(parts, cap * sizeof *np);
+            if (!np) {
+                free(parts);
+                return -ENOMEM;
+            }
+            parts = np;
+        }
+        for (int a = 0; a < 3; a++) {
+            parts[n].lo[a] = tb[a] > b[a] ? tb[a] : b[a];
+            parts[n].hi[a] = tb[3 + a] < b[3 + a] ? tb[3 + a] : b[3 + a];
+        }
+        n++;
+    }
+    int found = 0;
+    keyed *k = n ? cvre_malloc(2 * (size_t)n * sizeof *k) : NULL;
+    float(*bounds)[3] = n ? cvre_malloc(4 * (size_t)n * sizeof *bounds) : NULL;
+    if (n && (!k || !bounds)) {
+        free(parts);
+        free(k);
+        free(bounds);
+        return -ENOMEM;
+    }
+    keyed *up = k + n;
+    float(*pl)[3] = bounds, (*ph)[3] = bounds + n, (*sl)[3] = bounds + 2 * n, (*sh)[3] = bounds + 3 * n;
+    double volume = box_volume(b, b + 3);
+    for (int axis = 0; axis < 3 && n > 1; axis++) {
+        for (uint32_t i = 0; i < n; i++) {
+            k[i] = (keyed){parts[i].lo[axis], i};
+            up[i] = (keyed){-parts[i].hi[axis], i};
+        }
+        qsort(k, n, sizeof *k, by_key);
+        qsort(up, n, sizeof *up, by_key);
+        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        float ulo[3] = {INFINITY, INFINITY, INFINITY}, uhi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (uint32_t i = 0; i < n; i++) {
+            part_grow(lo, hi, &parts[k[i].i]);
+            memcpy(pl[i], lo, sizeof lo);
+            memcpy(ph[i], hi, sizeof hi);
+            part_grow(ulo, uhi, &parts[up[i].i]);
+            memcpy(sl[i], ulo, sizeof ulo);
+            memcpy(sh[i], uhi, sizeof uhi);
+        }
+        /* A plane just before each distinct start after the first (two
+         * floats before, more than tightening's margin, which holds what
+         * touches a side):
+         * below it the parts that start before, above it those that end
+         * at it or after. */
+        uint32_t above = n;
+        for (uint32_t i = 1; i < n; i++) {
+            float at = nextafterf(nextafterf(k[i].key, -INFINITY), -INFINITY);
+            if (!((double)at + 4 * tt->eps < (double)k[i].key && at > k[i - 1].key && at > b[axis] &&
+                  at < b[3 + axis]))
+                continue;
+            while (above > 0 && -up[above - 1].key < at)
+                above--;
+            double v = prefix_volume((const float(*)[3])pl, (const float(*)[3])ph, i, axis, at, 1) +
+                       prefix_volume((const float(*)[3])sl, (const float(*)[3])sh, above, axis, at, 0);
+            if (v < volume && (!found || v < best->volume)) {
+                *best = (split){.axis = axis, .at = at, .volume = v};
+                found = 1;
+            }
+        }
+    }
+    free(parts);
+    free(k);
+    free(bounds);
+    return found;
+}
+
+/*
+ * Step 7: new boxes next to wanted space that still hold much empty space
+ * along the geometry, under the cell's size (a desk's side panel whose box
+ * also holds the end of the back board, 5 cm further out: users stop 5 cm
+ * short of the panel all along it), are split across the plane that frees
+ * the most, both parts tightened, while the object has fewer than max
+ * boxes and a split frees more than gain_min of its box (a part without
+ * geometry goes). boxes: count boxes (room for max); state: per box (room
+ * for max), 0 for a box to split, 2 for one to keep as it is; 1 is used
+ * here (priced). The parts of a split box may be split again. Returns the
+ * new count, or -ENOMEM.
+ */
+static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t count, uint32_t max, double gain_min)
+{
+    split sp[ECM_MAX_BOXES_LIMIT];
+    while (count < max) {
+        uint32_t bi = UINT32_MAX;
+        double bgain = 0;
+        for (uint32_t j = 0; j < count; j++) {
+            if (state[j] == 0) {
+                int rc = best_split(tt, boxes[j], &sp[j]);
+                if (rc < 0)
+                    return rc;
+                double vol = box_volume(boxes[j], boxes[j] + 3);
+                state[j] = rc == 1 && vol - sp[j].volume > gain_min * vol ? 1 : 2;
+            }
+            double gain = box_volume(boxes[j], boxes[j] + 3) - sp[j].volume;
+            if (state[j] == 1 && (bi == UINT32_MAX || gain > bgain)) {
+                bi = j;
+                bgain = gain;
+            }
+        }
+        if (bi == UINT32_MAX)
+            break;
+        /* Exactly: both sides tightened; a side without geometry goes. */
+        float lo[6], hi[6];
+        memcpy(lo, boxes[bi], sizeof lo);
+        memcpy(hi, boxes[bi], sizeof hi);
+        lo[3 + sp[bi].axis] = sp[bi].at;
+        hi[sp[bi].axis] = sp[bi].at;
+        int has_lo = tighten(tt, lo), has_hi = tighten(tt, hi);
+        double vol = box_volume(boxes[bi], boxes[bi] + 3);
+        double after = (has_lo ? box_volume(lo, lo + 3) : 0) + (has_hi ? box_volume(hi, hi + 3) : 0);
+        if (!(has_lo || has_hi) || !(vol - after > gain_min * vol)) {
+            state[bi] = 2;
+            continue;
+        }
+        memcpy(boxes[bi], has_lo ? lo : hi, sizeof lo);
+        state[bi] = 0;
+        if (has_lo && has_hi) {
+            memcpy(boxes[count], hi, sizeof hi);
+            state[count++] = 0;
+        }
+    }
+    return (int)count;
+}
+
 /* Local float coordinates of a box of cells grown by twice RANGE_MARGIN
  * (it then holds the slivers of problem boxes next to its cells: see
  * classify), rounded outwards and clamped to the grid's box. */
@@ -1168,6 +1408,7 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     float(*tb)[6] = NULL;
     float(*pb)[6] = NULL;
     double(*clip)[6] = NULL;
+    uint8_t *state = NULL;
     work w = {0};
     tight tt = {0};
     if (!problem)
@@ -1198,9 +1439,12 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         tb = cvre_malloc((size_t)ntris * sizeof *tb);
         pb = cvre_malloc(nproblem * sizeof *pb);
         clip = cvre_malloc(nproblem * sizeof *clip);
-        out->boxes = cvre_malloc((size_t)(kept + (whole ? nproblem : w.out.n) + 1) * sizeof *out->boxes);
+        uint32_t room = kept + (whole ? nproblem : w.out.n) + 1;
+        room = room > p->max_boxes ? room : p->max_boxes;
+        out->boxes = cvre_malloc((size_t)room * sizeof *out->boxes);
+        state = cvre_malloc(room);
         rc = -ENOMEM;
-        if (!tb || !pb || !clip || !out->boxes)
+        if (!tb || !pb || !clip || !out->boxes || !state)
             goto done;
         for (uint32_t t = 0; t < ntris; t++) {
             const float *v = tris + 9 * (size_t)t;
@@ -1227,6 +1471,7 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
             if (!problem[i])
                 memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
         uint32_t nb = whole ? nproblem : w.out.n;
+        memset(state, 2, out->count);
         for (uint32_t j = 0; j < nb; j++) {
             float *b = out->boxes[out->count];
             if (whole)
@@ -1235,9 +1480,20 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
                 to_local(&w.g, hb, &w.out.b[j], b);
             if (!tighten(&tt, b))
                 continue;
+            /* Step 7 looks at boxes with wanted cells in them or next to them. */
+            uint32_t lo[3], hi[3];
+            ibox near = {{0, 0, 0}, {0, 0, 0}};
+            if (cell_range(&w.g, b, 1, lo, hi))
+                near = (ibox){{(uint16_t)lo[0], (uint16_t)lo[1], (uint16_t)lo[2]},
+                              {(uint16_t)hi[0], (uint16_t)hi[1], (uint16_t)hi[2]}};
+            state[out->count] = svt_sum(&w.press, &near) > 0 ? 0 : 2;
             out->count++;
             out->capped += whole || svt_sum(&w.press, &w.out.b[j]) > 0;
         }
+        if ((rc = split_boxes(&tt, out->boxes, state, out->count, p->max_boxes - p->max_boxes / SPLIT_RESERVE,
+                              fmax(SPLIT_GAIN_MIN, p->max_empty))) < 0)
+            goto done;
+        out->count = (uint32_t)rc;
         out->divide_ms += ms_since(&t0);
     } else {
         out->boxes = cvre_malloc((size_t)nboxes * sizeof *out->boxes);
@@ -1256,6 +1512,7 @@ done:
     free(tb);
     free(pb);
     free(clip);
+    free(state);
     tribins_free(&tt.bins);
     free(problem);
     if (rc < 0)

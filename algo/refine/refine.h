@@ -66,6 +66,18 @@
  *      rounding), rounded outwards to float; a box with no such part goes.
  *      A box never grows: boxes stop at the geometry, not at the cells
  *      around it, so an opening never narrows by a cell per round.
+ *   7. Split under the cell: a new box with wanted cells in it or next to
+ *      it may still hold empty space along the geometry that no cell
+ *      border separates (a desk's side panel in one box with the last
+ *      centimetres of the back board that meets it: users stop short of
+ *      the panel all along it). While the object has fewer than
+ *      max_boxes less a quarter (left for later rounds), the box whose
+ *      best plane frees the most is split across it, both parts tightened
+ *      as in step 6, if that frees more than a quarter of it and more than
+ *      max_empty. The plane is chosen among the starts of the triangles'
+ *      bounding boxes in it, on each axis (boxes meeting more than
+ *      SPLIT_PARTS_MAX triangles are left as they are: their surface
+ *      already follows the cells).
  *
  * `capped` counts the new boxes left holding pressure (wanted cells), or
  * every problem box when they were only tightened: the opening may stay
