@@ -146,7 +146,13 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
     memcpy(g->near, near, sizeof g->near);
     g->in = in;
     g->scale = in->scale;
-    uint32_t cap = 0;
+    /* Room for every triangle, of which only what the indexed ones fill
+     * is touched (a large block's pages are mapped as they are written):
+     * growing the arrays instead copied them again and again. */
+    g->tbox = cvre_malloc(in->ntris * sizeof *g->tbox);
+    g->tris = cvre_malloc((size_t)in->ntris * 9 * sizeof *g->tris);
+    if (!g->tbox || !g->tris)
+        return -ENOMEM;
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t i = 0; i < in->ntris; i++) {
         const float *t = in->tris + 9 * (size_t)i;
@@ -154,16 +160,6 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
         tri_box(t, b);
         if (!meets(b, near))
             continue;
-        if (g->ntris == cap) {
-            cap = cap ? 2 * cap : 1024;
-            float(*nb)[6] = cvre_realloc(g->tbox, (size_t)cap * sizeof *nb);
-            if (nb)
-                g->tbox = nb;
-            float *nt = nb ? cvre_realloc(g->tris, (size_t)cap * 9 * sizeof *nt) : NULL;
-            if (!nt)
-                return -ENOMEM;
-            g->tris = nt;
-        }
         memcpy(g->tbox[g->ntris], b, sizeof b);
         memcpy(g->tris + 9 * (size_t)g->ntris, t, 9 * sizeof *t);
         g->ntris++;
