@@ -445,18 +445,27 @@ static void test_room_door_opens_walls_stay(void **state)
  * 0.15 in local units. Users stopped on the back face, in front of the
  * opening.
  */
+/* Model rel (Y up), its bounding box as its one box, and the default
+ * parameters for it scaled `scale` times in the world (the avatar and its
+ * step in local units). */
+static import_mesh scaled_model(const char *rel, float scale, float box[6], ecm_params *p)
+{
+    snprintf(check_ctx, sizeof check_ctx, "%s", rel);
+    import_mesh m = load(rel, 0);
+    mbr(m.tris, m.ntris, box);
+    ecm_params_default(p);
+    for (int a = 0; a < 3; a++)
+        p->avatar[a] /= scale;
+    p->step /= scale;
+    return m;
+}
+
 static void test_archway_opens_stone_stays(void **state)
 {
     (void)state;
-    snprintf(check_ctx, sizeof check_ctx, "archway");
-    import_mesh m = load("openings/kenney_archway_cliff_cave_stone.glb", 0);
     float box[6];
-    mbr(m.tris, m.ntris, box);
     ecm_params p;
-    ecm_params_default(&p);
-    p.avatar[0] = 0.6f / 4;
-    p.avatar[1] = 1.8f / 4;
-    p.avatar[2] = 0.6f / 4;
+    import_mesh m = scaled_model("openings/kenney_archway_cliff_cave_stone.glb", 4, box, &p);
     ecm_cluster cl = cluster_at(0, (const float[3]){0, 0.175f, box[5]}, (const float[3]){0.05f, 0.1f, 0});
     ecm_result r;
     char err[256];
@@ -505,15 +514,9 @@ static void test_archway_opens_stone_stays(void **state)
 static void test_split_frees_space_under_the_cell(void **state)
 {
     (void)state;
-    snprintf(check_ctx, sizeof check_ctx, "desk");
-    import_mesh m = load("openings/homedecor_desk.obj", 0);
     float box[6];
-    mbr(m.tris, m.ntris, box);
     ecm_params p;
-    ecm_params_default(&p);
-    for (int a = 0; a < 3; a++)
-        p.avatar[a] /= 3;
-    p.step /= 3;
+    import_mesh m = scaled_model("openings/homedecor_desk.obj", 3, box, &p);
     const ecm_cluster cl = {.box = 0, .min = {-1.21f, -0.2f, -0.5f}, .max = {0.164f, -0.2f, -0.5f},
                             .centroid = {-0.73f, -0.2f, -0.5f}, .weight = 2600};
     ecm_result r;
