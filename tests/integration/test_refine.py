@@ -139,9 +139,14 @@ def test_doorway_opens_live_and_walls_stay():
     crowd = Crowd(srv, ["u1", "u2", "u3", "u4", "wallbumper"])
     room = object_id(srv.db, "openfoam_room_with_doorway.stl")
     to_east_of_door(crowd)
-    # Into the doorway: the MBR stops everyone at the east face.
+    # Into the doorway: the MBR stops everyone at the east face. The
+    # refiner looks every second, so v2 may come within these 0.8 s and let
+    # them through at once (u1 then ends 2 m in): the stop is then seen in
+    # the collisions the users were told of.
     crowd.walk((5, 0, DOOR_Z), 0.8)
-    assert blocked_x(crowd.at("u1")[0]), crowd.at("u1")
+    assert crowd.hits.get(room, 0) > 0, crowd.hits
+    if not any(m["id"] == room and m["ecm_version"] >= 2 for m in crowd.infos):
+        assert blocked_x(crowd.at("u1")[0]), crowd.at("u1")
     info = crowd.wait_version(room, 2)
     assert len(info["boxes"]) > 1, info
     # Keep walking: now the door lets them in, up to the west wall inside
