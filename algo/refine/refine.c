@@ -1265,6 +1265,76 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
     return (int)count;
 }
 
+/* Most old boxes a new box may meet for within_old to test it cell by
+ * cell ((2m + 2)^3 cells); past it the box is taken apart. */
+#define CONTAIN_MAX 16u
+
+static int by_double(const void *x, const void *y)
+{
+    double a = *(const double *)x, b = *(const double *)y;
+    return (a > b) - (a < b);
+}
+
+/*
+ * Whether box b lies in the union of the n boxes pb (the old map), give or
+ * take tol: the planes of their faces cut b into cells, and the middle of
+ * each cell wider than tol must be in one of them. 0 also when b meets more
+ * than CONTAIN_MAX of them.
+ */
+static int within_old(const float b[6], const float (*pb)[6], uint32_t n, double tol)
+{
+    float q[CONTAIN_MAX][6];
+    uint32_t m = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        float c[6];
+        int meets = 1;
+        for (int a = 0; a < 3; a++) {
+            c[a] = b[a] > pb[i][a] ? b[a] : pb[i][a];
+            c[3 + a] = b[3 + a] < pb[i][3 + a] ? b[3 + a] : pb[i][3 + a];
+            meets &= c[a] <= c[3 + a];
+        }
+        if (!meets)
+            continue;
+        if (m == CONTAIN_MAX)
+            return 0;
+        memcpy(q[m++], c, sizeof c);
+    }
+    double cut[3][2 * CONTAIN_MAX + 2];
+    uint32_t nc[3];
+    for (int a = 0; a < 3; a++) {
+        nc[a] = 0;
+        cut[a][nc[a]++] = b[a];
+        cut[a][nc[a]++] = b[3 + a];
+        for (uint32_t i = 0; i < m; i++) {
+            cut[a][nc[a]++] = q[i][a];
+            cut[a][nc[a]++] = q[i][3 + a];
+        }
+        qsort(cut[a], nc[a], sizeof cut[a][0], by_double);
+    }
+    for (uint32_t i = 0; i + 1 < nc[0]; i++)
+        for (uint32_t j = 0; j + 1 < nc[1]; j++)
+            for (uint32_t k = 0; k + 1 < nc[2]; k++) {
+                const uint32_t at[3] = {i, j, k};
+                double mid[3];
+                int wide = 1;
+                for (int a = 0; a < 3; a++) {
+                    wide &= cut[a][at[a] + 1] - cut[a][at[a]] > tol;
+                    mid[a] = (cut[a][at[a]] + cut[a][at[a] + 1]) / 2;
+                }
+                if (!wide)
+                    continue;
+                int in = 0;
+                for (uint32_t r = 0; r < m && !in; r++) {
+                    in = 1;
+                    for (int a = 0; a < 3; a++)
+                        in &= mid[a] >= (double)q[r][a] - tol && mid[a] <= (double)q[r][3 + a] + tol;
+                }
+                if (!in)
+                    return 0;
+            }
+    return 1;
+}
+
 /* Local float coordinates of a box of cells grown by twice RANGE_MARGIN
  * (it then holds the slivers of problem boxes next to its cells: see
  * classify), rounded outwards and clamped to the grid's box. */
@@ -1439,8 +1509,9 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         tb = cvre_malloc((size_t)ntris * sizeof *tb);
         pb = cvre_malloc(nproblem * sizeof *pb);
         clip = cvre_malloc(nproblem * sizeof *clip);
-        uint32_t room = kept + (whole ? nproblem : w.out.n) + 1;
-        room = room > p->max_boxes ? room : p->max_boxes;
+        /* Never more than max boxes, or the object's own count (only
+         * tightened); one more for the box being placed. */
+        uint32_t limit = p->max_boxes > nboxes ? p->max_boxes : nboxes, room = limit + 1;
         out->boxes = cvre_malloc((size_t)room * sizeof *out->boxes);
         state = cvre_malloc(room);
         rc = -ENOMEM;
@@ -1470,25 +1541,60 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         for (uint32_t i = 0; i < nboxes; i++)
             if (!problem[i])
                 memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
-        uint32_t nb = whole ? nproblem : w.out.n;
-        memset(state, 2, out->count);
-        for (uint32_t j = 0; j < nb; j++) {
-            float *b = out->boxes[out->count];
-            if (whole)
-                memcpy(b, pb[j], sizeof pb[j]);
-            else
-                to_local(&w.g, hb, &w.out.b[j], b);
-            if (!tighten(&tt, b))
-                continue;
-            /* Step 7 looks at boxes with wanted cells in them or next to them. */
-            uint32_t lo[3], hi[3];
-            ibox near = {{0, 0, 0}, {0, 0, 0}};
-            if (cell_range(&w.g, b, 1, lo, hi))
-                near = (ibox){{(uint16_t)lo[0], (uint16_t)lo[1], (uint16_t)lo[2]},
-                              {(uint16_t)hi[0], (uint16_t)hi[1], (uint16_t)hi[2]}};
-            state[out->count] = svt_sum(&w.press, &near) > 0 ? 0 : 2;
-            out->count++;
-            out->capped += whole || svt_sum(&w.press, &w.out.b[j]) > 0;
+        /* A new box over several problem boxes may reach out of the old map
+         * by up to a cell (its parts' bounds in one and another): an avatar
+         * that stood at the old face would be inside it, and so free to
+         * walk on into the geometry (move.h's inside policy; 36 leaks in a
+         * desk round). Such a box is taken apart into its parts in each
+         * problem box, tightened; if they pass the limit, the problem boxes
+         * are only tightened. */
+        double tol = 1e3 * tt.eps;
+        for (;;) {
+            int over = 0;
+            uint32_t nb = whole ? nproblem : w.out.n;
+            out->count = kept;
+            out->capped = 0;
+            memset(state, 2, out->count);
+            for (uint32_t j = 0; j < nb && !over; j++) {
+                float b[6];
+                if (whole)
+                    memcpy(b, pb[j], sizeof pb[j]);
+                else
+                    to_local(&w.g, hb, &w.out.b[j], b);
+                if (!tighten(&tt, b))
+                    continue;
+                /* Step 7 looks at boxes with wanted cells in them or next to them. */
+                uint32_t lo[3], hi[3];
+                ibox near = {{0, 0, 0}, {0, 0, 0}};
+                if (cell_range(&w.g, b, 1, lo, hi))
+                    near = (ibox){{(uint16_t)lo[0], (uint16_t)lo[1], (uint16_t)lo[2]},
+                                  {(uint16_t)hi[0], (uint16_t)hi[1], (uint16_t)hi[2]}};
+                uint8_t st = svt_sum(&w.press, &near) > 0 ? 0 : 2;
+                uint32_t pressed = whole || svt_sum(&w.press, &w.out.b[j]) > 0 ? 1u : 0u;
+                int whole_box = whole || within_old(b, boxes, nboxes, tol);
+                for (uint32_t i = 0; i < (whole_box ? 1 : nproblem) && !over; i++) {
+                    float c[6];
+                    memcpy(c, b, sizeof c);
+                    int meets = 1;
+                    for (int a = 0; a < 3 && !whole_box; a++) {
+                        c[a] = b[a] > pb[i][a] ? b[a] : pb[i][a];
+                        c[3 + a] = b[3 + a] < pb[i][3 + a] ? b[3 + a] : pb[i][3 + a];
+                        meets &= c[a] <= c[3 + a];
+                    }
+                    if (!meets || (!whole_box && !tighten(&tt, c)))
+                        continue;
+                    if (out->count == limit) {
+                        over = 1;
+                        break;
+                    }
+                    memcpy(out->boxes[out->count], c, sizeof c);
+                    state[out->count++] = st;
+                    out->capped += pressed;
+                }
+            }
+            if (!over)
+                break;
+            whole = 1;
         }
         if ((rc = split_boxes(&tt, out->boxes, state, out->count, p->max_boxes - p->max_boxes / SPLIT_RESERVE,
                               fmax(SPLIT_GAIN_MIN, p->max_empty))) < 0)

@@ -65,7 +65,13 @@
  *      each triangle clipped to the box, in double, with a margin against
  *      rounding), rounded outwards to float; a box with no such part goes.
  *      A box never grows: boxes stop at the geometry, not at the cells
- *      around it, so an opening never narrows by a cell per round.
+ *      around it, so an opening never narrows by a cell per round. A box
+ *      over several problem boxes whose parts' bounds reach out of the old
+ *      map (a cell that met one problem box let it cover the corner of
+ *      another's free space) is taken apart into its parts in each problem
+ *      box, each tightened; if they pass max_boxes, the problem boxes are
+ *      only tightened. An avatar stopped at an old face is so never inside
+ *      a new box, which would let it walk on into the geometry (move.h).
  *   7. Split under the cell: a new box with wanted cells in it or next to
  *      it may still hold empty space along the geometry that no cell
  *      border separates (a desk's side panel in one box with the last
@@ -90,7 +96,9 @@
  * problem box; the rest of every triangle lies in the kept boxes. So the
  * union of the object's boxes still contains every triangle. Refinement
  * only ever removes space in which no triangle lies: no amount of
- * deliberate bumping opens a real wall.
+ * deliberate bumping opens a real wall. And every new box lies in the old
+ * map's union (to a millionth of the object's size): it never closes
+ * space, not even by a cell.
  */
 #ifndef CVRE_ECM_REFINE_H
 #define CVRE_ECM_REFINE_H

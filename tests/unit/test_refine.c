@@ -534,6 +534,62 @@ static void test_split_frees_space_under_the_cell(void **state)
     import_mesh_free(&m);
 }
 
+/* Whether box b lies in the union of the n boxes old, give or take tol:
+ * 9^3 points spread over it, each in one of them. */
+static int within_boxes(const float b[6], const float (*old)[6], uint32_t n, float tol)
+{
+    for (int i = 0; i < 9 * 9 * 9; i++) {
+        const int at[3] = {i % 9, i / 9 % 9, i / 81};
+        float q[3];
+        for (int a = 0; a < 3; a++)
+            q[a] = b[a] + (b[3 + a] - b[a]) * (float)at[a] / 8;
+        int in = 0;
+        for (uint32_t j = 0; j < n && !in; j++) {
+            in = 1;
+            for (int a = 0; a < 3; a++)
+                in &= q[a] >= old[j][a] - tol && q[a] <= old[j][3 + a] + tol;
+        }
+        if (!in)
+            return 0;
+    }
+    return 1;
+}
+
+/*
+ * The desk's map of round 1 at seed 4 of the scenario (4 boxes) and the
+ * cluster of round 2 (users under the desk). The division merged the back
+ * board's box with part of the pedestal's, and the new box's bounds, one
+ * part from each, reached 2.5 cm below the board's old box and 2 mm in
+ * front of it: users standing at that face were then inside it, free to
+ * walk on into the board (move.h), 36 leaks in a round. No new box may
+ * reach out of the old map.
+ */
+static void test_new_boxes_stay_in_the_old_map(void **state)
+{
+    (void)state;
+    float box[6];
+    ecm_params p;
+    import_mesh m = scaled_model("openings/homedecor_desk.obj", 3, box, &p);
+    static const float old[4][6] = {{-0.50000006f, -0.5f, -0.5f, 0.5f, 0.5f, 0.5f},
+                                    {-1.5f, 0.109374978f, -0.437000036f, -0.49999994f, 0.5f, 0.5f},
+                                    {-1.5f, -0.5f, -0.437000036f, -1.42187488f, 0.109375022f, 0.5f},
+                                    {-1.42187512f, -0.37500003f, 0.437999964f, -0.49999994f, 0.109375022f, 0.5f}};
+    const ecm_cluster cl = {.box = 0, .min = {-0.600333393f, -0.200000003f, -0.5f},
+                            .max = {0.394075006f, -0.137500048f, 0.438000053f},
+                            .centroid = {-0.048434183f, -0.194857597f, -0.311920017f}, .weight = 316};
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 4, &cl, 1, &r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, CBOXES(old), 4, &cl, 1, &r, 16);
+    assert_true(r.count > 4);
+    for (uint32_t i = 0; i < r.count; i++)
+        CHECK(within_boxes(r.boxes[i], old, 4, 1e-5f), "box %u (%g %g %g .. %g %g %g) reaches out of the old map", i,
+              (double)r.boxes[i][0], (double)r.boxes[i][1], (double)r.boxes[i][2], (double)r.boxes[i][3],
+              (double)r.boxes[i][4], (double)r.boxes[i][5]);
+    ecm_result_free(&r);
+    import_mesh_free(&m);
+}
+
 /* ---- random triangle soups --------------------------------------------- */
 
 typedef struct rng {
@@ -1822,6 +1878,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_room_door_opens_walls_stay),
         cmocka_unit_test(test_archway_opens_stone_stays),
         cmocka_unit_test(test_split_frees_space_under_the_cell),
+        cmocka_unit_test(test_new_boxes_stay_in_the_old_map),
         cmocka_unit_test(test_soups),
         cmocka_unit_test(test_soups_several_boxes),
         cmocka_unit_test(test_flat_objects),
