@@ -847,6 +847,8 @@ def check(u, stats, bumped):
     u.pending = []
     if sc.g.touches(lo + 0.01, hi - 0.01):
         st["leaks"] += 1
+        if os.environ.get("SCENARIO_DEBUG"):
+            print(f"leak {sc.name} user {u.name} at {tuple(round(v, 3) for v in p)}")
 
 
 def report(a, scenes, rounds, bump):
