@@ -1269,6 +1269,18 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
  * cell ((2m + 2)^3 cells); past it the box is taken apart. */
 #define CONTAIN_MAX 16u
 
+/* The closed intersection of boxes a and b into c; 0 when they do not meet. */
+static int intersect(const float a[6], const float b[6], float c[6])
+{
+    int meets = 1;
+    for (int k = 0; k < 3; k++) {
+        c[k] = a[k] > b[k] ? a[k] : b[k];
+        c[3 + k] = a[3 + k] < b[3 + k] ? a[3 + k] : b[3 + k];
+        meets &= c[k] <= c[3 + k];
+    }
+    return meets;
+}
+
 static int by_double(const void *x, const void *y)
 {
     double a = *(const double *)x, b = *(const double *)y;
@@ -1287,13 +1299,7 @@ static int within_old(const float b[6], const float (*pb)[6], uint32_t n, double
     uint32_t m = 0;
     for (uint32_t i = 0; i < n; i++) {
         float c[6];
-        int meets = 1;
-        for (int a = 0; a < 3; a++) {
-            c[a] = b[a] > pb[i][a] ? b[a] : pb[i][a];
-            c[3 + a] = b[3 + a] < pb[i][3 + a] ? b[3 + a] : pb[i][3 + a];
-            meets &= c[a] <= c[3 + a];
-        }
-        if (!meets)
+        if (!intersect(b, pb[i], c))
             continue;
         if (m == CONTAIN_MAX)
             return 0;
@@ -1428,14 +1434,6 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
     return 0;
 }
 
-static int finite_all(const float *v, size_t n)
-{
-    for (size_t i = 0; i < n; i++)
-        if (!isfinite(v[i]))
-            return 0;
-    return 1;
-}
-
 int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
                const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
 {
@@ -1453,12 +1451,12 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         return cvre_fail(err, errlen, -EINVAL, "the step height must be finite and not negative");
     if (ntris == 0 || !tris)
         return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
-    if (!finite_all(tris, (size_t)ntris * 9))
+    if (!voxel_finite(tris, (size_t)ntris * 9))
         return cvre_fail(err, errlen, -EINVAL, "a triangle has a coordinate that is not finite");
     if (nboxes == 0 || nboxes > ECM_MAX_BOXES_LIMIT || !boxes)
         return cvre_fail(err, errlen, -EINVAL, "the object has %u boxes (1..%u)", nboxes, ECM_MAX_BOXES_LIMIT);
     for (uint32_t i = 0; i < nboxes; i++) {
-        if (!finite_all(boxes[i], 6))
+        if (!voxel_finite(boxes[i], 6))
             return cvre_fail(err, errlen, -EINVAL, "box %u has a coordinate that is not finite", i);
         for (int a = 0; a < 3; a++)
             if (boxes[i][a] > boxes[i][3 + a])
@@ -1467,11 +1465,10 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     for (uint32_t i = 0; i < nclusters; i++) {
         if (clusters[i].box >= nboxes)
             return cvre_fail(err, errlen, -EINVAL, "cluster %u names box %u of %u", i, clusters[i].box, nboxes);
-        if (!finite_all(clusters[i].min, 3) || !finite_all(clusters[i].max, 3) ||
-            !finite_all(clusters[i].centroid, 3))
+        if (!voxel_finite(clusters[i].min, 3) || !voxel_finite(clusters[i].max, 3) ||
+            !voxel_finite(clusters[i].centroid, 3))
             return cvre_fail(err, errlen, -EINVAL, "cluster %u has a coordinate that is not finite", i);
     }
-
 
     int rc = -ENOMEM;
     uint8_t *problem = cvre_calloc(nboxes, 1);
@@ -1571,23 +1568,16 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
                                   {(uint16_t)hi[0], (uint16_t)hi[1], (uint16_t)hi[2]}};
                 uint8_t st = svt_sum(&w.press, &near) > 0 ? 0 : 2;
                 uint32_t pressed = whole || svt_sum(&w.press, &w.out.b[j]) > 0 ? 1u : 0u;
-                int whole_box = whole || within_old(b, boxes, nboxes, tol);
-                for (uint32_t i = 0; i < (whole_box ? 1 : nproblem) && !over; i++) {
+                /* The box itself, or its parts in each problem box. */
+                int apart = !whole && !within_old(b, boxes, nboxes, tol);
+                for (uint32_t i = 0; i < (apart ? nproblem : 1) && !over; i++) {
                     float c[6];
-                    memcpy(c, b, sizeof c);
-                    int meets = 1;
-                    for (int a = 0; a < 3 && !whole_box; a++) {
-                        c[a] = b[a] > pb[i][a] ? b[a] : pb[i][a];
-                        c[3 + a] = b[3 + a] < pb[i][3 + a] ? b[3 + a] : pb[i][3 + a];
-                        meets &= c[a] <= c[3 + a];
-                    }
-                    if (!meets || (!whole_box && !tighten(&tt, c)))
+                    if (apart && !(intersect(b, pb[i], c) && tighten(&tt, c)))
                         continue;
-                    if (out->count == limit) {
-                        over = 1;
+                    over = out->count == limit;
+                    if (over)
                         break;
-                    }
-                    memcpy(out->boxes[out->count], c, sizeof c);
+                    memcpy(out->boxes[out->count], apart ? c : b, sizeof c);
                     state[out->count++] = st;
                     out->capped += pressed;
                 }
