@@ -64,6 +64,11 @@ _Static_assert(3 * ECM_DEPTH_MAX + 8 <= 32, "pressure sums fit uint32_t");
  * box's); a triangle touches it. */
 enum { CELL_PROBLEM = 1, CELL_INNER = 2, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16, CELL_OCCUPIED = 32 };
 
+/* Step 6: times the division is run again with fewer boxes when the parts
+ * of boxes taken apart pass the limit, before the problem boxes are only
+ * tightened. */
+#define APART_RETRIES 2u
+
 /* A box of cells: [lo, hi) on each axis. */
 typedef struct ibox {
     uint16_t lo[3], hi[3];
@@ -486,6 +491,15 @@ done:
     return rc;
 }
 
+/* divide() once more, from the start, with budget boxes: the parts of the
+ * boxes taken apart in step 6 did not fit. */
+static int redivide(work *w, uint32_t budget)
+{
+    w->budget = budget;
+    w->out.n = 0;
+    return divide(w);
+}
+
 /*
  * The padded array of mark_wanted: dim[0] x dim[1] x dim[2] bits, each line
  * along x in w words (bit t of a line is bit t % 64 of word t / 64), the
@@ -661,6 +675,10 @@ static void mark_slivers(work *w, const float b[6])
         }
 }
 
+/* A problem box is divided on the grid (step 4), or, when none of its
+ * clusters' regions can reach it, only tightened (step 6). */
+enum { PROBLEM_DIVIDE = 1, PROBLEM_TIGHTEN = 2 };
+
 /* Step 2: what each cell is (CELL_*). A cell only touching a problem box,
  * or meeting it by less than INNER_MARGIN of a cell, is outside unless it
  * must be covered: so a box never grows by a cell into space the map
@@ -669,11 +687,12 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
 {
     uint32_t n = w->n;
     for (uint32_t i = 0; i < nboxes; i++) {
-        if (problem[i]) {
+        int divided = problem[i] == PROBLEM_DIVIDE;
+        if (divided) {
             mark_range(w, boxes[i], -RANGE_MARGIN, CELL_PROBLEM);
             mark_slivers(w, boxes[i]);
         }
-        mark_range(w, boxes[i], -INNER_MARGIN, problem[i] ? CELL_INNER : CELL_KEPT);
+        mark_range(w, boxes[i], -INNER_MARGIN, divided ? CELL_INNER : CELL_KEPT);
     }
     for (uint32_t z = 0; z < n; z++)
         for (uint32_t y = 0; y < n; y++) {
@@ -717,6 +736,53 @@ static void bit_clear(bits3 *b, uint32_t t, uint32_t y, uint32_t z)
     b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] &= ~((uint64_t)1 << (t % 64));
 }
 
+/* The face of the box the cluster names nearest its centroid: the axis
+ * users cross, in every box the cluster presses on (a neighbour's nearest
+ * face may be the one it shares with the named box). */
+static int crossed_face(const ecm_cluster *cl, const float named[6])
+{
+    int face = 0;
+    double best = INFINITY;
+    for (int a = 0; a < 3; a++) {
+        double c = cl->centroid[a];
+        double d = fmin(fabs(c - (double)named[a]), fabs((double)named[3 + a] - c));
+        if (d < best) {
+            best = d;
+            face = a;
+        }
+    }
+    return face;
+}
+
+/* The avatar's size as a region counts it; horizontally the smaller of x
+ * and z, so that any yaw is covered. */
+static void region_size(const ecm_params *p, double size[3])
+{
+    size[0] = size[2] = fmin(p->avatar[0], p->avatar[2]);
+    size[1] = p->avatar[1];
+}
+
+/* Whether box b may hold cells of cluster cl's region (step 3, mark_wanted,
+ * each side a cell of at most cell[a] further): named, the box it names;
+ * span, the hull of the boxes it presses on. */
+static int meets_region(const ecm_cluster *cl, const float named[6], const float span[6], const float b[6],
+                        const ecm_params *p, const double cell[3])
+{
+    int face = crossed_face(cl, named);
+    double size[3];
+    region_size(p, size);
+    for (int a = 0; a < 3; a++) {
+        double lo = span[a], hi = span[3 + a];
+        if (a != face) {
+            lo = (double)cl->min[a] - size[a] / 2 - cell[a];
+            hi = (double)cl->max[a] + size[a] / 2 + (a == 1 ? 2 * cell[1] + p->step : 0) + cell[a];
+        }
+        if (b[a] > hi || b[3 + a] < lo)
+            return 0;
+    }
+    return 1;
+}
+
 /*
  * Step 3 for one cluster: adds its pressure to the empty cells of its
  * region that an avatar-sized box of free cells covers (near: inside the
@@ -733,21 +799,9 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
 {
     const voxel_grid *g = &w->g;
     uint32_t n = w->n;
-    /* The face of the box the cluster names nearest its centroid: the axis
-     * users cross, in every box the cluster presses on (a neighbour's
-     * nearest face may be the one it shares with the named box). */
-    int face = 0;
-    double best = INFINITY;
-    for (int a = 0; a < 3; a++) {
-        double c = cl->centroid[a];
-        double d = fmin(fabs(c - (double)named[a]), fabs((double)named[3 + a] - c));
-        if (d < best) {
-            best = d;
-            face = a;
-        }
-    }
-    /* Horizontal size: the smaller of x and z, so that any yaw is covered. */
-    double size[3] = {fmin(p->avatar[0], p->avatar[2]), p->avatar[1], fmin(p->avatar[0], p->avatar[2])};
+    int face = crossed_face(cl, named);
+    double size[3];
+    region_size(p, size);
     uint32_t lo[3], hi[3], k[3], dim[3], top;
     for (int a = 0; a < 3; a++) {
         if (a == face) {
@@ -1415,7 +1469,7 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
         float span[6];
         memcpy(span, EMPTY_HULL, sizeof span);
         for (uint32_t b = 0; b < nboxes; b++)
-            if (problem[b] && presses(&cl[i], boxes, b, p))
+            if (presses(&cl[i], boxes, b, p))
                 widen(span, boxes[b]);
         uint32_t weight = cl[i].weight ? cl[i].weight : 1;
         uint32_t near =
@@ -1432,6 +1486,163 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
     r->occupied += w->g.occupied;
     r->divide_ms += ms_since(&t0);
     return 0;
+}
+
+static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const float *tris,
+                        uint32_t ntris, const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters,
+                        uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
+
+/* Union-find over clusters: the root of i. */
+static uint32_t group_root(uint32_t *up, uint32_t i)
+{
+    while (up[i] != i)
+        i = up[i] = up[up[i]];
+    return i;
+}
+
+/* A group of clusters, in the order they are refined. */
+typedef struct group {
+    uint32_t first;   /* its smallest cluster index */
+    uint64_t weight;  /* its clusters' weights */
+} group;
+
+static int cmp_group(const void *a, const void *b)
+{
+    const group *x = a, *y = b;
+    if (x->weight != y->weight)
+        return x->weight > y->weight ? -1 : 1;
+    return x->first < y->first ? -1 : x->first > y->first;
+}
+
+/*
+ * Clusters that press on a common box are one group; each group is refined
+ * on its own grid over the hull of its own boxes, heaviest first, the
+ * boxes of the others kept meanwhile. One grid over boxes far apart (the
+ * two sides of a well, posts across a gazebo) spends the budget on cutting
+ * the space between them out, and its cells are coarser. Each group may
+ * add a share of the boxes left under max_boxes, by its weight among the
+ * groups still to come (what one leaves goes to the next); step 7 stops at
+ * max_boxes less a quarter in all.
+ */
+static int refine_groups(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6],
+                         uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err,
+                         size_t errlen)
+{
+    const uint32_t split_max = p->max_boxes - p->max_boxes / SPLIT_RESERVE;
+    /* The object's cell: its bounding box over 2^depth a side. */
+    float ob[6];
+    memcpy(ob, EMPTY_HULL, sizeof ob);
+    for (uint32_t t = 0; t < ntris; t++)
+        for (int v = 0; v < 3; v++)
+            for (int a = 0; a < 3; a++) {
+                float x = tris[9 * (size_t)t + (size_t)(3 * v + a)];
+                ob[a] = x < ob[a] ? x : ob[a];
+                ob[3 + a] = x > ob[3 + a] ? x : ob[3 + a];
+            }
+    double objcell[3];
+    for (int a = 0; a < 3; a++)
+        objcell[a] = ((double)ob[3 + a] - ob[a]) / (double)(1u << p->depth);
+    uint32_t *up = cvre_malloc((nclusters ? nclusters : 1) * sizeof *up);
+    uint32_t *owner = cvre_malloc(nboxes * sizeof *owner); /* a cluster pressing on the box, or UINT32_MAX */
+    group *g = cvre_malloc((nclusters ? nclusters : 1) * sizeof *g);
+    ecm_cluster *mine = cvre_malloc((nclusters ? nclusters : 1) * sizeof *mine);
+    uint32_t *where = cvre_malloc(nboxes * sizeof *where);
+    float(*cur)[6] = NULL;
+    ecm_result part = {0};
+    int rc = -ENOMEM;
+    if (!up || !owner || !g || !mine || !where)
+        goto done;
+    for (uint32_t i = 0; i < nclusters; i++)
+        up[i] = i;
+    for (uint32_t b = 0; b < nboxes; b++) {
+        owner[b] = UINT32_MAX;
+        for (uint32_t i = 0; i < nclusters; i++)
+            if (presses(&clusters[i], boxes, b, p)) {
+                if (owner[b] == UINT32_MAX)
+                    owner[b] = i;
+                else
+                    up[group_root(up, i)] = group_root(up, owner[b]);
+            }
+    }
+    uint32_t ng = 0;
+    for (uint32_t i = 0; i < nclusters; i++)
+        if (group_root(up, i) == i) {
+            g[ng] = (group){.first = i, .weight = 0};
+            ng++;
+        }
+    for (uint32_t k = 0; k < ng; k++)
+        for (uint32_t i = 0; i < nclusters; i++)
+            if (group_root(up, i) == g[k].first)
+                g[k].weight += clusters[i].weight ? clusters[i].weight : 1;
+    qsort(g, ng, sizeof *g, cmp_group);
+    uint64_t left = 0;
+    for (uint32_t k = 0; k < ng; k++)
+        left += g[k].weight;
+    /* cur: the boxes so far; where[b]: old box b's index in cur, or
+     * UINT32_MAX once its group replaced it. */
+    uint32_t ncur = nboxes;
+    cur = cvre_malloc((size_t)nboxes * sizeof *cur);
+    if (!cur)
+        goto done;
+    memcpy(cur, boxes, (size_t)nboxes * sizeof *cur);
+    for (uint32_t b = 0; b < nboxes; b++)
+        where[b] = b;
+    for (uint32_t k = 0; k < ng; k++) {
+        uint32_t n = 0;
+        for (uint32_t i = 0; i < nclusters; i++)
+            if (group_root(up, i) == g[k].first) {
+                mine[n] = clusters[i];
+                mine[n++].box = where[clusters[i].box];
+            }
+        /* An object over max_boxes already: as one group, never more than it has. */
+        uint32_t spare = p->max_boxes > ncur ? p->max_boxes - ncur : 0;
+        ecm_params gp = *p;
+        gp.max_boxes = ncur > p->max_boxes ? p->max_boxes : ncur + (uint32_t)(spare * g[k].weight / left);
+        left -= g[k].weight;
+        uint32_t smax = split_max < gp.max_boxes ? split_max : gp.max_boxes;
+        if ((rc = refine_group(&gp, objcell, smax, tris, ntris, (const float(*)[6])cur, ncur, mine, n, &part, err,
+                               errlen)) < 0)
+            goto done;
+        /* The boxes it kept keep their order, first; its new ones follow.
+         * (A new box of an earlier group may reach a cell into this one's
+         * boxes, and be pressed and refined again with them.) */
+        uint32_t kept = 0;
+        for (uint32_t b = 0; b < nboxes; b++)
+            if (where[b] != UINT32_MAX) {
+                int pressed = 0;
+                for (uint32_t i = 0; i < n && !pressed; i++)
+                    pressed = presses(&mine[i], (const float(*)[6])cur, where[b], &gp);
+                where[b] = pressed ? UINT32_MAX : kept++;
+                out->problem_boxes += (uint32_t)pressed;
+            }
+        out->capped += part.capped;
+        out->cells += part.cells;
+        out->occupied += part.occupied;
+        out->wanted += part.wanted;
+        out->voxel_ms += part.voxel_ms;
+        out->divide_ms += part.divide_ms;
+        free(cur);
+        cur = part.boxes;
+        ncur = part.count;
+        part.boxes = NULL;
+    }
+    out->boxes = cur;
+    out->count = ncur;
+    cur = NULL;
+    rc = 0;
+done:
+    if (rc == -ENOMEM)
+        cvre_fail(err, errlen, rc, "out of memory");
+    free(up);
+    free(owner);
+    free(g);
+    free(mine);
+    free(where);
+    free(cur);
+    ecm_result_free(&part);
+    if (rc < 0)
+        ecm_result_free(out);
+    return rc;
 }
 
 int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
@@ -1469,7 +1680,86 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
             !voxel_finite(clusters[i].centroid, 3))
             return cvre_fail(err, errlen, -EINVAL, "cluster %u has a coordinate that is not finite", i);
     }
+    return refine_groups(p, tris, ntris, boxes, nboxes, clusters, nclusters, out, err, errlen);
+}
 
+/*
+ * The depth of a group's grid over hb: the shallowest, from ECM_DEPTH_MIN
+ * up to depth, whose cells are no larger than the object's cell (objcell:
+ * the object's bounding box over 2^depth) on any axis. The map's
+ * resolution is the object's cell (the phantom tolerance, judge.h): a grid
+ * over a few small boxes at full depth cuts curves into steps far finer
+ * than anyone can tell, and spends the whole budget on them.
+ */
+static uint32_t group_depth(uint32_t depth, const float hb[6], const double objcell[3])
+{
+    uint32_t d = ECM_DEPTH_MIN;
+    for (; d < depth; d++) {
+        int fine = 1;
+        for (int a = 0; a < 3; a++)
+            fine &= ((double)hb[3 + a] - hb[a]) / (double)(1u << d) <= objcell[a];
+        if (fine)
+            break;
+    }
+    return d;
+}
+
+/*
+ * Problem boxes that no region of a cluster reaches (a roof over a well,
+ * pressed because a user at the well might step up under it) hold no wanted
+ * cell: dividing them only spreads the grid over the space between them
+ * and the rest, to be cut out box by box. They are marked PROBLEM_TIGHTEN
+ * (the box a cluster names never is), and hb becomes the hull of the others.
+ * Returns how many were marked.
+ */
+static uint32_t tighten_only(const ecm_params *p, const double objcell[3], const float (*boxes)[6], uint32_t nboxes,
+                             const ecm_cluster *clusters, uint32_t nclusters, uint8_t *problem, float hb[6])
+{
+    /* The grid's cell is at most the object's, or the hull of all problem
+     * boxes' over 2^depth (group_depth). */
+    double cell[3];
+    for (int a = 0; a < 3; a++)
+        cell[a] = fmax(objcell[a], ((double)hb[3 + a] - hb[a]) / (double)(1u << p->depth));
+    uint32_t n = 0;
+    for (uint32_t b = 0; b < nboxes; b++) {
+        if (!problem[b])
+            continue;
+        int reached = 0;
+        for (uint32_t i = 0; i < nclusters && !reached; i++) {
+            if (clusters[i].box == b) {
+                reached = 1;
+                break;
+            }
+            float span[6];
+            memcpy(span, EMPTY_HULL, sizeof span);
+            for (uint32_t k = 0; k < nboxes; k++)
+                if (presses(&clusters[i], boxes, k, p))
+                    widen(span, boxes[k]);
+            reached = meets_region(&clusters[i], boxes[clusters[i].box], span, boxes[b], p, cell);
+        }
+        if (!reached) {
+            problem[b] = PROBLEM_TIGHTEN;
+            n++;
+        }
+    }
+    memcpy(hb, EMPTY_HULL, 6 * sizeof *hb);
+    for (uint32_t b = 0; b < nboxes; b++)
+        if (problem[b] == PROBLEM_DIVIDE)
+            widen(hb, boxes[b]);
+    return n;
+}
+
+/*
+ * One group of clusters (refine_groups): steps 1 to 7 over the boxes they
+ * press, the other boxes kept; the new boxes no more than max_boxes in all
+ * and step 7 stopping at split_max. Fills *out (empty on error) as
+ * ecm_refine does.
+ */
+static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const float *tris,
+                        uint32_t ntris, const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters,
+                        uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
     int rc = -ENOMEM;
     uint8_t *problem = cvre_calloc(nboxes, 1);
     float(*tb)[6] = NULL;
@@ -1486,17 +1776,22 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     for (uint32_t i = 0; i < nclusters; i++)
         for (uint32_t b = 0; b < nboxes; b++)
             if (!problem[b] && presses(&clusters[i], boxes, b, p)) {
-                problem[b] = 1;
+                problem[b] = PROBLEM_DIVIDE;
                 kept--;
                 nproblem++;
                 widen(hb, boxes[b]);
             }
     out->problem_boxes = nproblem;
+    float hall[6]; /* all problem boxes; hb: those divided */
+    memcpy(hall, hb, sizeof hall);
+    uint32_t ntighten = tighten_only(p, objcell, boxes, nboxes, clusters, nclusters, problem, hb);
+    ecm_params gp = *p; /* the grid's depth: group_depth */
+    gp.depth = group_depth(p->depth, hb, objcell);
     int whole = 0; /* 1: the problem boxes are only tightened */
     if (nproblem) {
         w.max_empty = p->max_empty;
-        w.budget = p->max_boxes > kept ? p->max_boxes - kept : 0;
-        if ((rc = build_grid(&w, p, tris, ntris, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
+        w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
+        if ((rc = build_grid(&w, &gp, tris, ntris, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
         struct timespec t0;
         clock_gettime(STAGE_CLOCK, &t0);
@@ -1523,16 +1818,18 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
         }
         double scale = 0;
         for (int a = 0; a < 6; a++)
-            scale = fmax(scale, fabs((double)hb[a]));
+            scale = fmax(scale, fabs((double)hall[a]));
         for (int a = 0; a < 3; a++)
-            scale = fmax(scale, (double)hb[3 + a] - hb[a]);
+            scale = fmax(scale, (double)hall[3 + a] - hall[a]);
+        /* pb: the divided problem boxes, then those only tightened. */
         uint32_t np = 0;
-        for (uint32_t i = 0; i < nboxes; i++)
-            if (problem[i])
-                memcpy(pb[np++], boxes[i], sizeof pb[0]);
+        for (int pass = PROBLEM_DIVIDE; pass <= PROBLEM_TIGHTEN; pass++)
+            for (uint32_t i = 0; i < nboxes; i++)
+                if (problem[i] == pass)
+                    memcpy(pb[np++], boxes[i], sizeof pb[0]);
         tt = (tight){.tris = tris, .tb = (const float(*)[6])tb, .problem = (const float(*)[6])pb,
                      .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
-        const double hull[6] = {hb[0], hb[1], hb[2], hb[3], hb[4], hb[5]};
+        const double hull[6] = {hall[0], hall[1], hall[2], hall[3], hall[4], hall[5]};
         if ((rc = tribins_build(&tt.bins, hull, BUCKETS, tt.tb, ntris, tt.eps, 0)) < 0)
             goto done;
         for (uint32_t i = 0; i < nboxes; i++)
@@ -1546,18 +1843,19 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
          * problem box, tightened; if they pass the limit, the problem boxes
          * are only tightened. */
         double tol = 1e3 * tt.eps;
-        for (;;) {
-            int over = 0;
-            uint32_t nb = whole ? nproblem : w.out.n;
+        for (uint32_t retry = 0;; retry++) {
+            uint32_t over = 0; /* boxes past the limit */
+            uint32_t nb = whole ? nproblem : w.out.n + ntighten;
             out->count = kept;
             out->capped = 0;
             memset(state, 2, out->count);
-            for (uint32_t j = 0; j < nb && !over; j++) {
+            for (uint32_t j = 0; j < nb; j++) {
                 float b[6];
-                if (whole)
-                    memcpy(b, pb[j], sizeof pb[j]);
-                else
+                int divided = !whole && j < w.out.n;
+                if (divided)
                     to_local(&w.g, hb, &w.out.b[j], b);
+                else
+                    memcpy(b, pb[whole ? j : nproblem - ntighten + (j - w.out.n)], sizeof b);
                 if (!tighten(&tt, b))
                     continue;
                 /* Step 7 looks at boxes with wanted cells in them or next to them. */
@@ -1567,16 +1865,17 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
                     near = (ibox){{(uint16_t)lo[0], (uint16_t)lo[1], (uint16_t)lo[2]},
                                   {(uint16_t)hi[0], (uint16_t)hi[1], (uint16_t)hi[2]}};
                 uint8_t st = svt_sum(&w.press, &near) > 0 ? 0 : 2;
-                uint32_t pressed = whole || svt_sum(&w.press, &w.out.b[j]) > 0 ? 1u : 0u;
+                uint32_t pressed = whole || (divided && svt_sum(&w.press, &w.out.b[j]) > 0) ? 1u : 0u;
                 /* The box itself, or its parts in each problem box. */
-                int apart = !whole && !within_old(b, boxes, nboxes, tol);
-                for (uint32_t i = 0; i < (apart ? nproblem : 1) && !over; i++) {
+                int apart = divided && !within_old(b, boxes, nboxes, tol);
+                for (uint32_t i = 0; i < (apart ? nproblem : 1); i++) {
                     float c[6];
                     if (apart && !(intersect(b, pb[i], c) && tighten(&tt, c)))
                         continue;
-                    over = out->count == limit;
-                    if (over)
-                        break;
+                    if (out->count == limit) {
+                        over++;
+                        continue;
+                    }
                     memcpy(out->boxes[out->count], apart ? c : b, sizeof c);
                     state[out->count++] = st;
                     out->capped += pressed;
@@ -1584,10 +1883,15 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
             }
             if (!over)
                 break;
-            whole = 1;
+            /* Divided again with as many boxes fewer, then only tightened. */
+            if (whole || retry == APART_RETRIES || w.budget <= over || (rc = redivide(&w, w.budget - over)) != 0) {
+                if (rc < 0)
+                    goto done;
+                whole = 1;
+            }
         }
-        if ((rc = split_boxes(&tt, out->boxes, state, out->count, p->max_boxes - p->max_boxes / SPLIT_RESERVE,
-                              fmax(SPLIT_GAIN_MIN, p->max_empty))) < 0)
+        if ((rc = split_boxes(&tt, out->boxes, state, out->count, split_max, fmax(SPLIT_GAIN_MIN, p->max_empty))) <
+            0)
             goto done;
         out->count = (uint32_t)rc;
         out->divide_ms += ms_since(&t0);

@@ -12,8 +12,25 @@
  * cluster presses on (problem boxes) are re-divided together, as one
  * object; every other box is kept as it is.
  *
- *   1. Digitize (voxel.h): one grid of 2^depth cells per axis over the hull
- *      of the problem boxes, a cell occupied when a triangle touches it.
+ * Groups: clusters that press on a common box are one group, and each
+ * group is refined on its own (steps 1 to 7), heaviest first (the sum of
+ * its clusters' weights), the other groups' boxes kept meanwhile: one grid
+ * over boxes far apart (both sides of a well) spends the budget cutting
+ * the space between them out, at coarser cells. Each group may add a share
+ * of the boxes left under max_boxes, by its weight among the groups still
+ * to come (what one leaves goes to the next). A problem box that no
+ * cluster's region (step 3) can reach, say a roof pressed because a user
+ * at the well might step up under it, is only tightened (step 6), and the
+ * grid spans the others.
+ *
+ *   1. Digitize (voxel.h): one grid over the hull of the problem boxes
+ *      divided, a cell occupied when a triangle touches it. The grid has
+ *      2^d cells per axis, d the least from ECM_DEPTH_MIN up to depth whose
+ *      cells are no larger than the object's cell (its bounding box over
+ *      2^depth) on any axis: the map's resolution is the object's cell (the
+ *      phantom tolerance), and a grid over a few small boxes at full depth
+ *      cuts a curve into steps nobody can tell apart, and spends the whole
+ *      budget on them.
  *   2. Classes: a cell must be covered when it is occupied and meets a
  *      problem box; it is outside when it meets no problem box (space the
  *      map leaves free, or only a kept box's): no new box may hold an
@@ -69,8 +86,9 @@
  *      over several problem boxes whose parts' bounds reach out of the old
  *      map (a cell that met one problem box let it cover the corner of
  *      another's free space) is taken apart into its parts in each problem
- *      box, each tightened; if they pass max_boxes, the problem boxes are
- *      only tightened. An avatar stopped at an old face is so never inside
+ *      box, each tightened; if they pass max_boxes, the division runs
+ *      again with as many boxes fewer (twice at most), and then the problem
+ *      boxes are only tightened. An avatar stopped at an old face is so never inside
  *      a new box, which would let it walk on into the geometry (move.h).
  *   7. Split under the cell: a new box with wanted cells in it or next to
  *      it may still hold empty space along the geometry that no cell
@@ -149,7 +167,8 @@ typedef struct ecm_result {
     uint32_t problem_boxes; /* boxes replaced */
     uint32_t capped;        /* new boxes left holding wanted cells by the cap, or every
                              * problem box when they were only tightened (step 5) */
-    uint64_t cells;         /* cells examined: 2^(3 depth), one grid (0: no problem box) */
+    uint64_t cells;         /* cells examined: 2^(3 depth) a grid, one grid a group of
+                             * clusters (0: no problem box) */
     uint64_t occupied;      /* of which occupied */
     uint64_t wanted;        /* of which wanted (step 3) */
     double voxel_ms;        /* ms in digitization, and */

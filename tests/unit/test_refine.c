@@ -134,10 +134,15 @@ static void mbr(const float *tris, uint32_t n, float box[6])
         }
 }
 
+/* A model under MODELS_DIR, or under tests/data/models (the project's own)
+ * for a path starting with "data/". */
 static import_mesh load(const char *rel, int z_up)
 {
     char path[4096];
-    snprintf(path, sizeof path, "%s/%s", models_dir, rel);
+    if (strncmp(rel, "data/", 5) == 0)
+        snprintf(path, sizeof path, "%s/%s", CVRE_DATA_MODELS_DIR, rel + 5);
+    else
+        snprintf(path, sizeof path, "%s/%s", models_dir, rel);
     FILE *f = fopen(path, "rb");
     if (!f)
         fail_msg("cannot open %s", path);
@@ -259,7 +264,9 @@ static void assert_results_equal(const ecm_result *a, const ecm_result *b)
  * without a cluster come first, unchanged and in order; each box after them
  * is a proper, finite box inside the hull of the problem boxes; the count
  * respects the cap (max_boxes, or the boxes it had for an object whose
- * kept boxes already fill it); one grid was examined; the statistics add up (capped
+ * kept boxes already fill it); one grid, of at most 2^depth cells a side,
+ * was examined a group of clusters (at most one a cluster); the statistics
+ * add up (capped
  * counts some of the new boxes); and every triangle is still covered
  * (sampled `steps` times per edge).
  */
@@ -286,8 +293,10 @@ static void check_result(const ecm_params *p, const float *tris, uint32_t ntris,
     CHECK(r->problem_boxes == nproblem, "%u problem boxes, expected %u", r->problem_boxes, nproblem);
     CHECK(r->count >= kept && r->count <= cap, "%u boxes: not in %u..%u", r->count, kept, cap);
     CHECK(r->boxes != NULL, "no box array");
-    CHECK(r->cells == (nproblem ? (uint64_t)1 << (3 * p->depth) : 0), "%llu cells examined",
-          (unsigned long long)r->cells);
+    const uint64_t grid = (uint64_t)1 << (3 * p->depth);
+    const uint64_t least = (uint64_t)1 << (3 * ECM_DEPTH_MIN);
+    CHECK(nproblem ? r->cells % least == 0 && r->cells >= least && r->cells <= ncl * grid : r->cells == 0,
+          "%llu cells examined: not one grid a group of clusters", (unsigned long long)r->cells);
     CHECK(r->occupied <= r->cells && r->wanted <= r->cells - r->occupied, "%llu occupied, %llu wanted",
           (unsigned long long)r->occupied, (unsigned long long)r->wanted);
     CHECK(r->capped <= r->count - kept, "%u boxes capped of the %u new", r->capped, r->count - kept);
@@ -586,6 +595,72 @@ static void test_new_boxes_stay_in_the_old_map(void **state)
         CHECK(within_boxes(r.boxes[i], old, 4, 1e-5f), "box %u (%g %g %g .. %g %g %g) reaches out of the old map", i,
               (double)r.boxes[i][0], (double)r.boxes[i][1], (double)r.boxes[i][2], (double)r.boxes[i][3],
               (double)r.boxes[i][4], (double)r.boxes[i][5]);
+    ecm_result_free(&r);
+    import_mesh_free(&m);
+}
+
+/*
+ * The scenario's gazebo (tests/data/models), seed 4, its second round: the
+ * map after round 1 (27 boxes; box 0 is the roof over everything) and the
+ * round's cluster, users stopped by the well's box 21 where the curved wall
+ * is 4 to 12 cm further in. The cluster also presses on the roof (a user
+ * at the well might step up under it), and one grid over the roof's hull
+ * cost more boxes to cut the space between the posts out than the budget
+ * held: the map came back only tightened, and users stayed stopped there.
+ * The roof, which no region of the cluster reaches, is now only tightened,
+ * and the well's boxes are divided on a grid of their own.
+ */
+static void test_roof_over_the_well_is_only_tightened(void **state)
+{
+    (void)state;
+    float box[6];
+    ecm_params p;
+    import_mesh m = scaled_model("data/gazebo.obj", 1, box, &p);
+    static const float old[27][6] = {
+        {-3.0999999f, 1.84062481f, -3.0999999f, 3.0999999f, 3.79999995f, 3.0999999f},
+        {-0.120000005f, 0, -2.72000027f, 0.120000005f, 1.84062505f, -2.47999978f},
+        {-2.30876613f, 0, 1.40468729f, -2.19463372f, 0.920312583f, 1.42000008f},
+        {2.19463372f, 0, 1.40468729f, 2.30876613f, 0.920312583f, 1.42000008f},
+        {-2.37170029f, 0, 1.17999995f, -2.1316998f, 0.920312583f, 1.40468764f},
+        {-2.37170029f, 0, -1.42000008f, -2.1316998f, 1.84062505f, -1.17999995f},
+        {2.1316998f, 0, -1.42000008f, 2.37170029f, 1.84062505f, -1.17999995f},
+        {1.16249979f, 0, -0.281629294f, 1.20000017f, 0.900000036f, 0.281629294f},
+        {2.1316998f, 0, 1.17999995f, 2.37170029f, 0.920312583f, 1.40468764f},
+        {-1.04346955f, 0.682812393f, -1.0693574f, -0.532812357f, 0.900000036f, -0.581249833f},
+        {0.532812357f, 0, -1.0693574f, 1.04346955f, 0.900000036f, -0.581249833f},
+        {-0.120000005f, 0, 2.47999978f, 0.120000005f, 1.84062505f, 2.72000027f},
+        {0.581249833f, 0, 0.532812357f, 1.0693574f, 0.900000036f, 1.04346955f},
+        {-1.04346955f, 0.445312411f, -0.869082332f, -0.823437333f, 0.682812572f, -0.581249833f},
+        {-0.629687607f, 0, 0.641906679f, 9.68749987e-08f, 0.44531256f, 1.20000017f},
+        {-1.04346955f, 0, -1.0693574f, -0.532812357f, 0.44531256f, -0.581249833f},
+        {-0.339062601f, 0.445312411f, 0.833118856f, 9.68749987e-08f, 0.900000036f, 1.20000017f},
+        {-0.823437631f, 0.445312411f, -1.0693574f, -0.532812357f, 0.682812572f, -0.869081974f},
+        {0.681643844f, 0, -0.581250131f, 1.16250014f, 0.900000036f, 0.532812595f},
+        {-1.0693574f, 0, 0.532812357f, -0.629687369f, 0.900000036f, 1.01758182f},
+        {-0.629687607f, 0.445312411f, 0.641906679f, -0.339062363f, 0.900000036f, 1.14509892f},
+        {-1.20000017f, 0, -0.581250131f, -0.681643844f, 0.900000036f, 0.532812595f},
+        {-0.532812595f, 0, -1.20000017f, 0.532812595f, 0.900000036f, -0.721381128f},
+        {2.1316998f, 0.920312405f, 1.17999995f, 2.37170029f, 1.84062505f, 1.42000008f},
+        {-9.68749987e-08f, 0, 0.681643844f, 0.581250131f, 0.900000036f, 1.20000017f},
+        {-2.37170029f, 0.920312405f, 1.17999995f, -2.1316998f, 1.84062505f, 1.42000008f},
+        {-0.681644201f, 0.445312411f, -0.721381426f, -0.532812357f, 0.682812572f, -0.581249833f}};
+    const ecm_cluster cl = {.box = 21, .min = {-1.20000017f, 0.450000018f, -0.323845387f},
+                            .max = {-1.0693574f, 0.450000018f, 1.01728964f},
+                            .centroid = {-1.18755805f, 0.450000018f, 0.224983066f}, .weight = 168};
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 27, &cl, 1, &r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, CBOXES(old), 27, &cl, 1, &r, 16);
+    CHECK(r.count > 27, "the %u problem boxes were only tightened", r.problem_boxes);
+    /* The roof comes back whole, only tightened: one box at its height. */
+    uint32_t roofs = 0;
+    for (uint32_t i = 0; i < r.count; i++)
+        roofs += r.boxes[i][1] > 1.8f;
+    CHECK(roofs == 1, "the roof became %u boxes", roofs);
+    /* Where the users pressed, outside the well's curved wall (radius
+     * 1.2; this corner of the old box is 3 to 5 cm from it): free. */
+    const float spot[6] = {-1.199f, 0.3f, 0.35f, -1.16f, 0.6f, 0.45f};
+    CHECK(!blocked(CBOXES(r.boxes), r.count, spot, spot + 3), "the place the users were stopped at is still held");
     ecm_result_free(&r);
     import_mesh_free(&m);
 }
@@ -1878,6 +1953,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_room_door_opens_walls_stay),
         cmocka_unit_test(test_archway_opens_stone_stays),
         cmocka_unit_test(test_split_frees_space_under_the_cell),
+        cmocka_unit_test(test_roof_over_the_well_is_only_tightened),
         cmocka_unit_test(test_new_boxes_stay_in_the_old_map),
         cmocka_unit_test(test_soups),
         cmocka_unit_test(test_soups_several_boxes),
