@@ -449,7 +449,7 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
 
 int judge_better(const judge_result *r)
 {
-    return r->phantom_new < r->phantom_old &&
+    return r->phantom_new + JUDGE_GAIN_MIN <= r->phantom_old &&
            (r->phantom_old - r->phantom_new) * JUDGE_GAIN_DEN >= r->phantom_old * JUDGE_GAIN_NUM &&
            r->opened_new <= r->opened_old;
 }

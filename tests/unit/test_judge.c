@@ -311,12 +311,14 @@ static void test_verdict_needs_a_clear_gain(void **state)
     assert_int_equal(judge_better(&r), 0); /* and seed 3 */
     r = (judge_result){.phantom_old = 1829, .phantom_new = 775};
     assert_int_equal(judge_better(&r), 1);
-    r = (judge_result){.phantom_old = 4, .phantom_new = 3};
-    assert_int_equal(judge_better(&r), 1); /* exactly a quarter */
-    r = (judge_result){.phantom_old = 5, .phantom_new = 4};
+    r = (judge_result){.phantom_old = 16, .phantom_new = 12};
+    assert_int_equal(judge_better(&r), 1); /* exactly a quarter, and JUDGE_GAIN_MIN */
+    r = (judge_result){.phantom_old = 17, .phantom_new = 13};
     assert_int_equal(judge_better(&r), 0);
-    r = (judge_result){.phantom_old = 1, .phantom_new = 0};
+    r = (judge_result){.phantom_old = 4, .phantom_new = 0};
     assert_int_equal(judge_better(&r), 1);
+    r = (judge_result){.phantom_old = 3, .phantom_new = 0};
+    assert_int_equal(judge_better(&r), 0); /* a trial held back a tick or three */
     r = (judge_result){.phantom_old = 0, .phantom_new = 0};
     assert_int_equal(judge_better(&r), 0); /* nothing to gain */
     r = (judge_result){.phantom_old = 100, .phantom_new = 0, .opened_old = 0, .opened_new = 1};
