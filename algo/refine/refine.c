@@ -754,6 +754,11 @@ static int crossed_face(const ecm_cluster *cl, const float named[6])
     return face;
 }
 
+/* The horizontal axis along the face users cross on axis face, across
+ * which a region reaches the whole span (step 3); -1 for a floor or a
+ * ceiling. */
+static int side_axis(int face) { return face == 1 ? -1 : 2 - face; }
+
 /* The avatar's size as a region counts it; horizontally the smaller of x
  * and z, so that any yaw is covered. */
 static void region_size(const ecm_params *p, double size[3])
@@ -768,12 +773,12 @@ static void region_size(const ecm_params *p, double size[3])
 static int meets_region(const ecm_cluster *cl, const float named[6], const float span[6], const float b[6],
                         const ecm_params *p, const double cell[3])
 {
-    int face = crossed_face(cl, named);
+    int face = crossed_face(cl, named), side = side_axis(face);
     double size[3];
     region_size(p, size);
     for (int a = 0; a < 3; a++) {
         double lo = span[a], hi = span[3 + a];
-        if (a != face) {
+        if (a != face && a != side) {
             lo = (double)cl->min[a] - size[a] / 2 - cell[a];
             hi = (double)cl->max[a] + size[a] / 2 + (a == 1 ? 2 * cell[1] + p->step : 0) + cell[a];
         }
@@ -787,12 +792,13 @@ static int meets_region(const ecm_cluster *cl, const float named[6], const float
  * Step 3 for one cluster: adds its pressure to the empty cells of its
  * region that an avatar-sized box of free cells covers (near: inside the
  * region before it is stretched along the axis users cross; a quarter of
- * it beyond). named: the box the cluster names; span: the hull of the
- * problem boxes it presses on. The opening runs on the region grown by the
- * kernel on each side, cells outside the grid free; a placement of the
- * avatar that reaches the step band above the region must stand on
- * something (a blocked cell, or the floor below the grid, within two
- * cells) under its footprint.
+ * it beyond; a sixteenth beside the points along the face's horizontal
+ * axis, where the region reaches across the span). named: the box the
+ * cluster names; span: the hull of the problem boxes it presses on. The
+ * opening runs on the region grown by the kernel on each side, cells
+ * outside the grid free; a placement of the avatar that reaches the step
+ * band above the region must stand on something (a blocked cell, or the
+ * floor below the grid, within two cells) under its footprint.
  */
 static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], const float span[6], const ecm_params *p,
                        uint32_t near)
@@ -803,8 +809,18 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     double size[3];
     region_size(p, size);
     uint32_t lo[3], hi[3], k[3], dim[3], top;
+    /* The horizontal axis along the face users cross (none for a floor or
+     * a ceiling): the region reaches across the span on it too. side_lo,
+     * side_hi: the points' own reach there. */
+    int side = side_axis(face);
+    uint32_t side_lo = 0, side_hi = 0;
     for (int a = 0; a < 3; a++) {
         if (a == face) {
+            lo[a] = cell_of(g, a, span[a], 0);
+            hi[a] = cell_of(g, a, span[3 + a], 1);
+        } else if (a == side) {
+            side_lo = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
+            side_hi = cell_of(g, a, (double)cl->max[a] + size[a] / 2, 1);
             lo[a] = cell_of(g, a, span[a], 0);
             hi[a] = cell_of(g, a, span[3 + a], 1);
         } else {
@@ -901,7 +917,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 0);
-    uint32_t far = near / 4 ? near / 4 : 1;
+    uint32_t far = near / 4 ? near / 4 : 1, beside = near / 16 ? near / 16 : 1;
     for (uint32_t z = lo[2]; z < hi[2]; z++)
         for (uint32_t y = lo[1]; y < hi[1]; y++) {
             const uint64_t *row = b.v + b.w * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]));
@@ -911,8 +927,11 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
                 if (!((row[t / 64] >> (t % 64)) & 1u) || (w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
                     continue;
                 uint32_t c = face == 0 ? x : face == 1 ? y : z;
+                uint32_t sc = side == 0 ? x : z;
                 w->wanted += w->pressure[i] == 0;
-                uint32_t v = w->pressure[i] + (c >= near_lo && c < near_hi ? near : far);
+                uint32_t v = w->pressure[i] + (side >= 0 && (sc < side_lo || sc >= side_hi) ? beside
+                                               : c >= near_lo && c < near_hi            ? near
+                                                                                        : far);
                 w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
             }
         }

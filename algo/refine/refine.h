@@ -39,9 +39,11 @@
  *      box, grown by half the avatar's size, stretched along the axis of
  *      the face of its box nearest its centroid through the problem boxes
  *      it presses on (users walk in across that face: a tunnel under an
- *      arch, a room behind a door), and upwards by one cell (a user stands
- *      on a box of the map, whose top may be a cell above the geometry)
- *      and then by the step height. Only space an avatar fits in counts (a
+ *      arch, a room behind a door), across them too along that face's
+ *      horizontal axis (users who came in roam sideways: the far wall of a
+ *      tunnel, the column pair past the last one pressed), and upwards by
+ *      one cell (a user stands on a box of the map, whose top may be a cell
+ *      above the geometry) and then by the step height. Only space an avatar fits in counts (a
  *      morphological opening of the cells no triangle touches and no kept
  *      box meets, space outside the grid counting as empty): the hollow
  *      inside a thick wall is never wanted. A placement of the avatar that
@@ -50,8 +52,8 @@
  *      up onto a base, not into the air. Each wanted cell of a problem box
  *      gets the cluster's pressure, by its weight: from 4 for the lightest
  *      to 255 for the heaviest near its points, a quarter of that where the
- *      region is only stretched; pressures of several clusters add, up to
- *      255.
+ *      region is only stretched, a sixteenth beside the points' own reach;
+ *      pressures of several clusters add, up to 255.
  *   4. Divide, best first: shrink the grid to its cells to cover; cut the
  *      node first in line in two and shrink the parts (empty parts go).
  *      Nodes holding outside cells come first and are always cut (the cut

@@ -139,11 +139,12 @@ def test_doorway_opens_live_and_walls_stay():
     crowd = Crowd(srv, ["u1", "u2", "u3", "u4", "wallbumper"])
     room = object_id(srv.db, "openfoam_room_with_doorway.stl")
     to_east_of_door(crowd)
-    # Into the doorway: the MBR stops everyone at the east face. The
+    # Into the doorway: the MBR stops the four at the east face. The
     # refiner looks every second, so v2 may come within these 0.8 s and let
     # them through at once (u1 then ends 2 m in): the stop is then seen in
-    # the collisions the users were told of.
-    crowd.walk((5, 0, DOOR_Z), 0.8)
+    # the collisions the users were told of. The wall bumper stays outside.
+    inner = ["u1", "u2", "u3", "u4"]
+    crowd.walk({n: (5, 0, DOOR_Z) for n in inner}, 0.8)
     assert crowd.hits.get(room, 0) > 0, crowd.hits
     if not any(m["id"] == room and m["ecm_version"] >= 2 for m in crowd.infos):
         assert blocked_x(crowd.at("u1")[0]), crowd.at("u1")
@@ -155,22 +156,21 @@ def test_doorway_opens_live_and_walls_stay():
     # about one run in four there).
     deadline = time.time() + 15
     while crowd.at("u1")[0] >= 5.2 and time.time() < deadline:
-        crowd.walk({n: (5, 0, DOOR_Z) for n in ["u1", "u2", "u3", "u4"]}, 0.5)
+        crowd.walk({n: (5, 0, DOOR_Z) for n in inner}, 0.5)
     x = crowd.at("u1")[0]
     assert 4.358 + 0.3 - 0.05 < x < 5.2, crowd.at("u1")
-    # Later rounds: inside, the south part of the room is covered by coarse
-    # boxes (only the strip behind the door was wanted at first); walking
-    # there makes collisions against the version in force, which the next
-    # round opens, until nothing stops the crowd.
+    # Inside, to the south part of the room: whatever the first round left
+    # covered there (its region reaches across the room from the strip
+    # behind the door, at a lower pressure) gets collisions against the
+    # version in force, which the next rounds open, until nothing stops the
+    # crowd.
     # They keep pressing until they are through: the test waits for that
     # event, not for a number of rounds in a given time, which a slow
     # (sanitized, loaded) machine did not always fit.
-    inner = ["u1", "u2", "u3", "u4"]
     deadline = time.time() + 60
     while crowd.at("u1")[2] >= -3.8 and time.time() < deadline:
         crowd.walk({n: (7, 0, -3.9) for n in inner}, 0.5)
     assert crowd.at("u1")[2] < -3.8, (crowd.at("u1"), [(m["id"], m["ecm_version"]) for m in crowd.infos])
-    assert max(m["ecm_version"] for m in crowd.infos if m["id"] == room) >= 3
     # The east wall beside the door still blocks (z = -0.8 is solid wall).
     crowd.walk({"wallbumper": (14, 0, -0.8)}, 0.5)
     crowd.walk({"wallbumper": (5, 0, -0.8)}, 1.0)

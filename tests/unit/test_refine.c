@@ -480,7 +480,6 @@ static void test_archway_opens_stone_stays(void **state)
     char err[256];
     assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
     check_result(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, 16);
-    assert_int_equal(r.capped, 0);
     assert_true(r.wanted > 0);
     assert_true(r.count > 1);
 
@@ -1360,9 +1359,13 @@ static void test_neighbour_uses_the_named_face(void **state)
  * Step 2 by numbers. A cluster on the x = 0 face, its points y 1.5..2.5,
  * z 2..2.5, the avatar 2 x 1 x 0.5: grown by half the avatar (horizontally
  * the smaller of x and z, 0.5, whatever the yaw) and upwards by one cell
- * more, to y 1..3.125, z 1.75..2.75, and stretched through the box along x:
- * 32 x 17 x 8 = 4352 free cells, all wanted. A point cluster on the y = 0
- * face at x = z = 2 is stretched along y instead: 4 x 32 x 4 = 512.
+ * more, to y 1..3.125, stretched through the box along x, and across it
+ * along z (the face's horizontal axis, beside the points at a sixteenth of
+ * the pressure): 32 x 17 x 32 cells, less the 81 cells of cube a's top
+ * (layer 8) and the 2 x 81 of cube b's bottom (layers 23 and 24 both
+ * touch y = 3): 17165, all wanted. A point cluster on the y = 0 face at
+ * x = z = 2 is stretched along y instead, and not sideways: 4 x 32 x 4 =
+ * 512.
  */
 static void test_wanted_region(void **state)
 {
@@ -1384,7 +1387,7 @@ static void test_wanted_region(void **state)
     char err[256];
     assert_int_equal(ecm_refine(&p, tris, 24, CBOXES(box), 1, &on_x, 1, &r, err, sizeof err), 0);
     check_result(&p, tris, 24, CBOXES(box), 1, &on_x, 1, &r, 16);
-    assert_int_equal(r.wanted, 32 * 17 * 8);
+    assert_int_equal(r.wanted, 32 * 17 * 32 - 3 * 81);
     /* Each cube is left in a box of its own, tightened to its triangles
      * (its cells reach one layer further on each side). */
     assert_int_equal(r.count, 2);
@@ -1403,7 +1406,7 @@ static void test_wanted_region(void **state)
     /* Space outside the grid is free. A plate at y = 0.25 over the whole
      * box (its cells: y layers 1 and 2), the avatar 2 x 2 x 2 (its kernel
      * held to a quarter of the grid, 8 cells), a cluster on the x = 0 face
-     * at y = 0.1, z = 2: the region is y layers 0..9, z 8..23. Above the
+     * at y = 0.1, z = 2: the region is y layers 0..9, all of z. Above the
      * plate layers 3..9 are wanted (the kernel reaches up into the free
      * space above the region); below it layer 0 is too, a kernel there
      * reaching down out of the box. */
@@ -1413,7 +1416,7 @@ static void test_wanted_region(void **state)
     p.avatar[0] = p.avatar[1] = p.avatar[2] = 2;
     assert_int_equal(ecm_refine(&p, plate, 2, CBOXES(box), 1, &low, 1, &r, err, sizeof err), 0);
     check_result(&p, plate, 2, CBOXES(box), 1, &low, 1, &r, 16);
-    assert_int_equal(r.wanted, 32 * 16 * (7 + 1));
+    assert_int_equal(r.wanted, 32 * 32 * (7 + 1));
     ecm_result_free(&r);
 }
 
@@ -1485,8 +1488,9 @@ static void test_cap_exact(void **state)
  * Step 4 by numbers. Cubes A [0,0.4]^3, B [3.6,4] x [0,0.4]^2 and C [0,0.4]
  * x [3.6,4]^2 in [0,4]^3 (depth 5: each cube lies in 4^3 cells, its 2^3
  * inner ones empty; too small inside for the 0.5 avatar, so never wanted).
- * Two clusters on the x = 0 face want everything at y >= 1.25, and at y <
- * 1.25 for z >= 2.25: wanted cells reach every face, so division halves
+ * Two clusters, on the x = 0 face and on the floor (whose regions are not
+ * widened sideways), want everything at y >= 1.25, and at z >= 2.25:
+ * wanted cells reach every face, so division halves
  * the box at x = 2 (B alone), then the rest at y = 2 (A and C apart). A and
  * C would cover wanted cells; A and B only add empty space, 32 x 4 x 4 - 2
  * x 56 - 2 x 8 = 384 cells of their hull's 512 (0.75): they merge only when
@@ -1503,7 +1507,7 @@ static void test_merge_max_empty(void **state)
     const float box[6] = {0, 0, 0, 4, 4, 4}, ab[6] = {0, 0, 0, 4, 0.4f, 0.4f};
     const ecm_cluster cl[2] = {
         {.box = 0, .min = {0, 1.5f, 0}, .max = {0, 4, 4}, .centroid = {0, 2.75f, 2}},
-        {.box = 0, .min = {0, 0, 2.5f}, .max = {0, 1, 4}, .centroid = {0, 0.5f, 3.25f}}};
+        {.box = 0, .min = {0, 0, 2.5f}, .max = {4, 0, 4}, .centroid = {2, 0, 3.25f}}};
     static const struct {
         double max_empty;
         uint32_t count;
