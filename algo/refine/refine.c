@@ -1571,9 +1571,12 @@ static int refine_groups(const ecm_params *p, const float *tris, uint32_t ntris,
     int rc = -ENOMEM;
     if (!up || !owner || !g || !mine || !where)
         goto done;
+    /* At the cap no group may grow, and one division can still move boxes
+     * from one group's boxes to another's: all clusters are one group. */
+    const int at_cap = nboxes >= p->max_boxes;
     for (uint32_t i = 0; i < nclusters; i++)
-        up[i] = i;
-    for (uint32_t b = 0; b < nboxes; b++) {
+        up[i] = at_cap ? 0 : i;
+    for (uint32_t b = 0; b < nboxes && !at_cap; b++) {
         owner[b] = UINT32_MAX;
         for (uint32_t i = 0; i < nclusters; i++)
             if (presses(&clusters[i], boxes, b, p)) {
