@@ -880,17 +880,6 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         int zin = cz >= 0 && cz < n;
         for (uint32_t y = 0; y < dim[1]; y++) {
             int64_t cy = (int64_t)lo[1] - k[1] + y;
-            if (u.v && y >= band) {
-                for (uint32_t t = 0; t < dim[0]; t++) {
-                    int64_t cx = x0 + t;
-                    int in = zin && cx >= 0 && cx < n;
-                    for (int64_t below = cy - 2; below < cy; below++)
-                        if (below < 0 || (in && below < n && blocked(w, (uint32_t)cx, (uint32_t)below, (uint32_t)cz))) {
-                            bit_clear(&u, t, y, z);
-                            break;
-                        }
-                }
-            }
             if (!zin || cy < 0 || cy >= n)
                 continue;
             for (int64_t cx = x0 < 0 ? 0 : x0; cx < n && cx - x0 < dim[0]; cx++)
@@ -898,6 +887,35 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
                     bit_clear(&b, (uint32_t)(cx - x0), y, z);
         }
     }
+    /* u: the two cells under are both free as b has them, and above the
+     * floor (below the grid is the floor: something to stand on). */
+    for (uint32_t z = 0; u.v && z < dim[2]; z++)
+        for (uint32_t y = band; y < dim[1]; y++) {
+            int64_t cy = (int64_t)lo[1] - k[1] + y;
+            uint64_t *ru = u.v + u.w * (y + (size_t)dim[1] * z);
+            if (cy - 2 < 0) {
+                memset(ru, 0, u.w * sizeof *ru);
+                continue;
+            }
+            if (y < 2) { /* the cells under lie below the padded rows */
+                int zin = (int64_t)lo[2] - k[2] + z >= 0 && (int64_t)lo[2] - k[2] + z < n;
+                uint32_t cz = (uint32_t)((int64_t)lo[2] - k[2] + z);
+                for (uint32_t t = 0; t < dim[0]; t++) {
+                    int64_t cx = x0 + t;
+                    for (int64_t below = cy - 2; below < cy; below++)
+                        if (zin && cx >= 0 && cx < n && below < n &&
+                            blocked(w, (uint32_t)cx, (uint32_t)below, cz)) {
+                            bit_clear(&u, t, y, z);
+                            break;
+                        }
+                }
+                continue;
+            }
+            const uint64_t *r1 = b.v + b.w * ((y - 1) + (size_t)dim[1] * z);
+            const uint64_t *r2 = b.v + b.w * ((y - 2) + (size_t)dim[1] * z);
+            for (size_t i = 0; i < u.w; i++)
+                ru[i] &= r1[i] & r2[i];
+        }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 1);
     if (u.v) {
