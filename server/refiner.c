@@ -260,8 +260,10 @@ static int refined_one(void *ctx, const cluster_found *f, uint32_t k, int rc, co
                      figures);
         settle(t, f, k);
     } else if (rc == 0) { /* unchanged */
-        log_info("object %lld v%u: %u clusters of run %lld press on real geometry only; map unchanged",
-                 (long long)t->id, t->version, k, run_id);
+        char why[160];
+        ecm_unchanged_line(a, why, sizeof why);
+        log_info("object %lld v%u: %u clusters of run %lld: map unchanged: %s", (long long)t->id, t->version, k,
+                 run_id, why);
         settle(t, f, k);
     } else if (rc == -ESTALE)
         log_info("object %lld: changed while it was refined; the next round uses the new version", (long long)t->id);

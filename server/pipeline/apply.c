@@ -75,6 +75,17 @@ void ecm_judge_line(const judge_result *j, char *buf, size_t len)
              (unsigned long long)j->opened_new, j->ms);
 }
 
+void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len)
+{
+    if (a->stats.wanted && a->stats.capped)
+        snprintf(buf, len,
+                 "opening what its clusters press on takes more boxes than the cap leaves (%u boxes; %u problem "
+                 "boxes, only tightened)",
+                 a->boxes_before, a->stats.problem_boxes);
+    else
+        snprintf(buf, len, "its clusters press on real geometry only");
+}
+
 static int cmp_box(const void *a, const void *b) { return memcmp(a, b, 6 * sizeof(float)); }
 
 /* Whether two maps hold the same boxes, in any order: a refinement that

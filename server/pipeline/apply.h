@@ -47,6 +47,12 @@ int64_t ecm_evidence(const cluster_found *f, uint32_t n);
  * buf (room for len bytes). */
 void ecm_judge_line(const judge_result *j, char *buf, size_t len);
 
+/* Why an object came out unchanged, for people: its clusters wanted no
+ * space opened ("its clusters press on real geometry only"), or what they
+ * wanted would take more boxes than the cap leaves (the problem boxes were
+ * only tightened, and that changed nothing). Into buf (room for len). */
+void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len);
+
 /*
  * Refines the object the n clusters f were found on (all of one object and
  * version, of run run_id; 0: none recorded). p's avatar is in metres; it is

@@ -385,9 +385,11 @@ int main(int argc, char **argv)
                        "%u (%s)\n",
                        (long long)objs[i].id, objs[i].version, a->boxes_before, a->boxes_after, a->candidate,
                        figures);
-            else if (objs[i].outcome == 0)
-                printf("  object %lld: v%u unchanged: its clusters press on real geometry only\n",
-                       (long long)objs[i].id, objs[i].version);
+            else if (objs[i].outcome == 0) {
+                char why[160];
+                ecm_unchanged_line(a, why, sizeof why);
+                printf("  object %lld: v%u unchanged: %s\n", (long long)objs[i].id, objs[i].version, why);
+            }
             else if (objs[i].outcome == -ESTALE)
                 printf("  object %lld: changed meanwhile; not refined\n", (long long)objs[i].id);
         }

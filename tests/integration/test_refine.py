@@ -434,6 +434,21 @@ def test_the_same_boxes_in_another_order_are_unchanged():
     assert [(r["outcome"], r["boxes_after"]) for r in got] == [("unchanged", 2)], got
     assert db.execute("SELECT count(*) FROM ecm_candidates").fetchone() == (0,)
     assert db.execute("SELECT max(version) FROM ecm_versions WHERE object_id = ?", (oid,)).fetchone() == (2,)
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--object", str(oid), "--apply")
+    assert rc == 0 and "v2 unchanged: its clusters press on real geometry only" in out, (rc, out, err)
+    # Back on the one box over both plates, users pressing on the gap
+    # between them want space opened, which a cap of one box cannot give:
+    # unchanged too, and the job says why.
+    db.execute("UPDATE objects SET ecm_version = 1 WHERE id = ?", (oid,))
+    db.execute("DELETE FROM collision_segments")
+    db.execute("DELETE FROM collisions")
+    db.commit()
+    insert_collisions(db, now, [(oid, (1.25, 0.25, 0), (1.25, 0, 40 - 0.301), (0, 0, 2))], version=1,
+                      step=(0.05, 0, 0))
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--object", str(oid), "--apply",
+                       "--max-boxes", "1")
+    assert rc == 0 and "v1 unchanged: opening what its clusters press on takes more boxes than the cap leaves" in out, (
+        rc, out, err)
     db.close()
 
 
