@@ -767,22 +767,42 @@ static void region_size(const ecm_params *p, double size[3])
     size[1] = p->avatar[1];
 }
 
-/* Whether box b may hold cells of cluster cl's region (step 3, mark_wanted,
- * each side a cell of at most cell[a] further): named, the box it names;
- * span, the hull of the boxes it presses on. */
-static int meets_region(const ecm_cluster *cl, const float named[6], const float span[6], const float b[6],
-                        const ecm_params *p, const double cell[3])
+/*
+ * Cluster cl's region (step 3), local: across the span of the boxes it
+ * presses on along the face users cross and that face's horizontal axis;
+ * on the other axes its points' reach, grown by half the avatar, and
+ * upwards by up and the step height. named: the box it names. Returns the
+ * face's axis.
+ */
+static int region_of(const ecm_cluster *cl, const float named[6], const float span[6], const ecm_params *p,
+                     double up, double lo[3], double hi[3])
 {
     int face = crossed_face(cl, named), side = side_axis(face);
     double size[3];
     region_size(p, size);
     for (int a = 0; a < 3; a++) {
-        double lo = span[a], hi = span[3 + a];
+        lo[a] = span[a];
+        hi[a] = span[3 + a];
         if (a != face && a != side) {
-            lo = (double)cl->min[a] - size[a] / 2 - cell[a];
-            hi = (double)cl->max[a] + size[a] / 2 + (a == 1 ? 2 * cell[1] + p->step : 0) + cell[a];
+            lo[a] = (double)cl->min[a] - size[a] / 2;
+            hi[a] = (double)cl->max[a] + size[a] / 2 + (a == 1 ? up + p->step : 0);
         }
-        if (b[a] > hi || b[3 + a] < lo)
+    }
+    return face;
+}
+
+/* Whether box b may hold cells of cluster cl's region, on a grid whose
+ * cells are at most cell: the region with a cell of its own above, and a
+ * cell further each side (and above once more) for the cells it rounds out
+ * to. */
+static int meets_region(const ecm_cluster *cl, const float named[6], const float span[6], const float b[6],
+                        const ecm_params *p, const double cell[3])
+{
+    double lo[3], hi[3];
+    int face = region_of(cl, named, span, p, 2 * cell[1], lo, hi), side = side_axis(face);
+    for (int a = 0; a < 3; a++) {
+        double grow = a != face && a != side ? cell[a] : 0;
+        if (b[a] > hi[a] + grow || b[3 + a] < lo[a] - grow)
             return 0;
     }
     return 1;
@@ -805,29 +825,22 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
 {
     const voxel_grid *g = &w->g;
     uint32_t n = w->n;
-    int face = crossed_face(cl, named);
-    double size[3];
+    double size[3], rlo[3], rhi[3];
     region_size(p, size);
+    int face = region_of(cl, named, span, p, g->cell[1], rlo, rhi);
     uint32_t lo[3], hi[3], k[3], dim[3], top;
     /* The horizontal axis along the face users cross (none for a floor or
-     * a ceiling): the region reaches across the span on it too. side_lo,
-     * side_hi: the points' own reach there. */
+     * a ceiling), where the region reaches across the span: side_lo,
+     * side_hi, the points' own reach there. */
     int side = side_axis(face);
     uint32_t side_lo = 0, side_hi = 0;
+    if (side >= 0) {
+        side_lo = cell_of(g, side, (double)cl->min[side] - size[side] / 2, 0);
+        side_hi = cell_of(g, side, (double)cl->max[side] + size[side] / 2, 1);
+    }
     for (int a = 0; a < 3; a++) {
-        if (a == face) {
-            lo[a] = cell_of(g, a, span[a], 0);
-            hi[a] = cell_of(g, a, span[3 + a], 1);
-        } else if (a == side) {
-            side_lo = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
-            side_hi = cell_of(g, a, (double)cl->max[a] + size[a] / 2, 1);
-            lo[a] = cell_of(g, a, span[a], 0);
-            hi[a] = cell_of(g, a, span[3 + a], 1);
-        } else {
-            double up = a == 1 ? g->cell[1] + p->step : 0;
-            lo[a] = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
-            hi[a] = cell_of(g, a, (double)cl->max[a] + size[a] / 2 + up, 1);
-        }
+        lo[a] = cell_of(g, a, rlo[a], 0);
+        hi[a] = cell_of(g, a, rhi[a], 1);
         if (lo[a] >= hi[a])
             return 0;
         /* The avatar in cells, rounded down (a smaller kernel finds more
@@ -1325,8 +1338,10 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
                 double vol = box_volume(boxes[j], boxes[j] + 3);
                 state[j] = rc == 1 && vol - sp[j].volume > gain_min * vol ? 1 : 2;
             }
+            if (state[j] != 1)
+                continue;
             double gain = box_volume(boxes[j], boxes[j] + 3) - sp[j].volume;
-            if (state[j] == 1 && (bi == UINT32_MAX || gain > bgain)) {
+            if (bi == UINT32_MAX || gain > bgain) {
                 bi = j;
                 bgain = gain;
             }
@@ -1453,7 +1468,7 @@ static void to_local(const voxel_grid *g, const float box[6], const ibox *b, flo
 static void work_free(work *w)
 {
     voxel_grid_free(&w->g);
-    voxel_svt_free(w->tables);
+    voxel_table_free(w->tables);
     free(w->cls);
     free(w->pressure);
     free(w->out.b);
@@ -1469,6 +1484,16 @@ static void widen(float h[6], const float b[6])
 }
 
 static const float EMPTY_HULL[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+
+/* span: the hull of the boxes cluster c presses on. */
+static void press_span(const ecm_cluster *c, const float (*boxes)[6], uint32_t nboxes, const ecm_params *p,
+                       float span[6])
+{
+    memcpy(span, EMPTY_HULL, 6 * sizeof *span);
+    for (uint32_t b = 0; b < nboxes; b++)
+        if (presses(c, boxes, b, p))
+            widen(span, boxes[b]);
+}
 
 /* Steps 1 to 3: the grid over the hull of the problem boxes, its cells'
  * classes and pressures, the three tables. */
@@ -1494,9 +1519,9 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
      * were handed back to the system after each round and faulted in
      * again, page by page, by the next (glibc keeps a freed block for
      * reuse up to twice the largest one it has seen returned to it); in
-     * huge pages where the system has them (voxel_svt_alloc). The outside
+     * huge pages where the system has them (voxel_table_alloc). The outside
      * table only when a cell is outside (never for one box). */
-    w->tables = voxel_svt_alloc((w->any_outside ? 3 : 2) * table);
+    w->tables = voxel_table_alloc((w->any_outside ? 3 : 2) * table * sizeof *w->tables);
     if (!w->tables)
         return -ENOMEM;
     uint32_t wmax = 1;
@@ -1504,10 +1529,7 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
         wmax = cl[i].weight > wmax ? cl[i].weight : wmax;
     for (uint32_t i = 0; i < ncl; i++) {
         float span[6];
-        memcpy(span, EMPTY_HULL, sizeof span);
-        for (uint32_t b = 0; b < nboxes; b++)
-            if (presses(&cl[i], boxes, b, p))
-                widen(span, boxes[b]);
+        press_span(&cl[i], boxes, nboxes, p, span);
         uint32_t weight = cl[i].weight ? cl[i].weight : 1;
         uint32_t near =
             PRESSURE_NEAR_MIN + (uint32_t)((uint64_t)(PRESSURE_MAX - PRESSURE_NEAR_MIN) * weight / wmax);
@@ -1570,14 +1592,13 @@ static int refine_groups(const ecm_params *p, const float *tris, const float (*t
     for (int a = 0; a < 3; a++)
         objcell[a] = ((double)ob[3 + a] - ob[a]) / (double)(1u << p->depth);
     uint32_t *up = cvre_malloc((nclusters ? nclusters : 1) * sizeof *up);
-    uint32_t *owner = cvre_malloc(nboxes * sizeof *owner); /* a cluster pressing on the box, or UINT32_MAX */
     group *g = cvre_malloc((nclusters ? nclusters : 1) * sizeof *g);
     ecm_cluster *mine = cvre_malloc((nclusters ? nclusters : 1) * sizeof *mine);
     uint32_t *where = cvre_malloc(nboxes * sizeof *where);
     float(*cur)[6] = NULL;
     ecm_result part = {0};
     int rc = -ENOMEM;
-    if (!up || !owner || !g || !mine || !where)
+    if (!up || !g || !mine || !where)
         goto done;
     /* At the cap no group may grow, and one division can still move boxes
      * from one group's boxes to another's: all clusters are one group. */
@@ -1585,13 +1606,13 @@ static int refine_groups(const ecm_params *p, const float *tris, const float (*t
     for (uint32_t i = 0; i < nclusters; i++)
         up[i] = at_cap ? 0 : i;
     for (uint32_t b = 0; b < nboxes && !at_cap; b++) {
-        owner[b] = UINT32_MAX;
+        uint32_t first = UINT32_MAX; /* the first cluster pressing on b */
         for (uint32_t i = 0; i < nclusters; i++)
             if (presses(&clusters[i], boxes, b, p)) {
-                if (owner[b] == UINT32_MAX)
-                    owner[b] = i;
+                if (first == UINT32_MAX)
+                    first = i;
                 else
-                    up[group_root(up, i)] = group_root(up, owner[b]);
+                    up[group_root(up, i)] = group_root(up, first);
             }
     }
     uint32_t ng = 0;
@@ -1664,7 +1685,6 @@ done:
     if (rc == -ENOMEM)
         cvre_fail(err, errlen, rc, "out of memory");
     free(up);
-    free(owner);
     free(g);
     free(mine);
     free(where);
@@ -1722,7 +1742,7 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
      * object's, in one pass with the check; in huge pages where the system
      * has them, like the tables: 9.6 MB for a 400k-triangle city block,
      * faulted in page by page otherwise. */
-    float(*tb)[6] = (float(*)[6])(void *)voxel_svt_alloc((size_t)ntris * 6);
+    float(*tb)[6] = voxel_table_alloc((size_t)ntris * sizeof *tb);
     if (!tb)
         return cvre_fail(err, errlen, -ENOMEM, "out of memory");
     float ob[6];
@@ -1732,7 +1752,7 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
     if (rc == 0)
         rc = refine_groups(p, tris, (const float(*)[6])tb, ob, ntris, boxes, nboxes, clusters, nclusters, out, err,
                            errlen);
-    voxel_svt_free((uint32_t *)(void *)tb);
+    voxel_table_free(tb);
     return rc;
 }
 
@@ -1796,28 +1816,20 @@ static uint32_t tighten_only(const ecm_params *p, const double objcell[3], const
     double cell[3];
     for (int a = 0; a < 3; a++)
         cell[a] = fmax(objcell[a], ((double)hb[3 + a] - hb[a]) / (double)(1u << p->depth));
-    uint32_t n = 0;
-    for (uint32_t b = 0; b < nboxes; b++) {
-        if (!problem[b])
-            continue;
-        int reached = 0;
-        for (uint32_t i = 0; i < nclusters && !reached; i++) {
-            if (clusters[i].box == b) {
-                reached = 1;
-                break;
-            }
-            float span[6];
-            memcpy(span, EMPTY_HULL, sizeof span);
-            for (uint32_t k = 0; k < nboxes; k++)
-                if (presses(&clusters[i], boxes, k, p))
-                    widen(span, boxes[k]);
-            reached = meets_region(&clusters[i], boxes[clusters[i].box], span, boxes[b], p, cell);
-        }
-        if (!reached) {
+    for (uint32_t b = 0; b < nboxes; b++)
+        if (problem[b])
             problem[b] = PROBLEM_TIGHTEN;
-            n++;
-        }
+    for (uint32_t i = 0; i < nclusters; i++) {
+        float span[6];
+        press_span(&clusters[i], boxes, nboxes, p, span);
+        for (uint32_t b = 0; b < nboxes; b++)
+            if (problem[b] == PROBLEM_TIGHTEN &&
+                (clusters[i].box == b || meets_region(&clusters[i], boxes[clusters[i].box], span, boxes[b], p, cell)))
+                problem[b] = PROBLEM_DIVIDE;
     }
+    uint32_t n = 0;
+    for (uint32_t b = 0; b < nboxes; b++)
+        n += problem[b] == PROBLEM_TIGHTEN;
     memcpy(hb, EMPTY_HULL, 6 * sizeof *hb);
     for (uint32_t b = 0; b < nboxes; b++)
         if (problem[b] == PROBLEM_DIVIDE)

@@ -629,10 +629,9 @@ int voxel_tri_box_overlap(const double t[9], const double min[3], const double m
  * of it past a header that remembers the block. */
 #define HUGE_PAGE ((size_t)2 << 20)
 
-uint32_t *voxel_svt_alloc(size_t count)
+void *voxel_table_alloc(size_t bytes)
 {
-    size_t bytes = count * sizeof(uint32_t);
-    if (count > (SIZE_MAX - 2 * HUGE_PAGE) / sizeof(uint32_t))
+    if (bytes > SIZE_MAX - 2 * HUGE_PAGE)
         return NULL;
     char *block = cvre_malloc(bytes + HUGE_PAGE + sizeof(void *));
     if (!block)
@@ -645,10 +644,10 @@ uint32_t *voxel_svt_alloc(size_t count)
     size_t whole = bytes & ~(HUGE_PAGE - 1);
     if (whole)
         madvise(t, whole, MADV_HUGEPAGE);
-    return (uint32_t *)(void *)t;
+    return t;
 }
 
-void voxel_svt_free(uint32_t *t)
+void voxel_table_free(void *t)
 {
     if (!t)
         return;

@@ -70,14 +70,15 @@ typedef struct voxel_svt {
     uint32_t m;
 } voxel_svt;
 
-/* Room for count table entries (voxel_svt_build's t), aligned for
- * transparent huge pages and advised as such (madvise; a hint the system
- * may ignore): three tables of 2^7 cells a side are 6,300 pages of 4 KiB,
- * faulted in one by one in every process that refines, and a fifth of a
- * small object's refinement. Returns NULL when out of memory; freed with
- * voxel_svt_free (NULL: nothing). */
-uint32_t *voxel_svt_alloc(size_t count);
-void voxel_svt_free(uint32_t *t);
+/* Room for a large table of bytes bytes (voxel_svt_build's t, a table of
+ * each triangle's bounds), aligned for transparent huge pages and advised
+ * as such (madvise; a hint the system may ignore): three tables of 2^7
+ * cells a side are 6,300 pages of 4 KiB, faulted in one by one in every
+ * process that refines, and a fifth of a small object's refinement.
+ * Returns NULL when out of memory; freed with voxel_table_free (NULL:
+ * nothing). */
+void *voxel_table_alloc(size_t bytes);
+void voxel_table_free(void *t);
 
 /* Builds s in t from n^3 bytes (cell x + n (y + n z)): the byte itself
  * (mask 0), or 1 where it has a bit of mask. The whole grid's sum must fit
