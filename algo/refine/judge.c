@@ -74,44 +74,6 @@ static void geometry_free(geometry *g)
 static inline float fmin2(float a, float b) { return a < b ? a : b; }
 static inline float fmax2(float a, float b) { return a > b ? a : b; }
 
-static void tri_box(const float *t, float b[6])
-{
-    for (int a = 0; a < 3; a++) {
-        b[a] = fmin2(fmin2(t[a], t[3 + a]), t[6 + a]);
-        b[3 + a] = fmax2(fmax2(t[a], t[3 + a]), t[6 + a]);
-    }
-}
-
-/* The bounding box of all the triangles, lo and hi: twelve floats (four
- * vertices) a step, slot k of lo and hi holding axis k % 3, which the
- * compiler turns into vector minimums and maximums (four times faster than
- * a vertex at a time on the city block's 400,000 triangles). */
-static void tris_bounds(const judge_input *in, float lo[3], float hi[3])
-{
-    const float *t = in->tris;
-    size_t n = (size_t)in->ntris * 9, i = 0;
-    float l[12], h[12];
-    for (int k = 0; k < 12; k++)
-        l[k] = h[k] = t[k % 3];
-    for (; i + 12 <= n; i += 12)
-        for (int k = 0; k < 12; k++) {
-            l[k] = fmin2(l[k], t[i + (size_t)k]);
-            h[k] = fmax2(h[k], t[i + (size_t)k]);
-        }
-    for (int a = 0; a < 3; a++) {
-        lo[a] = l[a];
-        hi[a] = h[a];
-        for (int k = a + 3; k < 12; k += 3) {
-            lo[a] = fmin2(lo[a], l[k]);
-            hi[a] = fmax2(hi[a], h[k]);
-        }
-        for (size_t v = i + (size_t)a; v < n; v += 3) { /* the vertices left */
-            lo[a] = fmin2(lo[a], t[v]);
-            hi[a] = fmax2(hi[a], t[v]);
-        }
-    }
-}
-
 /* The table of occupied cells, from the grid's bits made bytes. */
 static int build_svt(geometry *g)
 {
@@ -149,18 +111,17 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
     /* Room for every triangle, of which only what the indexed ones fill
      * is touched (a large block's pages are mapped as they are written):
      * growing the arrays instead copied them again and again. */
-    g->tbox = cvre_malloc(in->ntris * sizeof *g->tbox);
-    g->tris = cvre_malloc((size_t)in->ntris * 9 * sizeof *g->tris);
+    g->tbox = cvre_malloc(in->mesh->ntris * sizeof *g->tbox);
+    g->tris = cvre_malloc((size_t)in->mesh->ntris * 9 * sizeof *g->tris);
     if (!g->tbox || !g->tris)
         return -ENOMEM;
+    const trimesh *m = in->mesh;
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (uint32_t i = 0; i < in->ntris; i++) {
-        const float *t = in->tris + 9 * (size_t)i;
-        float b[6];
-        tri_box(t, b);
+    for (uint32_t i = 0; i < m->ntris; i++) {
+        const float *t = m->tris + 9 * (size_t)i, *b = m->box[i];
         if (!meets(b, near))
             continue;
-        memcpy(g->tbox[g->ntris], b, sizeof b);
+        memcpy(g->tbox[g->ntris], b, sizeof g->tbox[0]);
         memcpy(g->tris + 9 * (size_t)g->ntris, t, 9 * sizeof *t);
         g->ntris++;
         for (int a = 0; a < 3; a++) {
@@ -235,13 +196,10 @@ static int touches_exactly(geometry *g, const double lo[3], const double hi[3])
         inside &= l[k] >= g->near[k] && h[k] <= g->near[3 + k];
     }
     if (!inside) { /* beyond the triangles indexed: all of them, one by one */
-        for (uint32_t i = 0; i < g->in->ntris; i++) {
-            const float *t = g->in->tris + 9 * (size_t)i;
-            float b[6];
-            tri_box(t, b);
-            if (tri_overlaps(t, b, l, h))
+        const trimesh *m = g->in->mesh;
+        for (uint32_t i = 0; i < m->ntris; i++)
+            if (tri_overlaps(m->tris + 9 * (size_t)i, m->box[i], l, h))
                 return 1;
-        }
         return 0;
     }
     if (g->ntris == 0 || !maybe_touches(g, lo, hi))
@@ -418,12 +376,8 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
         p->cell_depth > VOXEL_DEPTH_MAX || p->max_samples < 1 ||
         p->max_samples > JUDGE_SAMPLES_LIMIT)
         return cvre_fail(err, errlen, -EINVAL, "judge parameters out of range");
-    if (!in->tris || in->ntris == 0)
+    if (!in->mesh || in->mesh->ntris == 0)
         return cvre_fail(err, errlen, -EINVAL, "no triangles to judge against");
-    if (!voxel_finite(in->tris, (size_t)in->ntris * 9))
-        for (size_t i = 0;; i++) /* which one */
-            if (!isfinite(in->tris[i]))
-                return cvre_fail(err, errlen, -EINVAL, "triangle %zu: a coordinate is not finite", i / 9);
     if (!(in->scale > 0) || !isfinite(in->scale) || !isfinite(in->pose_y))
         return cvre_fail(err, errlen, -EINVAL, "scale %g or height %g unusable", in->scale, in->pose_y);
     const float (*maps[2])[6] = {in->old_boxes, in->new_boxes};
@@ -480,8 +434,7 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
         if (m == 0 || cmp_sample(&distinct[m - 1], &distinct[i]) != 0)
             distinct[m++] = distinct[i];
     uint32_t n = m < jp.max_samples ? m : jp.max_samples;
-    float lo[3], hi[3];
-    tris_bounds(in, lo, hi);
+    const float *lo = in->mesh->min, *hi = in->mesh->max;
     const double cells = (double)(1u << jp.cell_depth);
     const double cell[3] = {((double)hi[0] - lo[0]) / cells * in->scale, ((double)hi[1] - lo[1]) / cells * in->scale,
                             ((double)hi[2] - lo[2]) / cells * in->scale};

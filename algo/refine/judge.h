@@ -73,6 +73,7 @@
 #include <stdint.h>
 
 #include "move.h"
+#include "trimesh.h"
 
 /* The server's tick at its default 20 Hz (server/srv_limits.h). */
 #define JUDGE_DT_DEFAULT 0.05f
@@ -152,8 +153,7 @@ typedef struct judge_sample {
 } judge_sample;
 
 typedef struct judge_input {
-    const float *tris;            /* ntris triangles, 9 floats each, local */
-    uint32_t ntris;
+    const trimesh *mesh;          /* the object's triangles, local */
     double scale;                 /* metres per local unit, > 0 */
     double pose_y;                /* world height of the object's origin, m */
     const float (*old_boxes)[6];  /* the map in force, local */
@@ -181,8 +181,8 @@ int judge_better(const judge_result *r);
  * Judges in->new_boxes against in->old_boxes (see above) and fills *out,
  * whatever the verdict. Returns 0, or with *out zeroed and a one-line
  * reason in err (room for errlen bytes): -EINVAL for parameters out of
- * range, no triangles, no boxes or more than ECM_MAX_BOXES_LIMIT, a
- * coordinate, the scale or pose_y not finite (or a scale not above 0), a
+ * range, no mesh, no boxes or more than ECM_MAX_BOXES_LIMIT, a
+ * box's coordinate, the scale or pose_y not finite (or a scale not above 0), a
  * box with min > max, no samples, or a sample with a coordinate that is not
  * finite or beyond MOVE_MAX_COORD; -ENOMEM when out of memory.
  */

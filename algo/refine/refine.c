@@ -20,6 +20,7 @@
 #include "avatar.h"
 #include "err.h"
 #include "tribins.h"
+#include "trimesh.h"
 
 _Static_assert(ECM_DEPTH_MIN >= VOXEL_DEPTH_MIN && ECM_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Cell indices, and one past the last, fit 16 bits. */
@@ -993,8 +994,6 @@ static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, co
  * (their rules for NaNs); every value here is finite. */
 static inline double dmin(double a, double b) { return a < b ? a : b; }
 static inline double dmax(double a, double b) { return a > b ? a : b; }
-static inline float min3f(float a, float b, float c) { return a < b ? (a < c ? a : c) : (b < c ? b : c); }
-static inline float max3f(float a, float b, float c) { return a > b ? (a > c ? a : c) : (b > c ? b : c); }
 
 /* Grows bb (min x y z, max x y z) to hold the part of triangle t (9
  * floats) inside the closed box c (Sutherland-Hodgman, in double: one
@@ -1547,9 +1546,9 @@ static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t 
     return 0;
 }
 
-static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const float *tris,
-                        const float (*tb)[6], uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
-                        const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
+static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
+                        const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
+                        ecm_result *out, char *err, size_t errlen);
 
 /* Union-find over clusters: the root of i. */
 static uint32_t group_root(uint32_t *up, uint32_t i)
@@ -1583,14 +1582,13 @@ static int cmp_group(const void *a, const void *b)
  * groups still to come (what one leaves goes to the next); step 7 stops at
  * max_boxes less a quarter in all.
  */
-static int refine_groups(const ecm_params *p, const float *tris, const float (*tb)[6], const float ob[6],
-                         uint32_t ntris, const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters,
-                         uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+static int refine_groups(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                         const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
 {
     const uint32_t split_max = p->max_boxes - p->max_boxes / SPLIT_RESERVE;
     double objcell[3];
     for (int a = 0; a < 3; a++)
-        objcell[a] = ((double)ob[3 + a] - ob[a]) / (double)(1u << p->depth);
+        objcell[a] = ((double)m->max[a] - m->min[a]) / (double)(1u << p->depth);
     uint32_t *up = cvre_malloc((nclusters ? nclusters : 1) * sizeof *up);
     group *g = cvre_malloc((nclusters ? nclusters : 1) * sizeof *g);
     ecm_cluster *mine = cvre_malloc((nclusters ? nclusters : 1) * sizeof *mine);
@@ -1651,8 +1649,8 @@ static int refine_groups(const ecm_params *p, const float *tris, const float (*t
         gp.max_boxes = ncur > p->max_boxes ? p->max_boxes : ncur + (uint32_t)(spare * g[k].weight / left);
         left -= g[k].weight;
         uint32_t smax = split_max < gp.max_boxes ? split_max : gp.max_boxes;
-        if ((rc = refine_group(&gp, objcell, smax, tris, tb, ntris, (const float(*)[6])cur, ncur, mine, n, &part, err,
-                               errlen)) < 0)
+        if ((rc = refine_group(&gp, objcell, smax, m, (const float(*)[6])cur, ncur, mine, n, &part, err, errlen)) <
+            0)
             goto done;
         /* The boxes it kept keep their order, first; its new ones follow.
          * (A new box of an earlier group may reach a cell into this one's
@@ -1695,32 +1693,11 @@ done:
     return rc;
 }
 
-/* tb[t]: triangle t's bounding box; ob: all of theirs. Returns whether
- * every coordinate is finite (voxel_finite: a pass of bit tests over the
- * array; a chain of float operations per vertex cost 5 ms on 400k
- * triangles). */
-static int tri_bounds(const float *tris, uint32_t ntris, float (*tb)[6], float ob[6])
-{
-    if (!voxel_finite(tris, (size_t)ntris * 9))
-        return 0;
-    memcpy(ob, EMPTY_HULL, 6 * sizeof *ob);
-    for (uint32_t t = 0; t < ntris; t++) {
-        const float *v = tris + 9 * (size_t)t;
-        for (int a = 0; a < 3; a++) {
-            tb[t][a] = min3f(v[a], v[3 + a], v[6 + a]);
-            tb[t][3 + a] = max3f(v[a], v[3 + a], v[6 + a]);
-            ob[a] = tb[t][a] < ob[a] ? tb[t][a] : ob[a];
-            ob[3 + a] = tb[t][3 + a] > ob[3 + a] ? tb[t][3 + a] : ob[3 + a];
-        }
-    }
-    return 1;
-}
-
 static int check_rest(const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
                       char *err, size_t errlen);
 
-int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
-               const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                    const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
 {
     memset(out, 0, sizeof *out);
     if (p->depth < ECM_DEPTH_MIN || p->depth > ECM_DEPTH_MAX)
@@ -1734,23 +1711,19 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
             return cvre_fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
     if (!(p->step >= 0) || !isfinite(p->step))
         return cvre_fail(err, errlen, -EINVAL, "the step height must be finite and not negative");
-    if (ntris == 0 || !tris)
-        return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
-    /* Each triangle's bounding box (tightening's, in every group) and the
-     * object's, in one pass with the check; in huge pages where the system
-     * has them, like the tables: 9.6 MB for a 400k-triangle city block,
-     * faulted in page by page otherwise. */
-    float(*tb)[6] = voxel_table_alloc((size_t)ntris * sizeof *tb);
-    if (!tb)
-        return cvre_fail(err, errlen, -ENOMEM, "out of memory");
-    float ob[6];
-    int rc = tri_bounds(tris, ntris, tb, ob) ? check_rest(boxes, nboxes, clusters, nclusters, err, errlen)
-                                             : cvre_fail(err, errlen, -EINVAL,
-                                                         "a triangle has a coordinate that is not finite");
+    int rc = check_rest(boxes, nboxes, clusters, nclusters, err, errlen);
+    return rc < 0 ? rc : refine_groups(p, m, boxes, nboxes, clusters, nclusters, out, err, errlen);
+}
+
+int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
+               const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    trimesh m;
+    int rc = trimesh_init(&m, tris, ntris, err, errlen);
     if (rc == 0)
-        rc = refine_groups(p, tris, (const float(*)[6])tb, ob, ntris, boxes, nboxes, clusters, nclusters, out, err,
-                           errlen);
-    voxel_table_free(tb);
+        rc = ecm_refine_mesh(p, &m, boxes, nboxes, clusters, nclusters, out, err, errlen);
+    trimesh_free(&m);
     return rc;
 }
 
@@ -1841,9 +1814,9 @@ static uint32_t tighten_only(const ecm_params *p, const double objcell[3], const
  * and step 7 stopping at split_max. Fills *out (empty on error) as
  * ecm_refine does.
  */
-static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const float *tris,
-                        const float (*tb)[6], uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
-                        const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
+                        const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
+                        ecm_result *out, char *err, size_t errlen)
 {
     memset(out, 0, sizeof *out);
     int rc = -ENOMEM;
@@ -1876,7 +1849,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
     if (nproblem) {
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
-        if ((rc = build_grid(&w, &gp, tris, ntris, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
+        if ((rc = build_grid(&w, &gp, m->tris, m->ntris, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
         struct timespec t0;
         clock_gettime(STAGE_CLOCK, &t0);
@@ -1904,10 +1877,10 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
             for (uint32_t i = 0; i < nboxes; i++)
                 if (problem[i] == pass)
                     memcpy(pb[np++], boxes[i], sizeof pb[0]);
-        tt = (tight){.tris = tris, .tb = tb, .problem = (const float(*)[6])pb,
+        tt = (tight){.tris = m->tris, .tb = (const float(*)[6])m->box, .problem = (const float(*)[6])pb,
                      .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
         const double hull[6] = {hall[0], hall[1], hall[2], hall[3], hall[4], hall[5]};
-        if ((rc = tribins_build(&tt.bins, hull, BUCKETS, tt.tb, ntris, tt.eps, 0)) < 0)
+        if ((rc = tribins_build(&tt.bins, hull, BUCKETS, tt.tb, m->ntris, tt.eps, 0)) < 0)
             goto done;
         for (uint32_t i = 0; i < nboxes; i++)
             if (!problem[i])

@@ -126,6 +126,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "trimesh.h"
 #include "voxel.h"
 
 /* Grid depths a refinement accepts: the division keeps three counts per
@@ -195,6 +196,10 @@ typedef struct ecm_result {
  */
 int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
                const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
+/* The same over a mesh its caller has (trimesh_init: the triangles were
+ * checked there), so that the judge can use it too. */
+int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                    const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
 void ecm_result_free(ecm_result *r);
 
 #endif

@@ -187,6 +187,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     clock_gettime(CLOCK_MONOTONIC, &t0);
     memset(out, 0, sizeof *out);
     db_ecm_object o = {0};
+    trimesh mesh = {0};
     ecm_result r = {0};
     judge_sample *samples = NULL;
     uint32_t nsamples = 0;
@@ -214,8 +215,9 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
         lp.avatar[a] = (float)(p->avatar[a] / scale);
     lp.step = (float)(p->step / scale);
     char why[256];
-    if (ecm_refine(&lp, o.tris, o.tri_count, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why,
-                   sizeof why) < 0) {
+    /* The triangles' boxes, for the refinement and its judge. */
+    if (trimesh_init(&mesh, o.tris, o.tri_count, why, sizeof why) < 0 ||
+        ecm_refine_mesh(&lp, &mesh, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why, sizeof why) < 0) {
         /* Out of memory too: the refinement did not run, the store is fine. */
         rc = cvre_fail(err, errlen, -EINVAL, "object %lld: %s", (long long)object_id, why);
         goto done;
@@ -230,7 +232,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     judge_params jp;
     judge_params_default(&jp);
     memcpy(jp.move.size, p->avatar, sizeof jp.move.size);
-    judge_input in = {.tris = o.tris, .ntris = o.tri_count, .scale = scale, .pose_y = at.pos[1],
+    judge_input in = {.mesh = &mesh, .scale = scale, .pose_y = at.pos[1],
                       .old_boxes = (const float(*)[6])o.boxes, .nold = o.box_count,
                       .new_boxes = (const float(*)[6])r.boxes, .nnew = r.count, .samples = samples,
                       .nsamples = nsamples};
@@ -267,6 +269,7 @@ done:
     clock_gettime(CLOCK_MONOTONIC, &t1);
     out->total_ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;
     ecm_result_free(&r);
+    trimesh_free(&mesh);
     db_ecm_object_free(&o);
     free(samples);
     free(clusters);

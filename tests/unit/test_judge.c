@@ -18,6 +18,7 @@
 typedef struct mesh {
     float t[MAX_TRIS * 9];
     uint32_t n;
+    trimesh tm; /* over t, made by input() */
 } mesh;
 
 /* The 12 triangles of the surface of box [x0, x1] x [y0, y1] x [z0, z1]. */
@@ -57,10 +58,16 @@ static uint32_t in_front(judge_sample *s, uint32_t n, float x0, float x1)
     return n;
 }
 
-static judge_input input(const mesh *m, const float (*old)[6], uint32_t nold, const float (*cand)[6], uint32_t nnew,
+/* The judge's input over m's triangles as they are now; the test frees
+ * m->tm at its end. */
+static judge_input input(mesh *m, const float (*old)[6], uint32_t nold, const float (*cand)[6], uint32_t nnew,
                          const judge_sample *s, uint32_t ns)
 {
-    return (judge_input){.tris = m->t, .ntris = m->n, .scale = 1, .pose_y = 0, .old_boxes = old, .nold = nold,
+    char err[128] = "";
+    trimesh_free(&m->tm);
+    if (trimesh_init(&m->tm, m->t, m->n, err, sizeof err) != 0)
+        fail_msg("trimesh_init: %s", err);
+    return (judge_input){.mesh = &m->tm, .scale = 1, .pose_y = 0, .old_boxes = old, .nold = nold,
                          .new_boxes = cand, .nnew = nnew, .samples = s, .nsamples = ns};
 }
 
@@ -101,6 +108,7 @@ static void test_doorway_opened_is_better(void **state)
     r = judged(&back);
     assert_int_equal(r.better, 0);
     assert_true(r.phantom_new > r.phantom_old);
+    trimesh_free(&m.tm);
 }
 
 /* A room behind the doorway (back wall at z = 4): the candidate opens only
@@ -124,6 +132,7 @@ static void test_corridor_behind_a_doorway_is_better(void **state)
     assert_true(r.phantom_new < r.phantom_old / 10);
     assert_int_equal(r.opened_new, 0);
     assert_int_equal(r.better, 1);
+    trimesh_free(&m.tm);
 }
 
 /* Users pressed on the far side of the wall, its solid part (sliding along
@@ -144,6 +153,7 @@ static void test_wall_on_the_max_face_is_real(void **state)
     assert_int_equal(r.phantom_old, 0);
     assert_int_equal(r.phantom_new, 0);
     assert_int_equal(r.better, 0);
+    trimesh_free(&m.tm);
 }
 
 /* Users behind the doorway walk 2.8 m on to a back wall, at the end of the
@@ -181,6 +191,7 @@ static void test_wall_at_the_end_of_the_reach_is_real(void **state)
     assert_int_equal(r[1].phantom_new, 0);
     assert_int_equal(r[1].opened_old, 0);
     assert_int_equal(r[1].opened_new, 0);
+    trimesh_free(&m.tm);
 }
 
 /* A garage: a 0.31 m base one steps onto, posts, a roof plate at 2.5 m and
@@ -212,6 +223,7 @@ static void test_garage_base_opened_under_a_low_box_is_rejected(void **state)
     assert_true(r.phantom_new > 0);
     assert_int_equal(r.opened_new, 0);
     assert_int_equal(r.better, 0);
+    trimesh_free(&m.tm);
 }
 
 /* A candidate that forgets the right part of the wall: fewer phantoms at
@@ -231,6 +243,7 @@ static void test_uncovered_wall_is_rejected(void **state)
     assert_int_equal(r.opened_old, 0);
     assert_true(r.opened_new > 0);
     assert_int_equal(r.better, 0);
+    trimesh_free(&m.tm);
 }
 
 /* The same input twice: the same figures; a cap picks samples evenly; a
@@ -278,6 +291,7 @@ static void test_deterministic_cap_still_scale(void **state)
     /* The wall at a tenth of its size, scaled back up: the same trial. */
     static mesh small;
     small = m;
+    small.tm = (trimesh){0}; /* input() makes its own */
     for (uint32_t i = 0; i < small.n * 9; i++)
         small.t[i] /= 10;
     float mbr[1][6], parts[3][6];
@@ -298,6 +312,8 @@ static void test_deterministic_cap_still_scale(void **state)
     b = judged(&scaled);
     assert_int_equal(b.better, 0);
     assert_true(b.phantom_old < a.phantom_old / 10);
+    trimesh_free(&m.tm);
+    trimesh_free(&small.tm);
 }
 
 /* The verdict: a map must remove a quarter of the old map's phantom
@@ -353,9 +369,15 @@ static void test_bad_input(void **state)
     assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
     s[1].pos[1] = 0;
 
+    /* The mesh's own check: a triangle that is not finite never gets
+     * to the judge. */
+    trimesh bad;
     m.t[13] = NAN;
-    assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
+    assert_int_equal(trimesh_init(&bad, m.t, m.n, err, sizeof err), -EINVAL);
     assert_string_equal(err, "triangle 1: a coordinate is not finite");
+    assert_null(bad.box);
+    assert_int_equal(trimesh_init(&bad, m.t, 0, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "the object has no triangles");
     wall(&m);
 
     const float inverted[1][6] = {{1, 0, 0, 0, 1, 1}};
@@ -374,9 +396,10 @@ static void test_bad_input(void **state)
     in.pose_y = INFINITY;
     assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
     in.pose_y = 0;
-    in.ntris = 0;
+    in.mesh = NULL;
     assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
-    in.ntris = m.n;
+    assert_string_equal(err, "no triangles to judge against");
+    in.mesh = &m.tm;
 
     p.dt = 0;
     assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
@@ -386,6 +409,7 @@ static void test_bad_input(void **state)
     assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), -EINVAL);
     judge_params_default(&p);
     assert_int_equal(judge_maps(&p, &in, &r, err, sizeof err), 0);
+    trimesh_free(&m.tm);
 }
 
 int main(void)
