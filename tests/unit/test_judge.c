@@ -412,6 +412,31 @@ static void test_bad_input(void **state)
     trimesh_free(&m.tm);
 }
 
+/* The mesh both the refinement and the judge read: each triangle's box and
+ * the object's, worked out once. */
+static void test_mesh_boxes(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    char err[128] = "";
+    trimesh tm;
+    assert_int_equal(trimesh_init(&tm, m.t, m.n, err, sizeof err), 0);
+    assert_int_equal(tm.ntris, 36);
+    const float lo[3] = {-3, 0, 0}, hi[3] = {3, 3, 0.2f};
+    for (int a = 0; a < 3; a++) {
+        assert_true(tm.min[a] == lo[a] && tm.max[a] == hi[a]);
+        for (uint32_t t = 0; t < tm.ntris; t++) {
+            const float *v = m.t + 9 * t;
+            assert_true(tm.box[t][a] == fminf(fminf(v[a], v[3 + a]), v[6 + a]));
+            assert_true(tm.box[t][3 + a] == fmaxf(fmaxf(v[a], v[3 + a]), v[6 + a]));
+        }
+    }
+    trimesh_free(&tm);
+    assert_null(tm.box);
+    trimesh_free(&tm); /* a zeroed mesh frees again */
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -424,6 +449,7 @@ int main(void)
         cmocka_unit_test(test_deterministic_cap_still_scale),
         cmocka_unit_test(test_verdict_needs_a_clear_gain),
         cmocka_unit_test(test_bad_input),
+        cmocka_unit_test(test_mesh_boxes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
