@@ -52,18 +52,24 @@ _Static_assert(3 * ECM_DEPTH_MAX + 8 <= 32, "pressure sums fit uint32_t");
 /* Margin, in cells, far above rounding: a box's cells are those it
  * overlaps by more than this (see mark_slivers for the rest). */
 #define RANGE_MARGIN 1e-6
-/* Least overlap, in cells, for a box to count as holding a cell (a cell
- * the box only touches is not its). */
-#define INNER_MARGIN 0.01
+/* Least overlap, in cells, for a kept box to block a cell (a cell the
+ * box only touches is free). */
+#define KEPT_MARGIN 0.01
 
-/* What a cell of the grid is (work.cls): a problem box overlaps it by
- * more than RANGE_MARGIN, or by more than INNER_MARGIN; a kept box
- * overlaps it by more than INNER_MARGIN; it must be covered (a triangle
+/* What a cell of the grid is (work.cls): a problem box divided overlaps
+ * it by more than RANGE_MARGIN; a kept box (or one only tightened)
+ * overlaps it by more than KEPT_MARGIN; it must be covered (a triangle
  * touches it and a problem box overlaps it, or see mark_slivers); it is
  * out of bounds for new boxes (not to be covered, and no problem box
- * overlaps it by INNER_MARGIN: space the map leaves free, or only a kept
- * box's); a triangle touches it. */
-enum { CELL_PROBLEM = 1, CELL_INNER = 2, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16, CELL_OCCUPIED = 32 };
+ * overlaps it: space the map leaves free, or only a kept box's); a
+ * triangle touches it. A cell a problem box only grazes is its, not out
+ * of bounds: boxes of an earlier round on the same grid end a hair past
+ * a cell border (to_local grows them by two RANGE_MARGIN), and cutting
+ * the free cells of that row out of the division took more boxes than
+ * the budget (a gazebo's roof over its posts: the round was only
+ * tightened). New boxes in such a row shrink back to the geometry in
+ * step 6. */
+enum { CELL_PROBLEM = 1, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16, CELL_OCCUPIED = 32 };
 
 /* Step 6: times the division is run again with fewer boxes when the parts
  * of boxes taken apart pass the limit, before the problem boxes are only
@@ -680,20 +686,21 @@ static void mark_slivers(work *w, const float b[6])
  * clusters' regions can reach it, only tightened (step 6). */
 enum { PROBLEM_DIVIDE = 1, PROBLEM_TIGHTEN = 2 };
 
-/* Step 2: what each cell is (CELL_*). A cell only touching a problem box,
- * or meeting it by less than INNER_MARGIN of a cell, is outside unless it
- * must be covered: so a box never grows by a cell into space the map
- * leaves free next to it. */
+/* Step 2: what each cell is (CELL_*). A cell only touching a problem box
+ * is outside unless it must be covered; one it overlaps at all is the
+ * box's: a new box may reach into it, past the old face, and step 6
+ * shrinks it back to the triangles inside the problem boxes, so a box
+ * never grows into space the map leaves free. */
 static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const uint8_t *problem)
 {
     uint32_t n = w->n;
     for (uint32_t i = 0; i < nboxes; i++) {
-        int divided = problem[i] == PROBLEM_DIVIDE;
-        if (divided) {
+        if (problem[i] == PROBLEM_DIVIDE) {
             mark_range(w, boxes[i], -RANGE_MARGIN, CELL_PROBLEM);
             mark_slivers(w, boxes[i]);
+        } else {
+            mark_range(w, boxes[i], -KEPT_MARGIN, CELL_KEPT);
         }
-        mark_range(w, boxes[i], -INNER_MARGIN, divided ? CELL_INNER : CELL_KEPT);
     }
     for (uint32_t z = 0; z < n; z++)
         for (uint32_t y = 0; y < n; y++) {
@@ -701,7 +708,7 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
             for (uint32_t x = 0; x < n; x++) {
                 if (voxel_get(&w->g, x, y, z))
                     row[x] |= (row[x] & CELL_PROBLEM) ? CELL_OCCUPIED | CELL_MUST : CELL_OCCUPIED;
-                if (!(row[x] & (CELL_MUST | CELL_INNER))) {
+                if (!(row[x] & (CELL_MUST | CELL_PROBLEM))) {
                     row[x] |= CELL_OUT;
                     w->any_outside = 1;
                 }
