@@ -598,6 +598,22 @@ static void test_new_boxes_stay_in_the_old_map(void **state)
     import_mesh_free(&m);
 }
 
+/* A round of the gazebo replayed: the map in force (nold boxes) and the
+ * round's clusters. The result must hold every invariant and divide (not
+ * only tighten) the problem boxes; the caller frees r and the mesh. */
+static import_mesh gazebo_round(const float (*old)[6], uint32_t nold, const ecm_cluster *cl, uint32_t ncl,
+                                ecm_result *r)
+{
+    float box[6];
+    ecm_params p;
+    import_mesh m = scaled_model("data/gazebo.obj", 1, box, &p);
+    char err[256];
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, old, nold, cl, ncl, r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, old, nold, cl, ncl, r, 16);
+    CHECK(r->count > nold, "the %u problem boxes were only tightened", r->problem_boxes);
+    return m;
+}
+
 /*
  * The scenario's gazebo (tests/data/models), seed 4, its second round: the
  * map after round 1 (27 boxes; box 0 is the roof over everything) and the
@@ -612,9 +628,6 @@ static void test_new_boxes_stay_in_the_old_map(void **state)
 static void test_roof_over_the_well_is_only_tightened(void **state)
 {
     (void)state;
-    float box[6];
-    ecm_params p;
-    import_mesh m = scaled_model("data/gazebo.obj", 1, box, &p);
     static const float old[27][6] = {
         {-3.0999999f, 1.84062481f, -3.0999999f, 3.0999999f, 3.79999995f, 3.0999999f},
         {-0.120000005f, 0, -2.72000027f, 0.120000005f, 1.84062505f, -2.47999978f},
@@ -647,10 +660,7 @@ static void test_roof_over_the_well_is_only_tightened(void **state)
                             .max = {-1.0693574f, 0.450000018f, 1.01728964f},
                             .centroid = {-1.18755805f, 0.450000018f, 0.224983066f}, .weight = 168};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 27, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(old), 27, &cl, 1, &r, 16);
-    CHECK(r.count > 27, "the %u problem boxes were only tightened", r.problem_boxes);
+    import_mesh m = gazebo_round(CBOXES(old), 27, &cl, 1, &r);
     /* The roof comes back whole, only tightened: one box at its height. */
     uint32_t roofs = 0;
     for (uint32_t i = 0; i < r.count; i++)
@@ -677,9 +687,6 @@ static void test_roof_over_the_well_is_only_tightened(void **state)
 static void test_grazed_row_is_no_opening(void **state)
 {
     (void)state;
-    float box[6];
-    ecm_params p;
-    import_mesh m = scaled_model("data/gazebo.obj", 1, box, &p);
     static const float old[28][6] = {
         {-3.0999999f, 1.84062481f, -3.0999999f, 3.0999999f, 3.79999995f, 3.0999999f},
         {-2.30876613f, 0, -1.42000008f, -2.19463372f, 0.920312583f, -1.40468729f},
@@ -715,10 +722,7 @@ static void test_grazed_row_is_no_opening(void **state)
         {.box = 4, .min = {-2.37170029f, 0.899999976f, 1.17999983f}, .max = {-2.25169992f, 0.899999976f, 1.32841539f},
          .centroid = {-2.32560539f, 0.899999976f, 1.24618125f}, .weight = 94}};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 28, cl, 2, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(old), 28, cl, 2, &r, 16);
-    CHECK(r.count > 28, "the %u problem boxes were only tightened", r.problem_boxes);
+    import_mesh m = gazebo_round(CBOXES(old), 28, cl, 2, &r);
     /* Where the users pressed, just outside the well's ring (radius
      * 1.2), 210 degrees round: held by boxes 11 and 25 before. */
     const float spot[6] = {-1.07f, 0.3f, -0.62f, -1.05f, 0.6f, -0.60f};
