@@ -1503,14 +1503,14 @@ static void press_span(const ecm_cluster *c, const float (*boxes)[6], uint32_t n
 
 /* Steps 1 to 3: the grid over the hull of the problem boxes, its cells'
  * classes and pressures, the three tables. */
-static int build_grid(work *w, const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6],
+static int build_grid(work *w, const ecm_params *p, const trimesh *m, const float (*boxes)[6],
                       uint32_t nboxes, const uint8_t *problem, const float hb[6], const ecm_cluster *cl,
                       uint32_t ncl, ecm_result *r)
 {
     struct timespec t0;
     clock_gettime(STAGE_CLOCK, &t0);
     int rc = voxel_grid_init(&w->g, p->depth, hb, hb + 3);
-    if (rc < 0 || (rc = voxel_mark(&w->g, tris, ntris)) < 0)
+    if (rc < 0 || (rc = voxel_mark_mesh(&w->g, m)) < 0)
         return rc;
     r->voxel_ms += ms_since(&t0);
     clock_gettime(STAGE_CLOCK, &t0);
@@ -1856,7 +1856,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
     if (nproblem) {
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
-        if ((rc = build_grid(&w, &gp, m->tris, m->ntris, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
+        if ((rc = build_grid(&w, &gp, m, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
         struct timespec t0;
         clock_gettime(STAGE_CLOCK, &t0);

@@ -459,6 +459,16 @@ static void marker_init(marker *m, const voxel_grid *g, int zlo, int zhi)
     m->eps = VOXEL_EPS_REL * (largest > 0.0 ? largest : fmax(far, 1.0));
 }
 
+/* One triangle (9 floats), in the grid's frame. */
+static void mark_one(marker *m, const voxel_grid *g, const float *p)
+{
+    double v[3][3];
+    for (int i = 0; i < 3; i++)
+        for (int a = 0; a < 3; a++)
+            v[i][a] = (double)p[3 * i + a] - g->min[a];
+    mark_triangle(m, v);
+}
+
 static void mark_all(marker *m, const voxel_grid *g, const float *tris, size_t ntris)
 {
     /* A thread's slab, grown by a cell: triangles wholly outside it are
@@ -469,11 +479,7 @@ static void mark_all(marker *m, const voxel_grid *g, const float *tris, size_t n
         const float *p = tris + 9 * t;
         if (slab && ((p[2] < zlo && p[5] < zlo && p[8] < zlo) || (p[2] > zhi && p[5] > zhi && p[8] > zhi)))
             continue;
-        double v[3][3];
-        for (int i = 0; i < 3; i++)
-            for (int a = 0; a < 3; a++)
-                v[i][a] = (double)p[3 * i + a] - g->min[a];
-        mark_triangle(m, v);
+        mark_one(m, g, p);
     }
 }
 
@@ -491,6 +497,30 @@ int voxel_mark(voxel_grid *g, const float *tris, size_t ntris)
     marker m;
     marker_init(&m, g, 0, (int)g->n - 1);
     mark_all(&m, g, tris, ntris);
+    g->occupied += m.added;
+    return 0;
+}
+
+int voxel_mark_mesh(voxel_grid *g, const trimesh *mesh)
+{
+    if (!g || !g->bits || !mesh)
+        return -EINVAL;
+    marker m;
+    marker_init(&m, g, 0, (int)g->n - 1);
+    /* A triangle whose box misses the grid grown by a cell sets nothing
+     * (axis_range's rounding reaches eps, far under a cell); a flat axis
+     * passes none over. */
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = m.c[a] > 0.0 ? g->min[a] - m.c[a] : -INFINITY;
+        hi[a] = m.c[a] > 0.0 ? g->max[a] + m.c[a] : INFINITY;
+    }
+    for (uint32_t t = 0; t < mesh->ntris; t++) {
+        const float *b = mesh->box[t];
+        if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
+            continue;
+        mark_one(&m, g, mesh->tris + 9 * (size_t)t);
+    }
     g->occupied += m.added;
     return 0;
 }

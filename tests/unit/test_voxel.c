@@ -405,6 +405,47 @@ static void test_one_call_equals_union(void **state)
     voxel_grid_free(&uni);
 }
 
+/* Marking a checked mesh sets exactly the cells marking its triangles
+ * does: triangles in the grid, grazing it, near it and far from it (passed
+ * over from their boxes), on flat grids too. */
+static void test_mesh_equals_triangles(void **state)
+{
+    (void)state;
+    rng_state = 777;
+    enum { N = 3000 };
+    float *t = malloc(9 * sizeof *t * N);
+    assert_non_null(t);
+    struct {
+        uint32_t depth;
+        double lo[3], hi[3];
+    } cases[] = {{6, {-1, -2, -3}, {3, 1, 2}}, {5, {0, 0, 0}, {4, 4, 0}}, {4, {0, 0, 0}, {1, 1, 1}}};
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        const double *lo = cases[c].lo, *hi = cases[c].hi;
+        for (int i = 0; i < N; i++) {
+            random_tri(t + 9 * i, lo, hi, 1 << cases[c].depth);
+            if (i % 3 == 0) /* a third far off on x: passed over from the box */
+                for (int k = 0; k < 3; k++)
+                    t[9 * i + 3 * k] += (float)(3 * (hi[0] - lo[0]) + 1);
+        }
+        char err[128] = "";
+        trimesh m;
+        assert_int_equal(trimesh_init(&m, t, N, err, sizeof err), 0);
+        voxel_grid tri, mesh;
+        grid_init(&tri, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+        grid_init(&mesh, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+        assert_int_equal(voxel_mark(&tri, t, N), 0);
+        assert_int_equal(voxel_mark_mesh(&mesh, &m), 0);
+        assert_true(tri.occupied > 0);
+        assert_int_equal(mesh.occupied, tri.occupied);
+        assert_memory_equal(mesh.bits, tri.bits, ((size_t)tri.n * tri.n * tri.n + 7) / 8);
+        assert_int_equal(voxel_mark_mesh(NULL, &m), -EINVAL);
+        voxel_grid_free(&tri);
+        voxel_grid_free(&mesh);
+        trimesh_free(&m);
+    }
+    free(t);
+}
+
 /* Threads mark exactly what one thread marks, whatever the split, on
  * grids where triangles cross slab boundaries; and fall back to one thread
  * where slabs would share words or copies (n < 8, flat z). */
@@ -952,6 +993,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_large_triangles_against_reference),
         cmocka_unit_test(test_one_call_equals_union),
         cmocka_unit_test(test_threads_equal_one_thread),
+        cmocka_unit_test(test_mesh_equals_triangles),
         cmocka_unit_test(test_svt_against_sums),
         {BUNNY, test_bunny, NULL, NULL, NULL},
     };
