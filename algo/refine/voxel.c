@@ -501,9 +501,9 @@ int voxel_mark(voxel_grid *g, const float *tris, size_t ntris)
     return 0;
 }
 
-int voxel_mark_mesh(voxel_grid *g, const trimesh *mesh)
+int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris)
 {
-    if (!g || !g->bits || !mesh)
+    if (!g || !g->bits || (ntris && (!tris || !box)))
         return -EINVAL;
     marker m;
     marker_init(&m, g, 0, (int)g->n - 1);
@@ -515,11 +515,11 @@ int voxel_mark_mesh(voxel_grid *g, const trimesh *mesh)
         lo[a] = m.c[a] > 0.0 ? g->min[a] - m.c[a] : -INFINITY;
         hi[a] = m.c[a] > 0.0 ? g->max[a] + m.c[a] : INFINITY;
     }
-    for (uint32_t t = 0; t < mesh->ntris; t++) {
-        const float *b = mesh->box[t];
+    for (uint32_t t = 0; t < ntris; t++) {
+        const float *b = box[t];
         if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
             continue;
-        mark_one(&m, g, mesh->tris + 9 * (size_t)t);
+        mark_one(&m, g, tris + 9 * (size_t)t);
     }
     g->occupied += m.added;
     return 0;

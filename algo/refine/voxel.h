@@ -23,8 +23,6 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "trimesh.h"
-
 /* Grid depths accepted: 2^1 to 2^10 cells per axis. 2^10 = 1024^3 cells is
  * a 128 MiB bit set, the most a refinement should ever hold in memory. */
 #define VOXEL_DEPTH_MIN 1u
@@ -57,11 +55,12 @@ void voxel_grid_free(voxel_grid *g);
  * counts the cells set. Allocates nothing. Returns 0, or -EINVAL if a
  * coordinate is not finite or g has no bits (nothing is marked then). */
 int voxel_mark(voxel_grid *g, const float *tris, size_t ntris);
-/* voxel_mark over a mesh trimesh_init checked: no second pass over its
- * coordinates, and a triangle whose box misses the grid by more than a
- * cell is passed over from its box (a group's grid over part of an
+/* voxel_mark over triangles whose coordinates the caller checked
+ * (trimesh_init), with box[t] triangle t's bounding box: no second pass
+ * over the coordinates, and a triangle whose box misses the grid by more
+ * than a cell is passed over from its box (a group's grid over part of an
  * object). Sets the same cells. Returns 0, or -EINVAL if g has no bits. */
-int voxel_mark_mesh(voxel_grid *g, const trimesh *mesh);
+int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris);
 
 static inline int voxel_get(const voxel_grid *g, uint32_t x, uint32_t y, uint32_t z)
 {

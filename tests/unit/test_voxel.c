@@ -30,6 +30,7 @@
 #include "../models.h"
 #include "alloc.h"
 #include "import.h"
+#include "trimesh.h"
 #include "voxel.h"
 
 #ifndef CVRE_MODELS_DIR
@@ -434,11 +435,12 @@ static void test_mesh_equals_triangles(void **state)
         grid_init(&tri, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
         grid_init(&mesh, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
         assert_int_equal(voxel_mark(&tri, t, N), 0);
-        assert_int_equal(voxel_mark_mesh(&mesh, &m), 0);
+        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, (const float(*)[6])m.box, m.ntris), 0);
         assert_true(tri.occupied > 0);
         assert_int_equal(mesh.occupied, tri.occupied);
         assert_memory_equal(mesh.bits, tri.bits, ((size_t)tri.n * tri.n * tri.n + 7) / 8);
-        assert_int_equal(voxel_mark_mesh(NULL, &m), -EINVAL);
+        assert_int_equal(voxel_mark_boxed(NULL, m.tris, (const float(*)[6])m.box, m.ntris), -EINVAL);
+        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, NULL, m.ntris), -EINVAL);
         voxel_grid_free(&tri);
         voxel_grid_free(&mesh);
         trimesh_free(&m);
