@@ -804,6 +804,11 @@ def run_scenes(a, scenes):
                 st["cluster_s"], st["refine_ms"] = wall_s - total_ms / 1000, refine_ms
                 st["clusters"] = len(job["clusters"])
                 st["rejected"] = sum(x.get("outcome") == "rejected" for x in job["refined"])
+                # What the job did with the scene's one object: written (a new
+                # version), rejected (by the judge), unchanged (the refined map
+                # is the old one), or no cluster.
+                st["outcome"] = (job["refined"][0]["outcome"] if job["refined"]
+                                 else "no cluster" if not job["clusters"] else "not refined")
                 row["cluster_s"] += st["cluster_s"]
                 row["refine_ms"] += refine_ms
             row["scenes"][sc.name] = st
@@ -863,16 +868,19 @@ def report(a, scenes, rounds, bump):
              "of the refinement grid over the MBR (the map's resolution), touches no triangle of the object. "
              "Leak: the avatar's box overlaps a triangle. Refinement ms: digitizing, dividing and judging after the "
              "round (the store's share of the job is not in it). A rejected candidate: a refined map the judge "
-             "found no better, not published. Tightness: volume of occupied cells / volume of the "
+             "found no better, not published. After the round: what clustering and refinement did with the "
+             "object (written: a new version; rejected; unchanged: the refined map is the old one; no "
+             "cluster). Tightness: volume of occupied cells / volume of the "
              "boxes (grid 2^7 over the MBR). Full-voxel baseline: every occupied cell its own box.", "",
              "| scene | round | version | moves | collisions | phantom | phantom / 1000 moves | leaks | boxes | "
-             "tightness | full-voxel boxes | refinement ms | candidates rejected |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "tightness | full-voxel boxes | refinement ms | candidates rejected | after the round |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rounds:
         for n, s in r["scenes"].items():
             lines.append(f"| {n} | {r['round']} | {s['version']} | {s['moves']} | {s['collisions']} | {s['phantom']} "
                          f"| {s['phantom_per_1000']:.2f} | {s['leaks']} | {s['boxes']} | {s['tightness']:.3f} "
-                         f"| {s['full_voxel_boxes']} | {s.get('refine_ms', 0.0):.1f} | {s.get('rejected', '-')} |")
+                         f"| {s['full_voxel_boxes']} | {s.get('refine_ms', 0.0):.1f} | {s.get('rejected', '-')} "
+                         f"| {s.get('outcome', '-')} |")
     lines += ["", "| round | clustering s | refinement ms | bumper collisions | bumper leaks |",
               "|---|---|---|---|---|"]
     for r in rounds:
@@ -937,6 +945,21 @@ def judge_scene(phantom, stats):
                 phantom=phantom)
 
 
+OUTCOMES = ("written", "rejected", "rejected before", "unchanged", "no cluster")
+
+
+def later_outcomes(reports, name):
+    """How many jobs after rounds 1 and later ended each way, for one
+    scene over all seeds."""
+    count = {}
+    for rep in reports.values():
+        for r in rep["rounds"][1:]:
+            o = r["scenes"].get(name, {}).get("outcome")
+            if o:
+                count[o] = count.get(o, 0) + 1
+    return count
+
+
 def seven_refine_ms(rounds):
     """The slowest round's refinement time over the seven scenes of the
     proof, in ms; None unless all seven were run."""
@@ -976,12 +999,19 @@ def summary(a, dirs):
                    rise_worst=max(j["rise"] for _, j in js), leaks=sum(j["leaks"] for _, j in js),
                    boxes=max(j["boxes"] for _, j in js), met=all(j["met"] for _, j in js),
                    rejected=sum(r["scenes"][n].get("rejected", 0) for rep in reports.values() for r in rep["rounds"]
-                                if n in r["scenes"]))
+                                if n in r["scenes"]),
+                   later=later_outcomes(reports, n))
         scenes[n] = row
         lines.append(f"| {n} | {row['seeds']} | {row['first_mean']:.2f} | {row['final_mean']:.2f} | "
                      f"{100 * row['reduction_mean']:.1f}% | {100 * row['reduction_worst']:.1f}% (seed "
                      f"{row['worst_seed']}) | {row['rise_worst']:.2f} | {row['leaks']} | {row['boxes']} | "
                      f"{row['rejected']} | {'yes' if row['met'] else 'NO'} |")
+    cols = list(OUTCOMES) + sorted({o for n in names for o in scenes[n]["later"]} - set(OUTCOMES))
+    lines += ["", "After rounds 1 and later (round 0's job makes the first refined map), what each job did, "
+              "all seeds: a map that never changes again leaves every trap it has to later users.", "",
+              "| scene | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+    for n in names:
+        lines.append(f"| {n} | " + " | ".join(str(scenes[n]["later"].get(o, 0)) for o in cols) + " |")
     refine = [rep["refine_ms"] for rep in reports.values() if rep.get("refine_ms") is not None]
     walls = [seed for seed, rep in reports.items() if not rep.get("wall_ok", True)]
     met = not missing and not walls and all(rep["targets_met"] for rep in reports.values())

@@ -67,6 +67,9 @@ def test_pictures_and_report():
     with open(os.path.join(OUT, "report.md")) as f:
         md = f.read()
     assert "| room | 2 |" in md and "phantom" in md and "leaks in all rounds: 0" in md, md
+    # round 0's job wrote the room's first refined map
+    assert REPORT["rounds"][0]["scenes"]["room"]["outcome"] == "written", REPORT["rounds"][0]
+    assert "| written |" in md, md
 
 
 def test_same_seed_same_run():
