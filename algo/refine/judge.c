@@ -111,11 +111,11 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
     /* Room for every triangle, of which only what the indexed ones fill
      * is touched (a large block's pages are mapped as they are written):
      * growing the arrays instead copied them again and again. */
-    g->tbox = cvre_malloc(in->mesh->ntris * sizeof *g->tbox);
-    g->tris = cvre_malloc((size_t)in->mesh->ntris * 9 * sizeof *g->tris);
+    const trimesh *m = in->mesh;
+    g->tbox = cvre_malloc(m->ntris * sizeof *g->tbox);
+    g->tris = cvre_malloc((size_t)m->ntris * 9 * sizeof *g->tris);
     if (!g->tbox || !g->tris)
         return -ENOMEM;
-    const trimesh *m = in->mesh;
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t i = 0; i < m->ntris; i++) {
         const float *t = m->tris + 9 * (size_t)i, *b = m->box[i];
@@ -134,7 +134,8 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
     int rc = voxel_grid_init(&g->g, p->depth, lo, hi);
     if (rc < 0)
         return rc;
-    if ((rc = voxel_mark(&g->g, g->tris, g->ntris)) < 0)
+    /* Copies of the mesh's triangles, checked by trimesh_init, and their boxes. */
+    if ((rc = voxel_mark_boxed(&g->g, g->tris, (const float(*)[6])g->tbox, g->ntris)) < 0)
         return rc;
     if ((rc = build_svt(g)) < 0)
         return rc;

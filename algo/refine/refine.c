@@ -1718,6 +1718,8 @@ int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[
             return cvre_fail(err, errlen, -EINVAL, "the avatar's size must be positive and finite");
     if (!(p->step >= 0) || !isfinite(p->step))
         return cvre_fail(err, errlen, -EINVAL, "the step height must be finite and not negative");
+    if (!m || !m->box || m->ntris == 0)
+        return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
     int rc = check_rest(boxes, nboxes, clusters, nclusters, err, errlen);
     return rc < 0 ? rc : refine_groups(p, m, boxes, nboxes, clusters, nclusters, out, err, errlen);
 }
@@ -1897,8 +1899,9 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
          * that stood at the old face would be inside it, and so free to
          * walk on into the geometry (move.h's inside policy; 36 leaks in a
          * desk round). Such a box is taken apart into its parts in each
-         * problem box, tightened; if they pass the limit, the problem boxes
-         * are only tightened. */
+         * problem box, tightened; if they pass the limit, the division runs
+         * again with as many boxes fewer (APART_RETRIES times), and then the
+         * problem boxes are only tightened. */
         double tol = 1e3 * tt.eps;
         for (uint32_t retry = 0;; retry++) {
             uint32_t over = 0; /* boxes past the limit */

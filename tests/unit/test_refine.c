@@ -1892,6 +1892,12 @@ static void test_bad_input(void **state)
         }
     call_init(&c), c.ntris = 0, expect_einval(&c, "no triangles");
     call_init(&c), c.tp = NULL, expect_einval(&c, "triangles NULL");
+    /* A mesh of none (never made by trimesh_init) is refused too. */
+    call_init(&c);
+    const trimesh none = {0};
+    assert_int_equal(ecm_refine_mesh(&c.p, &none, c.bp, c.nboxes, c.cl, c.ncl, &r, err, sizeof err), -EINVAL);
+    assert_string_equal(err, "the object has no triangles");
+    assert_result_empty(&r);
     call_init(&c), c.nboxes = 0, expect_einval(&c, "no boxes");
     call_init(&c), c.bp = NULL, expect_einval(&c, "boxes NULL");
     for (int a = 0; a < 3; a++) {
