@@ -31,10 +31,15 @@ _Static_assert(3 * ECM_DEPTH_MAX + 8 <= 32, "pressure sums fit uint32_t");
 
 /* Boxes a division may hold beyond the budget before merging brings it
  * back (see divide): parts that merging joins again cost nothing in the
- * end. More slack spends the whole budget in the first round and leaves
- * later rounds nothing to divide with, and merging costs grow with the
- * square of the boxes held. */
-#define DIVIDE_SLACK 8u
+ * end, and the more it holds, the better merging chooses which to keep.
+ * Merging costs grow with the square of the boxes held. Users who press
+ * from outside show the whole opening they want, so the first round may
+ * spend the budget on it; users inside a box (an object placed around
+ * them) show only the part they stand in, and more slack there spends the
+ * whole budget on that part and leaves later rounds nothing to open the
+ * rest with. */
+#define DIVIDE_SLACK 32u
+#define DIVIDE_SLACK_INSIDE 8u
 /* Most boxes and waiting nodes a division may hold while it keeps outside
  * cells out (such cuts are not bounded by the budget): past it the
  * problem boxes are only tightened (see refine.h). */
@@ -97,6 +102,7 @@ typedef struct work {
     ilist out;         /* boxes so far: no more division for them */
     double max_empty;
     uint32_t budget;   /* most boxes the problem boxes may become */
+    uint32_t slack;    /* DIVIDE_SLACK or DIVIDE_SLACK_INSIDE */
     int any_outside;   /* a cell meets no problem box (else no outside table) */
     uint64_t wanted;   /* cells with pressure */
 } work;
@@ -442,7 +448,7 @@ static int cut(const work *w, const ibox *b, int outside_cells, ibox ch[2])
 /*
  * Steps 4 and 5: best first, the first node waiting is cut in two (cut):
  * nodes holding outside cells always, nodes holding pressure until no node
- * holds any or the next cut would pass the budget plus DIVIDE_SLACK even
+ * holds any or the next cut would pass the budget plus w->slack even
  * after merging what is done; nodes left then are kept whole. Then the
  * merges: those step 5 allows, then, while there are more boxes than the
  * budget, the pair whose hull adds the least pressure, then the fewest
@@ -466,10 +472,10 @@ static int divide(work *w)
         ibox ch[2];
         int outside_cells = nd.key == KEY_OUT;
         int nch = cut(w, &nd.b, outside_cells, ch);
-        if (!outside_cells && w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
+        if (!outside_cells && w->out.n + h.n + (uint32_t)nch > w->budget + w->slack) {
             if ((rc = merge_all(w, 0)) < 0)
                 goto done;
-            if (w->out.n + h.n + (uint32_t)nch > w->budget + DIVIDE_SLACK) {
+            if (w->out.n + h.n + (uint32_t)nch > w->budget + w->slack) {
                 /* The budget is spent: what waits stays whole (nothing
                  * waiting holds an outside cell: those come first). */
                 if ((rc = push(&w->out, &nd.b)) < 0)
@@ -992,6 +998,20 @@ static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, co
     for (int a = 0; a < 3; a++) {
         double up = a == 1 ? (double)p->avatar[1] + p->step : 0;
         if ((double)c->min[a] - tol > boxes[i][3 + a] || (double)c->max[a] + tol + up < boxes[i][a])
+            return 0;
+    }
+    return 1;
+}
+
+/* Whether cluster c's users stood inside the box it names: its centroid
+ * (the avatars' feet) within the box, below its top by more than a step
+ * (not standing on it). */
+static int inside_named(const ecm_cluster *c, const float (*boxes)[6], const ecm_params *p)
+{
+    const float *b = boxes[c->box];
+    for (int a = 0; a < 3; a++) {
+        double top = (double)b[3 + a] - (a == 1 ? (double)p->step : 0);
+        if (!(c->centroid[a] > b[a] && c->centroid[a] < top))
             return 0;
     }
     return 1;
@@ -1858,6 +1878,10 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
     if (nproblem) {
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
+        w.slack = DIVIDE_SLACK;
+        for (uint32_t i = 0; i < nclusters; i++)
+            if (inside_named(&clusters[i], boxes, p))
+                w.slack = DIVIDE_SLACK_INSIDE;
         if ((rc = build_grid(&w, &gp, m, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
         struct timespec t0;

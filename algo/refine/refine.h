@@ -68,8 +68,11 @@
  *      the clusters, coarse elsewhere; one cut adds at most one box.
  *   5. Merge and cap: the budget is max_boxes less the kept boxes, for the
  *      whole object. When the next pressed cut would pass the budget by
- *      more than a small slack even after merging, division stops and the
- *      nodes still waiting stay whole. Two boxes (of any problem boxes:
+ *      more than a slack even after merging, division stops and the
+ *      nodes still waiting stay whole. The slack is smaller when users
+ *      stood inside a box they press on (their feet in it, below its top
+ *      by more than a step): they show only the part they stand in, and
+ *      later rounds need boxes for the rest. Two boxes (of any problem boxes:
  *      merges cross the old boxes' borders) whose hull holds no outside
  *      cell, adds no pressure and adds at most max_empty of its volume as
  *      new empty space become one, cheapest first: slivers that free no
