@@ -80,6 +80,9 @@ enum { CELL_PROBLEM = 1, CELL_KEPT = 4, CELL_MUST = 8, CELL_OUT = 16, CELL_OCCUP
  * of boxes taken apart pass the limit, before the problem boxes are only
  * tightened. */
 #define APART_RETRIES 2u
+/* Steps 4 and 5: times the division runs again with more slack when it
+ * stopped at the budget and merging left boxes of it unused. */
+#define REFILL_RETRIES 2u
 
 /* A box of cells: [lo, hi) on each axis. */
 typedef struct ibox {
@@ -102,7 +105,8 @@ typedef struct work {
     ilist out;         /* boxes so far: no more division for them */
     double max_empty;
     uint32_t budget;   /* most boxes the problem boxes may become */
-    uint32_t slack;    /* DIVIDE_SLACK or DIVIDE_SLACK_INSIDE */
+    uint32_t slack;    /* DIVIDE_SLACK, or DIVIDE_SLACK_INSIDE when inside */
+    int inside;        /* users stood inside a box they press on (inside_named) */
     int any_outside;   /* a cell meets no problem box (else no outside table) */
     uint64_t wanted;   /* cells with pressure */
 } work;
@@ -459,7 +463,7 @@ static int cut(const work *w, const ibox *b, int outside_cells, ibox ch[2])
  * shrunk to cells to cover), so it always divides, and both parts are
  * smaller.
  */
-static int divide(work *w)
+static int divide_once(work *w, int *stopped)
 {
     heap h = {0};
     int rc = 0;
@@ -478,6 +482,7 @@ static int divide(work *w)
             if (w->out.n + h.n + (uint32_t)nch > w->budget + w->slack) {
                 /* The budget is spent: what waits stays whole (nothing
                  * waiting holds an outside cell: those come first). */
+                *stopped = 1;
                 if ((rc = push(&w->out, &nd.b)) < 0)
                     goto done;
                 while (h.n) {
@@ -501,6 +506,27 @@ static int divide(work *w)
     rc = w->out.n > w->budget;
 done:
     free(h.v);
+    return rc;
+}
+
+/* Steps 4 and 5 (divide_once), again with the slack grown by the boxes
+ * left unused when the division stopped at the budget and merging then
+ * joined more than the slack held (parts of nodes kept whole merge back):
+ * those boxes go to the nodes kept whole, not to nobody. Not when users
+ * stood inside (see DIVIDE_SLACK): the boxes left are for later rounds. */
+static int divide(work *w)
+{
+    uint32_t slack = w->slack;
+    int rc;
+    for (uint32_t again = 0;; again++) {
+        int stopped = 0;
+        rc = divide_once(w, &stopped);
+        if (rc != 0 || !stopped || w->inside || w->out.n >= w->budget || again == REFILL_RETRIES)
+            break;
+        w->slack += w->budget - w->out.n;
+        w->out.n = 0;
+    }
+    w->slack = slack;
     return rc;
 }
 
@@ -1878,10 +1904,9 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
     if (nproblem) {
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
-        w.slack = DIVIDE_SLACK;
         for (uint32_t i = 0; i < nclusters; i++)
-            if (inside_named(&clusters[i], boxes, p))
-                w.slack = DIVIDE_SLACK_INSIDE;
+            w.inside |= inside_named(&clusters[i], boxes, p);
+        w.slack = w.inside ? DIVIDE_SLACK_INSIDE : DIVIDE_SLACK;
         if ((rc = build_grid(&w, &gp, m, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
         struct timespec t0;

@@ -72,7 +72,10 @@
  *      nodes still waiting stay whole. The slack is smaller when users
  *      stood inside a box they press on (their feet in it, below its top
  *      by more than a step): they show only the part they stand in, and
- *      later rounds need boxes for the rest. Two boxes (of any problem boxes:
+ *      later rounds need boxes for the rest. When merging then leaves
+ *      boxes of the budget unused (the parts of nodes kept whole join
+ *      back), the division runs again with as much more slack (twice at
+ *      most; not for users inside). Two boxes (of any problem boxes:
  *      merges cross the old boxes' borders) whose hull holds no outside
  *      cell, adds no pressure and adds at most max_empty of its volume as
  *      new empty space become one, cheapest first: slivers that free no

@@ -542,6 +542,55 @@ static void test_archway_path_past_the_curve(void **state)
 }
 
 /*
+ * How much of the budget a round spends. The colonnade at seed 1 of the
+ * scenario, round 0's four clusters, users stopped on its front face: the
+ * division stopped at the budget with 21 pressed nodes kept whole, and
+ * merging then joined their parts back to 46 boxes; users later stopped
+ * by column bases those 18 boxes would have cut (19 per 1,000 moves in
+ * round 3). Users outside show the whole opening they want: every box of
+ * the budget is spent. Sponza, round 0's cluster, users standing inside
+ * its one box: they show only the part they stand in, and a quarter of the
+ * budget at least is left for the rounds that find the rest (spent in
+ * round 1, the next round was left 5 boxes, and 153 of the judge's moves
+ * stayed blocked where no triangle is).
+ */
+static void test_budget_spent_outside_kept_inside(void **state)
+{
+    (void)state;
+    float box[6];
+    ecm_params p;
+    import_mesh m = scaled_model("data/colonnade.obj", 1, box, &p);
+    const ecm_cluster front[4] = {
+        {.box = 0, .min = {-1.9242233f, 0.9f, -2.2f}, .max = {0.232935444f, 0.9f, -2.2f},
+         .centroid = {-1.19113505f, 0.9f, -2.2f}, .weight = 278},
+        {.box = 0, .min = {0.377127469f, 0.9f, -2.2f}, .max = {2.19910049f, 0.9f, -2.2f},
+         .centroid = {1.36958659f, 0.9f, -2.2f}, .weight = 369},
+        {.box = 0, .min = {3.7750001f, 0.9f, -2.2f}, .max = {5.64656591f, 0.9f, -2.2f},
+         .centroid = {4.10390377f, 0.9f, -2.2f}, .weight = 318},
+        {.box = 0, .min = {-4.68331718f, 0.9f, -2.2f}, .max = {-2.78816915f, 0.9f, -2.2f},
+         .centroid = {-3.85715079f, 0.9f, -2.2f}, .weight = 272}};
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, front, 4, &r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, front, 4, &r, 16);
+    CHECK(r.capped > 0 && r.count == p.max_boxes, "outside: %u boxes of %u, %u pressed kept whole", r.count,
+          p.max_boxes, r.capped);
+    ecm_result_free(&r);
+    import_mesh_free(&m);
+
+    m = scaled_model("scenes/dabrovic_sponza.obj", 1, box, &p);
+    const ecm_cluster in = {.box = 0, .min = {-15.6777592f, 0.993f, -4.92351198f},
+                            .max = {15.6722403f, 0.993f, -0.198510006f},
+                            .centroid = {-0.079234004f, 0.993f, -2.68530369f}, .weight = 2400};
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, &in, 1, &r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, &in, 1, &r, 16);
+    CHECK(r.capped > 0 && r.count <= p.max_boxes - p.max_boxes / 4, "inside: %u boxes of %u, %u pressed kept whole",
+          r.count, p.max_boxes, r.capped);
+    ecm_result_free(&r);
+    import_mesh_free(&m);
+}
+
+/*
  * Step 7 on the desk (local units, -1.5..0.5 x -0.5..0.5 x -0.5..0.5; the
  * scenario scales it 3x, so the avatar is 0.2 x 0.6 x 0.2). Its right
  * pedestal's inner panel is the plane x = -0.375 (z -0.437..0.5), and the
@@ -2063,6 +2112,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_room_door_opens_walls_stay),
         cmocka_unit_test(test_archway_opens_stone_stays),
         cmocka_unit_test(test_archway_path_past_the_curve),
+        cmocka_unit_test(test_budget_spent_outside_kept_inside),
         cmocka_unit_test(test_split_frees_space_under_the_cell),
         cmocka_unit_test(test_roof_over_the_well_is_only_tightened),
         cmocka_unit_test(test_grazed_row_is_no_opening),
