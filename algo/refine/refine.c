@@ -102,6 +102,8 @@ typedef struct work {
     uint32_t *tables;
     uint8_t *cls;      /* n^3: CELL_* bits */
     uint8_t *pressure; /* n^3: 0, or how hard users press for the cell to open */
+    uint64_t *blocked; /* n^2 lines of bw words: bit x set when blocked() (0 past n) */
+    size_t bw;
     ilist out;         /* boxes so far: no more division for them */
     double max_empty;
     uint32_t budget;   /* most boxes the problem boxes may become */
@@ -737,13 +739,17 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
     for (uint32_t z = 0; z < n; z++)
         for (uint32_t y = 0; y < n; y++) {
             uint8_t *row = w->cls + (size_t)n * (y + (size_t)n * z);
+            uint64_t *bits = w->blocked + w->bw * (y + (size_t)n * z);
+            uint64_t base = (uint64_t)n * (y + (uint64_t)n * z); /* the row in w->g.bits */
             for (uint32_t x = 0; x < n; x++) {
-                if (voxel_get(&w->g, x, y, z))
+                if ((w->g.bits[(base + x) >> 6] >> ((base + x) & 63)) & 1u)
                     row[x] |= (row[x] & CELL_PROBLEM) ? CELL_OCCUPIED | CELL_MUST : CELL_OCCUPIED;
                 if (!(row[x] & (CELL_MUST | CELL_PROBLEM))) {
                     row[x] |= CELL_OUT;
                     w->any_outside = 1;
                 }
+                if (row[x] & (CELL_OCCUPIED | CELL_KEPT))
+                    bits[x / 64] |= (uint64_t)1 << (x % 64);
             }
         }
 }
@@ -753,6 +759,20 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
 static int blocked(const work *w, uint32_t x, uint32_t y, uint32_t z)
 {
     return (w->cls[x + (size_t)w->n * (y + (size_t)w->n * z)] & (CELL_OCCUPIED | CELL_KEPT)) != 0;
+}
+
+/* The 64 bits of a line of w->blocked from cell x on (x may be negative:
+ * cells outside the grid are not blocked). */
+static uint64_t blocked_bits(const work *w, const uint64_t *line, int64_t x)
+{
+    if (x < 0)
+        return x <= -64 ? 0 : blocked_bits(w, line, 0) << -x;
+    size_t q = (size_t)x / 64;
+    unsigned r = (unsigned)(x % 64);
+    uint64_t v = q < w->bw ? line[q] >> r : 0;
+    if (r && q + 1 < w->bw)
+        v |= line[q + 1] << (64 - r);
+    return v;
 }
 
 /* The padded array's bits, all 1 (the bits past dim[0] 0). */
@@ -935,9 +955,10 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
             int64_t cy = (int64_t)lo[1] - k[1] + y;
             if (!zin || cy < 0 || cy >= n)
                 continue;
-            for (int64_t cx = x0 < 0 ? 0 : x0; cx < n && cx - x0 < dim[0]; cx++)
-                if (blocked(w, (uint32_t)cx, (uint32_t)cy, (uint32_t)cz))
-                    bit_clear(&b, (uint32_t)(cx - x0), y, z);
+            const uint64_t *line = w->blocked + w->bw * ((size_t)cy + (size_t)n * (size_t)cz);
+            uint64_t *rb = b.v + b.w * (y + (size_t)dim[1] * z);
+            for (size_t i = 0; i < b.w; i++)
+                rb[i] &= ~blocked_bits(w, line, x0 + 64 * (int64_t)i);
         }
     }
     /* u: the two cells under are both free as b has them, and above the
@@ -992,18 +1013,27 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     for (uint32_t z = lo[2]; z < hi[2]; z++)
         for (uint32_t y = lo[1]; y < hi[1]; y++) {
             const uint64_t *row = b.v + b.w * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]));
-            for (uint32_t x = lo[0]; x < hi[0]; x++) {
-                uint32_t t = x - lo[0] + k[0];
-                size_t i = x + (size_t)n * (y + (size_t)n * z);
-                if (!((row[t / 64] >> (t % 64)) & 1u) || (w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
-                    continue;
-                uint32_t c = face == 0 ? x : face == 1 ? y : z;
-                uint32_t sc = side == 0 ? x : z;
-                w->wanted += w->pressure[i] == 0;
-                uint32_t v = w->pressure[i] + (side >= 0 && (sc < side_lo || sc >= side_hi) ? beside
-                                               : c >= near_lo && c < near_hi            ? near
-                                                                                        : far);
-                w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
+            /* The set bits of the region's cells, k[0] to t1 on the row. */
+            uint32_t t1 = k[0] + hi[0] - lo[0];
+            for (uint32_t q = k[0] / 64; q <= (t1 - 1) / 64; q++) {
+                uint64_t bits = row[q];
+                if (q == k[0] / 64)
+                    bits &= ~(uint64_t)0 << (k[0] % 64);
+                if (q == (t1 - 1) / 64 && t1 % 64)
+                    bits &= ~(uint64_t)0 >> (64 - t1 % 64);
+                for (; bits; bits &= bits - 1) {
+                    uint32_t x = q * 64 + (uint32_t)__builtin_ctzll(bits) - k[0] + lo[0];
+                    size_t i = x + (size_t)n * (y + (size_t)n * z);
+                    if ((w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
+                        continue;
+                    uint32_t c = face == 0 ? x : face == 1 ? y : z;
+                    uint32_t sc = side == 0 ? x : z;
+                    w->wanted += w->pressure[i] == 0;
+                    uint32_t v = w->pressure[i] + (side >= 0 && (sc < side_lo || sc >= side_hi) ? beside
+                                                   : c >= near_lo && c < near_hi            ? near
+                                                                                            : far);
+                    w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
+                }
             }
         }
     free(b.v);
@@ -1523,6 +1553,7 @@ static void work_free(work *w)
     voxel_table_free(w->tables);
     free(w->cls);
     free(w->pressure);
+    free(w->blocked);
     free(w->out.b);
     memset(w, 0, sizeof *w);
 }
@@ -1562,9 +1593,11 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     clock_gettime(STAGE_CLOCK, &t0);
     uint32_t n = w->n = w->g.n;
     size_t cells = (size_t)n * n * n, table = (size_t)(n + 1) * (n + 1) * (n + 1);
+    w->bw = (n + 63) / 64;
     w->cls = cvre_calloc(cells, 1);
     w->pressure = cvre_calloc(cells, 1);
-    if (!w->cls || !w->pressure)
+    w->blocked = cvre_calloc((size_t)n * n * w->bw, sizeof *w->blocked);
+    if (!w->cls || !w->pressure || !w->blocked)
         return -ENOMEM;
     classify(w, boxes, nboxes, problem);
     /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
