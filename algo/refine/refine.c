@@ -1751,6 +1751,7 @@ static int refine_groups(const ecm_params *p, const trimesh *m, const float (*bo
                 out->problem_boxes += (uint32_t)pressed;
             }
         out->capped += part.capped;
+        out->apart_over += part.apart_over;
         out->cells += part.cells;
         out->occupied += part.occupied;
         out->wanted += part.wanted;
@@ -2025,6 +2026,8 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
             }
             if (!over)
                 break;
+            if (!retry)
+                out->apart_over = over;
             /* Divided again with as many boxes fewer, then only tightened. */
             if (whole || retry == APART_RETRIES || w.budget <= over || (rc = redivide(&w, w.budget - over)) != 0) {
                 if (rc < 0)
@@ -2032,6 +2035,8 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
                 whole = 1;
             }
         }
+        if (!whole)
+            out->apart_over = 0; /* a division again fitted */
         if ((rc = split_boxes(&tt, out->boxes, state, out->count, split_max, fmax(SPLIT_GAIN_MIN, p->max_empty))) <
             0)
             goto done;

@@ -176,6 +176,9 @@ typedef struct ecm_result {
     uint32_t problem_boxes; /* boxes replaced */
     uint32_t capped;        /* new boxes left holding wanted cells by the cap, or every
                              * problem box when they were only tightened (step 5) */
+    uint32_t apart_over;    /* when they were only tightened because the new boxes,
+                             * taken apart in step 6, passed the cap: by how many
+                             * boxes, at the first try (else 0) */
     uint64_t cells;         /* cells examined: 2^(3 depth) a grid, one grid a group of
                              * clusters (0: no problem box) */
     uint64_t occupied;      /* of which occupied */

@@ -809,6 +809,24 @@ static void test_grazed_row_is_no_opening(void **state)
      * 1.2), 210 degrees round: held by boxes 11 and 25 before. */
     const float spot[6] = {-1.07f, 0.3f, -0.62f, -1.05f, 0.6f, -0.60f};
     CHECK(!blocked(CBOXES(r.boxes), r.count, spot, spot + 3), "the place the users were stopped at is still held");
+    assert_int_equal(r.apart_over, 0);
+    ecm_result_free(&r);
+
+    /* At a cap of the 28 boxes it has, the new boxes, which join boxes of
+     * the well's ring whose faces are offset by less than a cell, reach
+     * out of the old map, and taken apart in each they pass the cap: only
+     * tightened, and the result says by how much. */
+    float box[6];
+    ecm_params p;
+    import_mesh_free(&m);
+    m = scaled_model("data/gazebo.obj", 1, box, &p);
+    p.max_boxes = 28;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 28, cl, 2, &r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, CBOXES(old), 28, cl, 2, &r, 16);
+    CHECK(r.count <= 28 && r.capped == r.problem_boxes && r.apart_over > 0,
+          "at the cap: %u boxes, %u of %u problem boxes kept whole, %u over", r.count, r.capped, r.problem_boxes,
+          r.apart_over);
     ecm_result_free(&r);
     import_mesh_free(&m);
 }
