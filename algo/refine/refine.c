@@ -1235,7 +1235,9 @@ static int tighten(tight *tt, float b[6])
 typedef struct split {
     int axis;
     float at;
-    double volume;
+    double volume; /* what the two sides' bounds hold */
+    double gain;   /* what it frees (step 7), or with the next one when both ends are peeled off */
+    int peel;      /* the first of the two: it frees nothing itself */
 } split;
 
 static double box_volume(const float lo[3], const float hi[3])
@@ -1266,6 +1268,20 @@ static int by_key(const void *x, const void *y)
     return (i > j) - (i < j);
 }
 
+/* How many of the n keys (sorted by by_key) are below at. */
+static uint32_t count_below(const keyed *k, uint32_t n, float at)
+{
+    uint32_t lo = 0, hi = n;
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (k[mid].key < at)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 /* Grows the bounds lo, hi (min x y z, max x y z) to hold part q. */
 static void part_grow(float lo[3], float hi[3], const part_box *q)
 {
@@ -1273,6 +1289,40 @@ static void part_grow(float lo[3], float hi[3], const part_box *q)
         lo[a] = q->lo[a] < lo[a] ? q->lo[a] : lo[a];
         hi[a] = q->hi[a] > hi[a] ? q->hi[a] : hi[a];
     }
+}
+
+/* The volume of the bounds of the n parts on each side of the planes p1
+ * < p2 across axis and between them, each clamped to its side: below p1
+ * those that start before it, above p2 those that end at it or after, and
+ * between them those that start before p2 and end at p1 or after. */
+static double peel_volume(const part_box *parts, uint32_t n, int axis, float p1, float p2)
+{
+    float lo[3][3], hi[3][3];
+    for (int side = 0; side < 3; side++)
+        for (int a = 0; a < 3; a++) {
+            lo[side][a] = INFINITY;
+            hi[side][a] = -INFINITY;
+        }
+    for (uint32_t i = 0; i < n; i++) {
+        const part_box *q = &parts[i];
+        int in[3] = {q->lo[axis] < p1, q->lo[axis] < p2 && q->hi[axis] >= p1, q->hi[axis] >= p2};
+        float l = q->lo[axis], h = q->hi[axis];
+        float from[3] = {l, l > p1 ? l : p1, l > p2 ? l : p2};
+        float to[3] = {h < p1 ? h : p1, h < p2 ? h : p2, h};
+        for (int side = 0; side < 3; side++) {
+            if (!in[side])
+                continue;
+            part_box c = *q;
+            c.lo[axis] = from[side];
+            c.hi[axis] = to[side];
+            part_grow(lo[side], hi[side], &c);
+        }
+    }
+    double v = 0;
+    for (int side = 0; side < 3; side++)
+        if (lo[side][0] <= hi[side][0])
+            v += box_volume(lo[side], hi[side]);
+    return v;
 }
 
 /* The volume of the bounds after k parts (prefix bounds pl, ph), the axis
@@ -1299,13 +1349,14 @@ static double prefix_volume(const float (*pl)[3], const float (*ph)[3], uint32_t
  * The best plane to split box b (step 7) across any axis: for each axis,
  * the parts sorted by where they start, with the bounds of every prefix,
  * and by where they end (from the far side), so that each plane at a
- * part's start is priced in O(log n): the parts below it and those above
- * it, each side's bounds clamped to the plane. Fills *best and returns 1
+ * part's start or end is priced in O(log n): the parts below it and those
+ * above it, each side's bounds clamped to the plane. Fills *best and returns 1
  * when a plane leaves the two sides less volume than b has; 0 otherwise
  * (or when b meets more than SPLIT_PARTS_MAX triangles); -ENOMEM.
  */
-static int best_split(tight *tt, const float b[6], split *best)
+static int best_split(tight *tt, const float b[6], split *best, split *peel)
 {
+    *peel = (split){.volume = INFINITY};
     double whole[6];
     for (int a = 0; a < 3; a++) {
         whole[a] = b[a];
@@ -1387,11 +1438,77 @@ static int best_split(tight *tt, const float b[6], split *best)
                 found = 1;
             }
         }
+        /* Both ends peeled off: a plane just after the first end and one
+         * just before the last start, the parts between them clamped to
+         * both (peel holds the first plane and the three sides' volume). */
+        float e1 = -up[n - 1].key, s2 = k[n - 1].key;
+        float p1 = nextafterf(nextafterf(e1, INFINITY), INFINITY);
+        float p2 = nextafterf(nextafterf(s2, -INFINITY), -INFINITY);
+        if ((double)p1 - 4 * tt->eps > (double)e1 && (double)p2 + 4 * tt->eps < (double)s2 && p1 > b[axis] &&
+            p2 < b[3 + axis] && p1 < p2) {
+            double v = peel_volume(parts, n, axis, p1, p2);
+            if (v < peel->volume)
+                *peel = (split){.axis = axis, .at = p1, .volume = v};
+        }
+        /* And a plane just after each distinct end before the last: below
+         * it the parts that start before it, above it those that end after
+         * (the end of a wall that meets the box's face, cut off). */
+        for (uint32_t i = n - 1; i > 0; i--) {
+            float end = -up[i].key, at = nextafterf(nextafterf(end, INFINITY), INFINITY);
+            if (!((double)at - 4 * tt->eps > (double)end && at < -up[i - 1].key && at > b[axis] &&
+                  at < b[3 + axis]))
+                continue;
+            uint32_t below = count_below(k, n, at), over = count_below(up, n, nextafterf(-at, INFINITY));
+            double v = prefix_volume((const float(*)[3])pl, (const float(*)[3])ph, below, axis, at, 1) +
+                       prefix_volume((const float(*)[3])sl, (const float(*)[3])sh, over, axis, at, 0);
+            if (v < volume && (!found || v < best->volume)) {
+                *best = (split){.axis = axis, .at = at, .volume = v};
+                found = 1;
+            }
+        }
     }
     free(parts);
     free(k);
     free(bounds);
     return found;
+}
+
+/* Box b split across sp into its two sides, each tightened (has_lo,
+ * has_hi: whether it holds geometry); returns the volume they hold. */
+static double split_sides(tight *tt, const float b[6], const split *sp, float lo[6], float hi[6], int *has_lo,
+                          int *has_hi)
+{
+    memcpy(lo, b, 6 * sizeof *lo);
+    memcpy(hi, b, 6 * sizeof *hi);
+    lo[3 + sp->axis] = sp->at;
+    hi[sp->axis] = sp->at;
+    *has_lo = tighten(tt, lo);
+    *has_hi = tighten(tt, hi);
+    return (*has_lo ? box_volume(lo, lo + 3) : 0) + (*has_hi ? box_volume(hi, hi + 3) : 0);
+}
+
+/* Prices box b's best split into sp (step 7): 1 when it frees more than
+ * gain_min of b, or when the two splits that peel both ends off along one
+ * axis do (a wall's box that also holds the ends of the two walls meeting
+ * it: one split frees nothing, two free it all; sp is then the first, and
+ * its larger side is priced again), else 0; -ENOMEM. */
+static int price_split(tight *tt, const float b[6], double gain_min, double gain_abs, split *sp)
+{
+    split peel;
+    int rc = best_split(tt, b, sp, &peel);
+    if (rc < 0)
+        return rc;
+    double vol = box_volume(b, b + 3);
+    sp->gain = rc == 1 ? vol - sp->volume : 0;
+    if (sp->gain > gain_min * vol && sp->gain > gain_abs)
+        return 1;
+    if (peel.volume < vol && vol - peel.volume > gain_min * vol && vol - peel.volume > gain_abs) {
+        *sp = peel;
+        sp->gain = vol - peel.volume;
+        sp->peel = 1;
+        return 1;
+    }
+    return 0;
 }
 
 /*
@@ -1400,13 +1517,15 @@ static int best_split(tight *tt, const float b[6], split *best)
  * also holds the end of the back board, 5 cm further out: users stop 5 cm
  * short of the panel all along it), are split across the plane that frees
  * the most, both parts tightened, while the object has fewer than max
- * boxes and a split frees more than gain_min of its box (a part without
- * geometry goes). boxes: count boxes (room for max); state: per box (room
- * for max), 0 for a box to split, 2 for one to keep as it is; 1 is used
- * here (priced). The parts of a split box may be split again. Returns the
- * new count, or -ENOMEM.
+ * boxes and a split frees more than gain_min of its box and more than
+ * gain_abs (a part without geometry goes); or across the first of two
+ * planes that peel both ends off (price_split). boxes: count boxes (room
+ * for max); state: per box (room for max), 0 for a box to split, 2 for
+ * one to keep as it is; 1 is used here (priced). The parts of a split box
+ * may be split again. Returns the new count, or -ENOMEM.
  */
-static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t count, uint32_t max, double gain_min)
+static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t count, uint32_t max, double gain_min,
+                       double gain_abs)
 {
     split sp[ECM_MAX_BOXES_LIMIT];
     while (count < max) {
@@ -1414,32 +1533,28 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
         double bgain = 0;
         for (uint32_t j = 0; j < count; j++) {
             if (state[j] == 0) {
-                int rc = best_split(tt, boxes[j], &sp[j]);
+                int rc = price_split(tt, boxes[j], gain_min, gain_abs, &sp[j]);
                 if (rc < 0)
                     return rc;
-                double vol = box_volume(boxes[j], boxes[j] + 3);
-                state[j] = rc == 1 && vol - sp[j].volume > gain_min * vol ? 1 : 2;
+                state[j] = rc == 1 ? 1 : 2;
             }
             if (state[j] != 1)
                 continue;
-            double gain = box_volume(boxes[j], boxes[j] + 3) - sp[j].volume;
-            if (bi == UINT32_MAX || gain > bgain) {
+            if (bi == UINT32_MAX || sp[j].gain > bgain) {
                 bi = j;
-                bgain = gain;
+                bgain = sp[j].gain;
             }
         }
         if (bi == UINT32_MAX)
             break;
-        /* Exactly: both sides tightened; a side without geometry goes. */
+        /* Exactly: both sides tightened; a side without geometry goes. A
+         * split priced with the next one frees little itself: its larger
+         * side is priced again, and split next. */
         float lo[6], hi[6];
-        memcpy(lo, boxes[bi], sizeof lo);
-        memcpy(hi, boxes[bi], sizeof hi);
-        lo[3 + sp[bi].axis] = sp[bi].at;
-        hi[sp[bi].axis] = sp[bi].at;
-        int has_lo = tighten(tt, lo), has_hi = tighten(tt, hi);
+        int has_lo, has_hi;
         double vol = box_volume(boxes[bi], boxes[bi] + 3);
-        double after = (has_lo ? box_volume(lo, lo + 3) : 0) + (has_hi ? box_volume(hi, hi + 3) : 0);
-        if (!(has_lo || has_hi) || !(vol - after > gain_min * vol)) {
+        double after = split_sides(tt, boxes[bi], &sp[bi], lo, hi, &has_lo, &has_hi);
+        if (sp[bi].peel ? !(has_lo && has_hi) : !(vol - after > 0)) {
             state[bi] = 2;
             continue;
         }
@@ -2037,8 +2152,8 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         }
         if (!whole)
             out->apart_over = 0; /* a division again fitted */
-        if ((rc = split_boxes(&tt, out->boxes, state, out->count, split_max, fmax(SPLIT_GAIN_MIN, p->max_empty))) <
-            0)
+        if ((rc = split_boxes(&tt, out->boxes, state, out->count, split_max, fmax(SPLIT_GAIN_MIN, p->max_empty),
+                              objcell[0] * objcell[1] * objcell[2])) < 0)
             goto done;
         out->count = (uint32_t)rc;
         out->divide_ms += ms_since(&t0);

@@ -105,11 +105,14 @@
  *      the panel all along it). While the object has fewer than
  *      max_boxes less a quarter (left for later rounds), the box whose
  *      best plane frees the most is split across it, both parts tightened
- *      as in step 6, if that frees more than a quarter of it and more than
- *      max_empty. The plane is chosen among the starts of the triangles'
- *      bounding boxes in it, on each axis (boxes meeting more than
- *      SPLIT_PARTS_MAX triangles are left as they are: their surface
- *      already follows the cells).
+ *      as in step 6, if that frees more than a quarter of it, more than
+ *      max_empty and more than one of the object's cells. The plane is
+ *      chosen among the starts and ends of the triangles' bounding boxes
+ *      in it, on each axis (boxes meeting more than SPLIT_PARTS_MAX
+ *      triangles are left as they are: their surface already follows the
+ *      cells). When no one plane frees enough, two that peel both ends off
+ *      along an axis may (a wall's box that also holds the first cell of
+ *      the two walls meeting it: users stop a cell short of the wall).
  *
  * `capped` counts the new boxes left holding pressure (wanted cells), or
  * every problem box when they were only tightened: the opening may stay

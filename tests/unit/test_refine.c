@@ -409,20 +409,26 @@ static void test_model_invariant(void **state)
  * 0.416, floor y = 0, ceiling y = 2.8; the door is in the x = 0.218 wall,
  * z from -2.349 to -1.581, y up to 2.1. Users stopped in front of the door
  * on the MBR's face make a cluster there. */
+static import_mesh room_model(float box[6], ecm_params *p)
+{
+    snprintf(check_ctx, sizeof check_ctx, "room");
+    import_mesh m = load("openings/openfoam_room_with_doorway.stl", 1);
+    mbr(m.tris, m.ntris, box);
+    ecm_params_default(p);
+    return m;
+}
+
 static void test_room_door_opens_walls_stay(void **state)
 {
     (void)state;
-    import_mesh m = load("openings/openfoam_room_with_doorway.stl", 1);
     float box[6];
-    mbr(m.tris, m.ntris, box);
     ecm_params p;
-    ecm_params_default(&p);
+    import_mesh m = room_model(box, &p);
     /* As a live run made it: every user walked the same line. */
     ecm_cluster cl = {.box = 0, .min = {0.217568f, 0.9f, -1.965f}, .max = {0.217568f, 0.9f, -1.965f},
                       .centroid = {0.217568f, 0.9f, -1.965f}};
     ecm_result r;
     char err[256];
-    snprintf(check_ctx, sizeof check_ctx, "room");
     assert_int_equal(ecm_refine(&p, m.tris, m.ntris, (const float(*)[6])box, 1, &cl, 1, &r, err, sizeof err), 0);
     assert_true(r.count > 1 && r.count <= p.max_boxes);
     assert_int_equal(r.problem_boxes, 1);
@@ -440,6 +446,37 @@ static void test_room_door_opens_walls_stay(void **state)
     assert_true(blocked((const float(*)[6])r.boxes, r.count, wall_lo, wall_hi));
     float back_lo[3] = {-5.9f, 0.03f, -2.2f}, back_hi[3] = {-5.3f, 1.83f, -1.6f};
     assert_true(blocked((const float(*)[6])r.boxes, r.count, back_lo, back_hi));
+    ecm_result_free(&r);
+    import_mesh_free(&m);
+}
+
+/*
+ * Step 7 on the room, round 0's two clusters at seed 8 of the scenario
+ * (users stopped on the front face and on the door's wall). The far wall
+ * x = -5.642 got a box one cell thick, which also held the first cell of
+ * both side walls that meet it: one split frees nothing (either side still
+ * holds a side wall's end), so it stayed, 4.5 cm in front of the wall, and
+ * a user who walked in and pushed the far wall was stopped there 31 moves
+ * in a row. Both ends peeled off, the wall's box is the wall.
+ */
+static void test_room_far_wall_peeled(void **state)
+{
+    (void)state;
+    float box[6];
+    ecm_params p;
+    import_mesh m = room_model(box, &p);
+    const ecm_cluster cl[2] = {
+        {.box = 0, .min = {-2.7173903f, 0.9f, -4.43519592f}, .max = {-2.7173903f, 0.9f, -4.43519592f},
+         .centroid = {-2.7173903f, 0.9f, -4.43519592f}, .weight = 867},
+        {.box = 0, .min = {0.217567921f, 0.9f, -4.2198534f}, .max = {0.217567921f, 0.9f, -0.939493179f},
+         .centroid = {0.217567921f, 0.9f, -2.07959032f}, .weight = 1636}};
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, cl, 2, &r, err, sizeof err), 0);
+    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, cl, 2, &r, 16);
+    /* An avatar 5 mm from the far wall, where the user was: free. */
+    const float lo[3] = {-5.637f, 0.03f, -2.0f}, hi[3] = {-5.037f, 1.83f, -1.4f};
+    CHECK(!blocked(CBOXES(r.boxes), r.count, lo, hi), "the far wall's box stands in front of it");
     ecm_result_free(&r);
     import_mesh_free(&m);
 }
@@ -2128,6 +2165,7 @@ int main(int argc, char **argv)
                 &sel);
     const struct CMUnitTest fixed[] = {
         cmocka_unit_test(test_room_door_opens_walls_stay),
+        cmocka_unit_test(test_room_far_wall_peeled),
         cmocka_unit_test(test_archway_opens_stone_stays),
         cmocka_unit_test(test_archway_path_past_the_curve),
         cmocka_unit_test(test_budget_spent_outside_kept_inside),
