@@ -340,7 +340,8 @@ int main(int argc, char **argv)
             const ecm_applied *a = &objs[i].applied;
             const judge_result *j = &a->judge;
             printf("%s{\"object\":%lld,\"from\":%u,\"outcome\":\"%s\",\"version\":%u,\"candidate\":%u,"
-                   "\"boxes_before\":%u,\"boxes_after\":%u,\"capped\":%u,\"voxel_ms\":%.3f,\"divide_ms\":%.3f,"
+                   "\"boxes_before\":%u,\"boxes_after\":%u,\"capped\":%u,\"apart_over\":%u,\"voxel_ms\":%.3f,"
+                   "\"divide_ms\":%.3f,"
                    "\"total_ms\":%.3f,\"judge\":{\"better\":%s,\"samples\":%u,\"moves\":%llu,"
                    "\"phantom_old\":%llu,\"phantom_new\":%llu,\"opened_old\":%llu,\"opened_new\":%llu,"
                    "\"ms\":%.3f}}",
@@ -351,7 +352,8 @@ int main(int argc, char **argv)
                    : a->judged_before      ? "rejected before"
                    : a->candidate          ? "rejected"
                                            : "unchanged",
-                   a->version, a->candidate, a->boxes_before, a->boxes_after, a->stats.capped, a->stats.voxel_ms,
+                   a->version, a->candidate, a->boxes_before, a->boxes_after, a->stats.capped, a->stats.apart_over,
+                   a->stats.voxel_ms,
                    a->stats.divide_ms, a->total_ms, j->better ? "true" : "false", j->samples,
                    (unsigned long long)j->moves, (unsigned long long)j->phantom_old,
                    (unsigned long long)j->phantom_new, (unsigned long long)j->opened_old,

@@ -806,9 +806,13 @@ def run_scenes(a, scenes):
                 st["rejected"] = sum(x.get("outcome") == "rejected" for x in job["refined"])
                 # What the job did with the scene's one object: written (a new
                 # version), rejected (by the judge), unchanged (the refined map
-                # is the old one), or no cluster.
+                # is the old one; "unchanged, apart" when the new boxes, taken
+                # apart where they reached out of the old map, passed the
+                # cap), or no cluster.
                 st["outcome"] = (job["refined"][0]["outcome"] if job["refined"]
                                  else "no cluster" if not job["clusters"] else "not refined")
+                if st["outcome"] == "unchanged" and job["refined"][0].get("apart_over"):
+                    st["outcome"] = "unchanged, apart"
                 row["cluster_s"] += st["cluster_s"]
                 row["refine_ms"] += refine_ms
             row["scenes"][sc.name] = st
@@ -869,8 +873,9 @@ def report(a, scenes, rounds, bump):
              "Leak: the avatar's box overlaps a triangle. Refinement ms: digitizing, dividing and judging after the "
              "round (the store's share of the job is not in it). A rejected candidate: a refined map the judge "
              "found no better, not published. After the round: what clustering and refinement did with the "
-             "object (written: a new version; rejected; unchanged: the refined map is the old one; no "
-             "cluster). Tightness: volume of occupied cells / volume of the "
+             "object (written: a new version; rejected; unchanged: the refined map is the old one; "
+             "unchanged, apart: so because its new boxes reached out of the old map and, taken apart, passed "
+             "the cap; no cluster). Tightness: volume of occupied cells / volume of the "
              "boxes (grid 2^7 over the MBR). Full-voxel baseline: every occupied cell its own box.", "",
              "| scene | round | version | moves | collisions | phantom | phantom / 1000 moves | leaks | boxes | "
              "tightness | full-voxel boxes | refinement ms | candidates rejected | after the round |",
@@ -945,7 +950,7 @@ def judge_scene(phantom, stats):
                 phantom=phantom)
 
 
-OUTCOMES = ("written", "rejected", "rejected before", "unchanged", "no cluster")
+OUTCOMES = ("written", "rejected", "rejected before", "unchanged", "unchanged, apart", "no cluster")
 
 
 def later_outcomes(reports, name):
