@@ -164,6 +164,7 @@ static import_mesh load(const char *rel, int z_up)
     return m;
 }
 
+
 /* Samples per triangle edge for uncovered(): fine on small models, coarse
  * on the big scenes (the city block has 400,020 triangles), so that the
  * whole file runs in seconds. */
@@ -325,6 +326,16 @@ static void check_result(const ecm_params *p, const float *tris, uint32_t ntris,
     free(problem);
 }
 
+/* ecm_refine on model m must succeed, and its result hold every
+ * invariant (check_result). */
+static void refine_model(const ecm_params *p, const import_mesh *m, const float (*boxes)[6], uint32_t nboxes,
+                         const ecm_cluster *cl, uint32_t ncl, ecm_result *r)
+{
+    char err[256];
+    assert_int_equal(ecm_refine(p, m->tris, m->ntris, boxes, nboxes, cl, ncl, r, err, sizeof err), 0);
+    check_result(p, m->tris, m->ntris, boxes, nboxes, cl, ncl, r, 16);
+}
+
 /* ---- the invariant on every model -------------------------------------- */
 
 typedef struct vol_index {
@@ -471,9 +482,7 @@ static void test_room_far_wall_peeled(void **state)
         {.box = 0, .min = {0.217567921f, 0.9f, -4.2198534f}, .max = {0.217567921f, 0.9f, -0.939493179f},
          .centroid = {0.217567921f, 0.9f, -2.07959032f}, .weight = 1636}};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, cl, 2, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, cl, 2, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, cl, 2, &r);
     /* An avatar 5 mm from the far wall, where the user was: free. */
     const float lo[3] = {-5.637f, 0.03f, -2.0f}, hi[3] = {-5.037f, 1.83f, -1.4f};
     CHECK(!blocked(CBOXES(r.boxes), r.count, lo, hi), "the far wall's box stands in front of it");
@@ -515,8 +524,7 @@ static void test_archway_opens_stone_stays(void **state)
     ecm_cluster cl = cluster_at(0, (const float[3]){0, 0.175f, box[5]}, (const float[3]){0.05f, 0.1f, 0});
     ecm_result r;
     char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, &cl, 1, &r);
     assert_true(r.wanted > 0);
     assert_true(r.count > 1);
 
@@ -565,9 +573,7 @@ static void test_archway_path_past_the_curve(void **state)
     const ecm_cluster cl = {.box = 0, .min = {-0.4318f, 0.175f, 0.3315f}, .max = {0.3875f, 0.175f, 0.3315f},
                             .centroid = {0.0436f, 0.175f, 0.3315f}, .weight = 2591};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, &cl, 1, &r);
     assert_true(r.count <= p.max_boxes);
     /* The avatar where it was stopped (world 1.30 0 3.81; the object at
      * 0 0.2 2.674, scale 4), walked on 3 mm, its head under the curve:
@@ -607,9 +613,7 @@ static void test_budget_spent_outside_kept_inside(void **state)
         {.box = 0, .min = {-4.68331718f, 0.9f, -2.2f}, .max = {-2.78816915f, 0.9f, -2.2f},
          .centroid = {-3.85715079f, 0.9f, -2.2f}, .weight = 272}};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, front, 4, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, front, 4, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, front, 4, &r);
     CHECK(r.capped > 0 && r.count == p.max_boxes, "outside: %u boxes of %u, %u pressed kept whole", r.count,
           p.max_boxes, r.capped);
     ecm_result_free(&r);
@@ -619,8 +623,7 @@ static void test_budget_spent_outside_kept_inside(void **state)
     const ecm_cluster in = {.box = 0, .min = {-15.6777592f, 0.993f, -4.92351198f},
                             .max = {15.6722403f, 0.993f, -0.198510006f},
                             .centroid = {-0.079234004f, 0.993f, -2.68530369f}, .weight = 2400};
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, &in, 1, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, &in, 1, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, &in, 1, &r);
     CHECK(r.capped > 0 && r.count <= p.max_boxes - p.max_boxes / 4, "inside: %u boxes of %u, %u pressed kept whole",
           r.count, p.max_boxes, r.capped);
     ecm_result_free(&r);
@@ -647,9 +650,7 @@ static void test_split_frees_space_under_the_cell(void **state)
     const ecm_cluster cl = {.box = 0, .min = {-1.21f, -0.2f, -0.5f}, .max = {0.164f, -0.2f, -0.5f},
                             .centroid = {-0.73f, -0.2f, -0.5f}, .weight = 2600};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, &cl, 1, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, &cl, 1, &r);
     assert_true(r.count <= p.max_boxes);
     /* Beside the panel, in the knee space, from the front to 5 cm before
      * the back board: free up to the panel itself. */
@@ -705,9 +706,7 @@ static void test_new_boxes_stay_in_the_old_map(void **state)
                             .max = {0.394075006f, -0.137500048f, 0.438000053f},
                             .centroid = {-0.048434183f, -0.194857597f, -0.311920017f}, .weight = 316};
     ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 4, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(old), 4, &cl, 1, &r, 16);
+    refine_model(&p, &m, CBOXES(old), 4, &cl, 1, &r);
     assert_true(r.count > 4);
     for (uint32_t i = 0; i < r.count; i++)
         CHECK(within_boxes(r.boxes[i], old, 4, 1e-5f), "box %u (%g %g %g .. %g %g %g) reaches out of the old map", i,
@@ -726,9 +725,7 @@ static import_mesh gazebo_round(const float (*old)[6], uint32_t nold, const ecm_
     float box[6];
     ecm_params p;
     import_mesh m = scaled_model("data/gazebo.obj", 1, box, &p);
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, old, nold, cl, ncl, r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, old, nold, cl, ncl, r, 16);
+    refine_model(&p, &m, old, nold, cl, ncl, r);
     CHECK(r->count > nold, "the %u problem boxes were only tightened", r->problem_boxes);
     return m;
 }
@@ -858,9 +855,7 @@ static void test_grazed_row_is_no_opening(void **state)
     import_mesh_free(&m);
     m = scaled_model("data/gazebo.obj", 1, box, &p);
     p.max_boxes = 28;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(old), 28, cl, 2, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(old), 28, cl, 2, &r, 16);
+    refine_model(&p, &m, CBOXES(old), 28, cl, 2, &r);
     CHECK(r.count <= 28 && r.capped == r.problem_boxes && r.apart_over > 0,
           "at the cap: %u boxes, %u of %u problem boxes kept whole, %u over", r.count, r.capped, r.problem_boxes,
           r.apart_over);
@@ -1772,11 +1767,9 @@ static void cap_model(const char *rel, int z_up, const ecm_cluster *cl, uint32_t
     ecm_params p;
     ecm_params_default(&p);
     ecm_result r;
-    char err[256];
     /* At the default cap first: it wants at least 3 boxes. */
     snprintf(check_ctx, sizeof check_ctx, "%s at the default cap", rel);
-    assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, c, ncl, &r, err, sizeof err), 0);
-    check_result(&p, m.tris, m.ntris, CBOXES(box), 1, c, ncl, &r, 16);
+    refine_model(&p, &m, CBOXES(box), 1, c, ncl, &r);
     uint32_t free_count = r.count;
     assert_true(r.wanted > 0);
     assert_true(free_count >= 3);
@@ -1786,8 +1779,7 @@ static void cap_model(const char *rel, int z_up, const ecm_cluster *cl, uint32_t
     for (size_t i = 0; i < NELEM(caps); i++) {
         p.max_boxes = caps[i];
         snprintf(check_ctx, sizeof check_ctx, "%s capped at %u", rel, caps[i]);
-        assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(box), 1, c, ncl, &r, err, sizeof err), 0);
-        check_result(&p, m.tris, m.ntris, CBOXES(box), 1, c, ncl, &r, 16);
+        refine_model(&p, &m, CBOXES(box), 1, c, ncl, &r);
         assert_in_range(r.count, 1, caps[i]);
         /* The cap bit: the boxes left hold wanted cells, unless so few
          * boxes can still steer clear of them (then capped is 0). */
@@ -1874,10 +1866,8 @@ static void test_cap_kept_boxes_over_cap(void **state)
         ecm_params_default(&p);
         p.max_boxes = caps[i];
         ecm_result r;
-        char err[256];
         snprintf(check_ctx, sizeof check_ctx, "room in octants, cap %u", caps[i]);
-        assert_int_equal(ecm_refine(&p, m.tris, m.ntris, CBOXES(oct), 8, cl, 3, &r, err, sizeof err), 0);
-        check_result(&p, m.tris, m.ntris, CBOXES(oct), 8, cl, 3, &r, 16);
+        refine_model(&p, &m, CBOXES(oct), 8, cl, 3, &r);
         assert_in_range(r.count, 5, caps[i] > 8 ? caps[i] : 8);
         if (caps[i] <= 6) {
             /* Two problem octants touch, the third is apart: at most one
