@@ -102,7 +102,8 @@ typedef struct work {
     uint32_t *tables;
     uint8_t *cls;      /* n^3: CELL_* bits */
     uint8_t *pressure; /* n^3: 0, or how hard users press for the cell to open */
-    uint64_t *blocked; /* n^2 lines of bw words: bit x set when blocked() (0 past n) */
+    uint64_t *blocked; /* n^2 lines of bw words: bit x set when a triangle touches cell x
+                        * or a kept box meets it (0 past n): see blocked() */
     size_t bw;
     ilist out;         /* boxes so far: no more division for them */
     double max_empty;
@@ -755,10 +756,10 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
 }
 
 /* Whether an avatar cannot be in the cell: a triangle touches it, or it
- * meets a kept box. */
+ * meets a kept box (w->blocked, which classify fills). */
 static int blocked(const work *w, uint32_t x, uint32_t y, uint32_t z)
 {
-    return (w->cls[x + (size_t)w->n * (y + (size_t)w->n * z)] & (CELL_OCCUPIED | CELL_KEPT)) != 0;
+    return (int)((w->blocked[w->bw * (y + (size_t)w->n * z) + x / 64] >> (x % 64)) & 1u);
 }
 
 /* The 64 bits of a line of w->blocked from cell x on (x may be negative:
@@ -1268,6 +1269,17 @@ static int by_key(const void *x, const void *y)
     return (i > j) - (i < j);
 }
 
+/* Makes the plane at on axis, whose sides hold v, *best when it holds
+ * less than the box (volume) and than *best (if found). Returns whether
+ * it did. */
+static int take_plane(split *best, int found, int axis, float at, double v, double volume)
+{
+    if (!(v < volume && (!found || v < best->volume)))
+        return 0;
+    *best = (split){.axis = axis, .at = at, .volume = v};
+    return 1;
+}
+
 /* How many of the n keys (sorted by by_key) are below at. */
 static uint32_t count_below(const keyed *k, uint32_t n, float at)
 {
@@ -1433,10 +1445,7 @@ static int best_split(tight *tt, const float b[6], split *best, split *peel)
                 above--;
             double v = prefix_volume((const float(*)[3])pl, (const float(*)[3])ph, i, axis, at, 1) +
                        prefix_volume((const float(*)[3])sl, (const float(*)[3])sh, above, axis, at, 0);
-            if (v < volume && (!found || v < best->volume)) {
-                *best = (split){.axis = axis, .at = at, .volume = v};
-                found = 1;
-            }
+            found |= take_plane(best, found, axis, at, v, volume);
         }
         /* Both ends peeled off: a plane just after the first end and one
          * just before the last start, the parts between them clamped to
@@ -1461,10 +1470,7 @@ static int best_split(tight *tt, const float b[6], split *best, split *peel)
             uint32_t below = count_below(k, n, at), over = count_below(up, n, nextafterf(-at, INFINITY));
             double v = prefix_volume((const float(*)[3])pl, (const float(*)[3])ph, below, axis, at, 1) +
                        prefix_volume((const float(*)[3])sl, (const float(*)[3])sh, over, axis, at, 0);
-            if (v < volume && (!found || v < best->volume)) {
-                *best = (split){.axis = axis, .at = at, .volume = v};
-                found = 1;
-            }
+            found |= take_plane(best, found, axis, at, v, volume);
         }
     }
     free(parts);
@@ -1554,7 +1560,7 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
         int has_lo, has_hi;
         double vol = box_volume(boxes[bi], boxes[bi] + 3);
         double after = split_sides(tt, boxes[bi], &sp[bi], lo, hi, &has_lo, &has_hi);
-        if (sp[bi].peel ? !(has_lo && has_hi) : !(vol - after > 0)) {
+        if (sp[bi].peel ? !(has_lo && has_hi) : (!(has_lo || has_hi) || !(vol - after > gain_min * vol))) {
             state[bi] = 2;
             continue;
         }
