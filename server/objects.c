@@ -618,8 +618,9 @@ static void on_import_results(ev_loop *loop, int fd, unsigned events, void *data
 }
 
 /* Takes the refiner's new collision maps: each replaces its object's boxes
- * between two ticks, and every client hears of it. An avatar that the new
- * boxes enclose is not trapped (move.h's inside policy). */
+ * between two ticks, and every client hears of it. An avatar that a new box
+ * encloses, where no old one did, is pushed out (world_push_out); one that
+ * no push frees is not trapped either (move.h's inside policy). */
 static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *data)
 {
     (void)loop;
@@ -634,17 +635,26 @@ static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *dat
             continue; /* removed, or already in force */
         }
         uint32_t before = o->box_count, old_version = o->ecm_version;
+        /* The old world boxes, for the push-out; without them (out of
+         * memory) every avatar the new boxes enclose is left inside. */
+        scene_box *old = cvre_malloc((size_t)before * sizeof *old);
+        if (old)
+            memcpy(old, o->world, (size_t)before * sizeof *old);
         _Static_assert(sizeof(scene_box) == sizeof *u.boxes, "a box is six floats");
         int rc = scene_set_ecm(s->scene, u.object_id, u.version, (const scene_box *)u.boxes, u.count);
         refiner_update_free(&u);
         if (rc < 0) {
+            free(old);
             log_error("object %u: cannot take collision map v%u: %s", u.object_id, u.version, strerror(-rc));
             continue;
         }
         s->st.versions_published++;
+        uint32_t stuck = 0, pushed = old ? world_push_out(s->world, s->scene, u.object_id, old, before, &stuck) : 0;
+        free(old);
         o = scene_get(s->scene, u.object_id);
-        log_info("object %u \"%s\": collision map v%u -> v%u in force, %u -> %u boxes", o->id, o->name, old_version,
-                 o->ecm_version, before, o->box_count);
+        log_info("object %u \"%s\": collision map v%u -> v%u in force, %u -> %u boxes; %u avatars pushed out of "
+                 "new boxes, %u left inside",
+                 o->id, o->name, old_version, o->ecm_version, before, o->box_count, pushed, stuck);
         s->scene_gen++;
     }
 }

@@ -138,6 +138,20 @@ static int controller(world *w, const scene *sc, const move_params *mp, const mo
     return move_step(mp, st, disp, dt, w->boxes, n, res);
 }
 
+/* The box of an avatar of size box standing at p. */
+static void avatar_bounds(const float p[3], const float box[3], float lo[3], float hi[3])
+{
+    lo[0] = p[0] - box[0] * 0.5f, lo[1] = p[1], lo[2] = p[2] - box[2] * 0.5f;
+    hi[0] = p[0] + box[0] * 0.5f, hi[1] = p[1] + box[1], hi[2] = p[2] + box[2] * 0.5f;
+}
+
+/* Whether the interiors of the box [lo, hi] and box b meet. */
+static int meets(const float lo[3], const float hi[3], const scene_box *b)
+{
+    return b->min[0] < hi[0] && lo[0] < b->max[0] && b->min[1] < hi[1] && lo[1] < b->max[1] && b->min[2] < hi[2] &&
+           lo[2] < b->max[2];
+}
+
 /* Whether a box of size box standing at p, once stood on any floor its feet
  * are a little into (move.h), overlaps no box of sc (their interiors meet
  * nowhere, as in move.h); if so, p is moved onto that floor. */
@@ -151,19 +165,14 @@ static int free_at(world *w, const scene *sc, const float box[3], float p[3])
     if (controller(w, sc, &mp, &st, still, 0, &res) < 0)
         return 0;
     const float *q = res.state.pos;
-    float lo[3] = {q[0] - box[0] * 0.5f, q[1], q[2] - box[2] * 0.5f};
-    float hi[3] = {q[0] + box[0] * 0.5f, q[1] + box[1], q[2] + box[2] * 0.5f};
+    float lo[3], hi[3];
+    avatar_bounds(q, box, lo, hi);
     uint32_t n = scene_query(sc, lo, hi, w->handles, WORLD_MAX_CANDIDATES);
     if (n > WORLD_MAX_CANDIDATES)
         return 0;
-    for (uint32_t i = 0; i < n; i++) {
-        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
-        int meet = 1;
-        for (int a = 0; a < 3; a++)
-            meet &= b->world.min[a] < hi[a] && lo[a] < b->world.max[a];
-        if (meet)
+    for (uint32_t i = 0; i < n; i++)
+        if (meets(lo, hi, &scene_box_at(sc, w->handles[i])->world))
             return 0;
-    }
     memcpy(p, q, sizeof res.state.pos);
     return 1;
 }
@@ -344,6 +353,69 @@ void world_step(world *w, const scene *sc, world_contact_fn *fn, void *ctx)
 }
 
 uint32_t world_tick(const world *w) { return w->step; }
+
+/* Pushes avatar a out of object o's new boxes (world_push_out): 1 when
+ * pushed, 0 when it needs no push, -ENOSPC when none frees it. */
+static int push_out(world *w, const scene *sc, avatar *a, const scene_object *o, const scene_box *old, uint32_t nold)
+{
+    const float *p = a->pub.pos, *box = a->pub.box;
+    float lo[3], hi[3];
+    avatar_bounds(p, box, lo, hi);
+    if (!meets(lo, hi, &o->bounds))
+        return 0;
+    for (uint32_t i = 0; i < nold; i++)
+        if (meets(lo, hi, &old[i]))
+            return 0; /* the object stood around it already */
+    /* The boxes a push can meet: past the faces of those it overlaps, at
+     * most half its width away, or standing on one. */
+    float reach = fmaxf(box[0], box[2]);
+    const float qlo[3] = {lo[0] - reach, lo[1], lo[2] - reach}, qhi[3] = {hi[0] + reach, hi[1] + reach, hi[2] + reach};
+    uint32_t n = scene_query(sc, qlo, qhi, w->handles, WORLD_MAX_CANDIDATES), k = 0;
+    int enclosed = 0;
+    if (n > WORLD_MAX_CANDIDATES)
+        n = WORLD_MAX_CANDIDATES;
+    for (uint32_t i = 0; i < n; i++) {
+        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
+        int in = meets(lo, hi, &b->world);
+        if (in && b->object_id != o->id)
+            continue; /* another object's box it was inside: its inside policy holds */
+        enclosed |= in != 0;
+        w->boxes[k] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
+        memcpy(w->boxes[k].min, b->world.min, sizeof b->world.min);
+        memcpy(w->boxes[k].max, b->world.max, sizeof b->world.max);
+        k++;
+    }
+    if (!enclosed)
+        return 0;
+    move_params mp;
+    params(w, box, &mp);
+    move_state st = {.pos = {p[0], p[1], p[2]}, .vy = a->pub.vy, .grounded = a->pub.grounded != 0};
+    int rc = move_push_out(&mp, &st, w->boxes, k);
+    if (rc <= 0)
+        return rc < 0 ? -ENOSPC : 0;
+    memcpy(a->pub.pos, st.pos, sizeof st.pos);
+    a->pub.vy = st.vy;
+    a->pub.grounded = st.grounded;
+    a->pub.changed_tick = w->step;
+    (void)grid_move(w->grid, world_slot(a->pub.id), a->pub.pos[0], a->pub.pos[2]); /* as in apply */
+    return 1;
+}
+
+uint32_t world_push_out(world *w, const scene *sc, uint32_t object_id, const scene_box *old, uint32_t nold,
+                        uint32_t *stuck)
+{
+    const scene_object *o = scene_get(sc, object_id);
+    uint32_t pushed = 0;
+    *stuck = 0;
+    for (uint32_t s = 0; o && s < w->cfg.capacity; s++) {
+        if (!w->avatars[s].used)
+            continue;
+        int rc = push_out(w, sc, &w->avatars[s], o, old, nold);
+        pushed += rc > 0 ? 1u : 0u;
+        *stuck += rc < 0 ? 1u : 0u;
+    }
+    return pushed;
+}
 
 uint32_t world_count(const world *w) { return w->count; }
 

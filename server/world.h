@@ -104,6 +104,15 @@ typedef void world_contact_fn(void *ctx, const world_avatar *a, const move_conta
 void world_step(world *w, const scene *sc, world_contact_fn *fn, void *ctx);
 uint32_t world_tick(const world *w);
 
+/* After object object_id's collision map changed in sc (its boxes before,
+ * as world AABBs: old, nold of them): pushes every avatar that a new box
+ * of it overlaps, and that overlapped none of the old ones, out of the
+ * scene's boxes (move_push_out; boxes of other objects it was already
+ * inside stay out of the trial). Returns how many were pushed; *stuck
+ * counts those no push-out frees, left to move.h's inside policy. */
+uint32_t world_push_out(world *w, const scene *sc, uint32_t object_id, const scene_box *old, uint32_t nold,
+                        uint32_t *stuck);
+
 /* The other avatars within the area-of-interest radius of avatar id,
  * written to out (room for max) in no particular order. Returns how many
  * were written. */

@@ -365,6 +365,16 @@ static bool valid(const move_params *p, const move_state *st, const float disp[3
            dt <= MOVE_MAX_DT;
 }
 
+/* Whether every box is finite with min <= max. */
+static bool boxes_valid(const move_box *boxes, uint32_t n)
+{
+    for (uint32_t i = 0; i < n; i++)
+        for (int a = 0; a < 3; a++)
+            if (!isfinite(boxes[i].min[a]) || !isfinite(boxes[i].max[a]) || boxes[i].min[a] > boxes[i].max[a])
+                return false;
+    return true;
+}
+
 /* Sets up the context and the motion of the tick: the start (lifted onto the
  * floor), the fall speed at the end of the tick and the whole displacement. */
 static void begin(ctx *c, const move_params *p, const move_state *st, const float disp[3], float dt, double m[3],
@@ -418,12 +428,10 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
             out->state = *st;
         return -EINVAL;
     }
-    for (uint32_t i = 0; i < nboxes; i++)
-        for (int a = 0; a < 3; a++)
-            if (!isfinite(boxes[i].min[a]) || !isfinite(boxes[i].max[a]) || boxes[i].min[a] > boxes[i].max[a]) {
-                out->state = *st;
-                return -EINVAL;
-            }
+    if (!boxes_valid(boxes, nboxes)) {
+        out->state = *st;
+        return -EINVAL;
+    }
 
     ctx c;
     c.boxes = boxes;
@@ -493,4 +501,85 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
             if (ignored(&c, &boxes[i]) && overlaps(&c, &boxes[i], fin))
                 add_inside(&c, out, i, fin);
     return 0;
+}
+
+/* The first box the avatar with its feet at p overlaps, from box `from` on,
+ * or nboxes. */
+static uint32_t overlapped_from(const ctx *c, const double p[3], uint32_t from)
+{
+    for (uint32_t i = from; i < c->nboxes; i++)
+        if (overlaps(c, &c->boxes[i], p))
+            return i;
+    return c->nboxes;
+}
+
+/* Where the avatar at p goes past face k of box b (0..3: the sides -x, +x,
+ * -z, +z, MOVE_SKIN past them; 4: standing on its top), rounded to float. */
+static void past_face(const ctx *c, const move_box *b, int k, const double p[3], double q[3])
+{
+    double lo[3], hi[3];
+    grown(c, b, lo, hi);
+    memcpy(q, p, 3 * sizeof *q);
+    int a = k == 4 ? 1 : k < 2 ? 0 : 2;
+    q[a] = k == 4 ? hi[1] : k % 2 ? hi[a] + MOVE_SKIN : lo[a] - MOVE_SKIN;
+    volatile float rounded = (float)q[a]; /* see settle */
+    q[a] = rounded;
+}
+
+/* Takes q as the best place so far if it is nearer to from than *best_d,
+ * within max_push, and overlaps no box. */
+static void consider(const ctx *c, const double from[3], const double q[3], double max_push, double best[3],
+                     double *best_d)
+{
+    double d = sqrt((q[0] - from[0]) * (q[0] - from[0]) + (q[1] - from[1]) * (q[1] - from[1]) +
+                    (q[2] - from[2]) * (q[2] - from[2]));
+    if (d < *best_d && d <= max_push && overlapped_from(c, q, 0) == c->nboxes) {
+        *best_d = d;
+        memcpy(best, q, 3 * sizeof *best);
+    }
+}
+
+int move_push_out(const move_params *p, move_state *st, const move_box *boxes, uint32_t nboxes)
+{
+    static const float still[3] = {0, 0, 0};
+    if (!valid(p, st, still, 0) || (!boxes && nboxes) || !boxes_valid(boxes, nboxes))
+        return -EINVAL;
+    const double max_push = fmin(p->size[0], p->size[2]) / 2.0;
+    ctx c = {.boxes = boxes, .nboxes = nboxes};
+    double m[3], vy;
+    begin(&c, p, st, still, 0, m, &vy);
+    const double from[3] = {c.start[0], c.start[1], c.start[2]};
+    uint32_t inside[MOVE_PUSH_BOXES], k = 0;
+    for (uint32_t i = overlapped_from(&c, from, 0); i < nboxes; i = overlapped_from(&c, from, i + 1)) {
+        if (k == MOVE_PUSH_BOXES)
+            return -ENOSPC;
+        inside[k++] = i;
+    }
+    if (k == 0)
+        return 0;
+    /* Past one face; when that place overlaps another box, past one of its
+     * faces too. */
+    double best[3], best_d = INFINITY;
+    for (uint32_t i = 0; i < k; i++)
+        for (int f = 0; f < 5; f++) {
+            double q[3], r[3];
+            past_face(&c, &boxes[inside[i]], f, from, q);
+            uint32_t j = overlapped_from(&c, q, 0);
+            if (j == nboxes) {
+                consider(&c, from, q, max_push, best, &best_d);
+                continue;
+            }
+            for (int g = 0; g < 5; g++) {
+                past_face(&c, &boxes[j], g, q, r);
+                consider(&c, from, r, max_push, best, &best_d);
+            }
+        }
+    if (best_d == INFINITY)
+        return -ENOSPC;
+    memcpy(c.start, best, sizeof best); /* it overlaps nothing: nothing is ignored */
+    for (int a = 0; a < 3; a++)
+        st->pos[a] = (float)best[a];
+    st->vy = 0;
+    st->grounded = supported(&c, best);
+    return 1;
 }

@@ -168,4 +168,29 @@ void move_bounds(const move_params *p, const move_state *st, const float disp[3]
 int move_step(const move_params *p, const move_state *st, const float disp[3], float dt, const move_box *boxes,
               uint32_t nboxes, move_result *out);
 
+/*
+ * Push-out: a new collision map that encloses an avatar the old one did not
+ * (a refined box reaches a little past the old faces it replaces) would
+ * leave it inside, free to walk on into the geometry (the inside policy).
+ * The server pushes such an avatar out when it puts the map in force, and
+ * the judge (algo/refine/judge.h) does the same to its samples.
+ *
+ * Moves the avatar in st to the nearest place that overlaps none of the
+ * nboxes boxes, among those just past one face of a box it overlaps, or
+ * past a face of one such box and then of another (a corner): a side
+ * (MOVE_SKIN past it) or the top (standing on it), never down. None further
+ * from the start (the feet, lifted onto the floor) than half the avatar's
+ * narrower width: refinement lets a new box reach past the old map by less
+ * (algo/refine/refine.h, step 6), and a longer push could carry it through
+ * a thin wall. Its
+ * vertical speed becomes 0 and it stands if something is under it (as after
+ * a move). Returns 1 when it was pushed, 0 when it overlapped no box (st
+ * unchanged), -ENOSPC when no such place is free (st unchanged: the inside
+ * policy applies), -EINVAL as move_step.
+ * O(k^2 n) for k boxes overlapped, at most MOVE_PUSH_BOXES of them (more:
+ * -ENOSPC).
+ */
+#define MOVE_PUSH_BOXES 8
+int move_push_out(const move_params *p, move_state *st, const move_box *boxes, uint32_t nboxes);
+
 #endif

@@ -1,6 +1,6 @@
 /* The character controller: walls, sliding, corners, tunnelling, steps,
- * support and falling, ceilings, the inside policy, bad input, and a random
- * walk that must never end inside a box it was not already in. */
+ * support and falling, ceilings, the inside policy, push-out, bad input, and
+ * a random walk that must never end inside a box it was not already in. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -789,6 +789,57 @@ static void test_deterministic(void **state)
     assert_int_equal(b.ncontacts, 0);
 }
 
+/* Push-out (a new map that encloses the avatar): the nearest free place
+ * past one face, or two at a corner, or on a top; no further than half the
+ * avatar's width; nothing moves an avatar that overlaps nothing. */
+static void test_push_out(void **state)
+{
+    (void)state;
+    move_result r;
+    static const float still[3] = {0, 0, 0};
+    /* 2 cm into a wall's box: back out of it, a skin from its face. */
+    const move_box wall = box(0.28f, 0, -1, 1, 3, 1, 1);
+    move_state s = at(0, 0, 0);
+    assert_int_equal(move_push_out(&prm, &s, &wall, 1), 1);
+    assert_float_equal(s.pos[0], 0.28f - 0.3f - SKIN, EPS);
+    assert_true(s.pos[1] == 0 && s.pos[2] == 0 && s.grounded && s.vy == 0);
+    assert_int_equal(move_step(&prm, &s, still, DT, &wall, 1, &r), 0);
+    assert_true(same_state(&r.state, &s));
+    /* Overlapping nothing: left as it is. */
+    move_state free_s = s;
+    assert_int_equal(move_push_out(&prm, &s, &wall, 1), 0);
+    assert_true(same_state(&free_s, &s));
+    /* A corner of two boxes: out of both, past a face of each. */
+    const move_box corner[2] = {wall, box(-1, 0, 0.25f, 1, 3, 1, 2)};
+    s = at(0, 0, 0);
+    assert_int_equal(move_push_out(&prm, &s, corner, 2), 1);
+    assert_float_equal(s.pos[0], 0.28f - 0.3f - SKIN, EPS);
+    assert_float_equal(s.pos[2], 0.25f - 0.3f - SKIN, EPS);
+    /* A low box under most of it: onto its top, standing. */
+    const move_box low = box(-1, 0, -1, 0.2f, 0.1f, 1, 3);
+    s = at(0, 0.02f, 0);
+    s.vy = -1;
+    s.grounded = false;
+    assert_int_equal(move_push_out(&prm, &s, &low, 1), 1);
+    assert_true(s.pos[0] == 0 && s.pos[1] == 0.1f && s.pos[2] == 0 && s.grounded && s.vy == 0);
+    /* Deeper than half its width on every side, or a box above the top it
+     * would be pushed onto: left inside (the inside policy). */
+    const move_box deep = box(-0.25f, 0, -0.25f, 0.25f, 3, 0.25f, 4);
+    s = at(0, 0, 0);
+    free_s = s;
+    assert_int_equal(move_push_out(&prm, &s, &deep, 1), -ENOSPC);
+    assert_true(same_state(&free_s, &s));
+    const move_box capped[2] = {box(-1, 0, -1, 1, 0.1f, 1, 5), box(-1, 1.5f, -1, 1, 3, 1, 6)};
+    assert_int_equal(move_push_out(&prm, &s, capped, 2), -ENOSPC);
+    /* Bad input. */
+    s = at(NAN, 0, 0);
+    assert_int_equal(move_push_out(&prm, &s, &wall, 1), -EINVAL);
+    s = at(0, 0, 0);
+    const move_box bad = box(1, 0, 0, 0, 1, 1, 7);
+    assert_int_equal(move_push_out(&prm, &s, &bad, 1), -EINVAL);
+    assert_int_equal(move_push_out(&prm, &s, NULL, 1), -EINVAL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -818,6 +869,7 @@ int main(void)
         cmocka_unit_test_setup(test_step_from_hover, setup),
         cmocka_unit_test_setup(test_rounding_never_overlaps, setup),
         cmocka_unit_test_setup(test_deterministic, setup),
+        cmocka_unit_test_setup(test_push_out, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

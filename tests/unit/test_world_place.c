@@ -1,9 +1,11 @@
 /*
- * test_world_spawn.c: where the world puts a new avatar (server/world.c,
- * world_add): on a model's floor that lies a few millimetres above the
- * world's, stood on it where it spawns, and it walks there with no inside
- * collision; out of the way of a tall object; inside only when nothing
- * around is free.
+ * test_world_place.c: where the world puts an avatar (server/world.c). A
+ * new one (world_add): on a model's floor that lies a few millimetres above
+ * the world's, stood on it where it spawns, and it walks there with no
+ * inside collision; out of the way of a tall object; inside only when
+ * nothing around is free. One that a new collision map encloses
+ * (world_push_out): out of the new boxes, unless the old map held it
+ * already or no place near is free.
  */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -114,12 +116,68 @@ static void test_crowded_when_nothing_free(void **state)
     scene_destroy(sc);
 }
 
+/* The box an avatar of size AV at p fills overlaps box b. */
+static int overlaps(const float p[3], const scene_box *b)
+{
+    const float lo[3] = {p[0] - AV[0] / 2, p[1], p[2] - AV[2] / 2}, hi[3] = {p[0] + AV[0] / 2, p[1] + AV[1], p[2] + AV[2] / 2};
+    return b->min[0] < hi[0] && lo[0] < b->max[0] && b->min[1] < hi[1] && lo[1] < b->max[1] && b->min[2] < hi[2] &&
+           lo[2] < b->max[2];
+}
+
+/* Puts object 1's map version v of one box [x0, 3] x [0, 3] x [-2, 2] in
+ * force and pushes avatars out of it; old: the map before. */
+static uint32_t new_map(world *w, scene *sc, uint32_t v, float x0, const scene_box *old, uint32_t *stuck)
+{
+    const scene_box b = {{x0, 0, -2}, {3, 3, 2}};
+    assert_int_equal(scene_set_ecm(sc, 1, v, &b, 1), 0);
+    return world_push_out(w, sc, 1, old, 1, stuck);
+}
+
+static void test_pushed_out_of_a_new_map(void **state)
+{
+    (void)state;
+    const float lo[3] = {1, 0, -2}, hi[3] = {3, 3, 2};
+    world *w;
+    scene *sc;
+    const world_avatar *a = spawn(lo, hi, 0, &w, &sc);
+    /* Walks into the wall's face and stops there. */
+    int contacts[2] = {0, 0};
+    for (uint32_t k = 1; k <= 60; k++)
+        walk(w, sc, a, k, contacts);
+    assert_true(contacts[0] > 0 && contacts[1] == 0);
+    assert_float_equal(a->pos[0], 1 - 0.3f - (float)MOVE_SKIN, 1e-5);
+    /* v2 reaches 2 cm past the old face: pushed back out of it. */
+    const scene_box v1 = {{1, 0, -2}, {3, 3, 2}};
+    uint32_t stuck = 9;
+    assert_int_equal(new_map(w, sc, 2, 0.98f, &v1, &stuck), 1);
+    assert_int_equal(stuck, 0);
+    assert_float_equal(a->pos[0], 0.98f - 0.3f - (float)MOVE_SKIN, 1e-5);
+    const scene_box v2 = scene_get(sc, 1)->world[0];
+    assert_false(overlaps(a->pos, &v2));
+    walk(w, sc, a, 61, contacts);
+    assert_int_equal(contacts[1], 0);
+    /* v3 encloses it whole: no place near is free, left inside. */
+    const float at[3] = {a->pos[0], a->pos[1], a->pos[2]};
+    assert_int_equal(new_map(w, sc, 3, -2, &v2, &stuck), 0);
+    assert_int_equal(stuck, 1);
+    assert_true(a->pos[0] == at[0] && a->pos[1] == at[1] && a->pos[2] == at[2]);
+    /* v4 still overlaps it, but v3 held it already (an object placed
+     * around it): not moved. */
+    const scene_box v3 = scene_get(sc, 1)->world[0];
+    assert_int_equal(new_map(w, sc, 4, 0.6f, &v3, &stuck), 0);
+    assert_int_equal(stuck, 0);
+    assert_true(a->pos[0] == at[0] && a->pos[1] == at[1] && a->pos[2] == at[2]);
+    world_destroy(w);
+    scene_destroy(sc);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_stood_on_a_thin_floor),
         cmocka_unit_test(test_tall_object_searched_around),
         cmocka_unit_test(test_crowded_when_nothing_free),
+        cmocka_unit_test(test_pushed_out_of_a_new_map),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
