@@ -270,16 +270,41 @@ typedef struct tally {
     uint64_t phantom, opened;
 } tally;
 
-/* Walks the avatar from s along (dx, dz) (a unit vector) at speed for
+/* Whether the avatar with its feet at f overlaps a box of m (interiors). */
+static int encloses(const move_params *mp, const map *m, const float f[3])
+{
+    static const double none[3] = {0, 0, 0};
+    double lo[3], hi[3];
+    avatar_box(mp, f, none, none, lo, hi);
+    for (uint32_t i = 0; i < m->n; i++) {
+        const move_box *b = &m->boxes[i];
+        if (b->min[0] < hi[0] && lo[0] < b->max[0] && b->min[1] < hi[1] && lo[1] < b->max[1] && b->min[2] < hi[2] &&
+            lo[2] < b->max[2])
+            return 1;
+    }
+    return 0;
+}
+
+/* Where sample s starts against the new map: where the server leaves an
+ * avatar when it puts that map in force (server/world.h, world_push_out):
+ * pushed out of the new boxes if one encloses it and no old box did. */
+static move_state start_new(const judge_params *p, const map *old, const map *cur, const judge_sample *s)
+{
+    move_state st = {.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true};
+    if (!encloses(&p->move, old, st.pos) && encloses(&p->move, cur, st.pos))
+        (void)move_push_out(&p->move, &st, cur->boxes, cur->n); /* none frees it: the inside policy */
+    return st;
+}
+
+/* Walks the avatar from st along (dx, dz) (a unit vector) at speed for
  * ticks ticks against m; adds what it finds to *t. */
-static void trial(const judge_params *p, geometry *g, const double cell[3], map *m, const judge_sample *s,
-                  float dx, float dz, float speed, uint32_t ticks, tally *t)
+static void trial(const judge_params *p, geometry *g, const double cell[3], map *m, move_state st, float dx,
+                  float dz, float speed, uint32_t ticks, tally *t)
 {
     /* Its bottom raised: what it stands on is support, not what stopped it. */
     const double grow_lo[3] = {cell[0], -JUDGE_FLOOR_TOLERANCE, cell[2]};
     const double shrink[3] = {-JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE};
     const float disp[3] = {dx * speed * p->dt, 0, dz * speed * p->dt};
-    move_state st = {.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true};
     for (uint32_t k = 0; k < ticks; k++) {
         float lo[3], hi[3];
         move_bounds(&p->move, &st, disp, p->dt, lo, hi);
@@ -460,11 +485,13 @@ int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, 
             continue;
         }
         pace(&jp, h, &speed, &ticks);
+        const move_state from[2] = {{.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true},
+                                    start_new(&jp, &maps[0], &maps[1], s)};
         for (int d = 0; d < nturns; d++) {
             float c = cosf(turns[d]), sn = sinf(turns[d]);
             float dx = (s->vel[0] * c - s->vel[2] * sn) / h, dz = (s->vel[0] * sn + s->vel[2] * c) / h;
             for (int k = 0; k < 2; k++)
-                trial(&jp, &g, cell, &maps[k], s, dx, dz, speed, ticks, &t[k]);
+                trial(&jp, &g, cell, &maps[k], from[k], dx, dz, speed, ticks, &t[k]);
             out->moves += ticks;
         }
     }

@@ -21,7 +21,10 @@
  * sample's horizontal speed (or `speed` when it is nearly still) for as many
  * ticks of dt as cover `reach` metres, once against the old boxes and once
  * against the new, with gravity and steps up as on the server: an opening
- * that leads onto a step and on under a box is tried as a user would. Per
+ * that leads onto a step and on under a box is tried as a user would.
+ * Against the new map, a sample that a new box encloses and no old box did
+ * starts where the server puts such an avatar when the map comes in force:
+ * pushed out of the new boxes (move.h, move_push_out). Per
  * map, every tick counts as
  *
  *   - a phantom block when a box of the map held the avatar back (an inside

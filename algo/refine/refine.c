@@ -1598,11 +1598,11 @@ static int by_double(const void *x, const void *y)
 
 /*
  * Whether box b lies in the union of the n boxes pb (the old map), give or
- * take tol: the planes of their faces cut b into cells, and the middle of
- * each cell wider than tol must be in one of them. 0 also when b meets more
- * than CONTAIN_MAX of them.
+ * take tol on each axis: the planes of their faces cut b into cells, and
+ * the middle of each cell wider than tol on every axis must be in one of
+ * them, grown by tol. 0 also when b meets more than CONTAIN_MAX of them.
  */
-static int within_old(const float b[6], const float (*pb)[6], uint32_t n, double tol)
+static int within_old(const float b[6], const float (*pb)[6], uint32_t n, const double tol[3])
 {
     float q[CONTAIN_MAX][6];
     uint32_t m = 0;
@@ -1633,7 +1633,7 @@ static int within_old(const float b[6], const float (*pb)[6], uint32_t n, double
                 double mid[3];
                 int wide = 1;
                 for (int a = 0; a < 3; a++) {
-                    wide &= cut[a][at[a] + 1] - cut[a][at[a]] > tol;
+                    wide &= cut[a][at[a] + 1] - cut[a][at[a]] > tol[a];
                     mid[a] = (cut[a][at[a]] + cut[a][at[a] + 1]) / 2;
                 }
                 if (!wide)
@@ -1642,7 +1642,7 @@ static int within_old(const float b[6], const float (*pb)[6], uint32_t n, double
                 for (uint32_t r = 0; r < m && !in; r++) {
                     in = 1;
                     for (int a = 0; a < 3; a++)
-                        in &= mid[a] >= (double)q[r][a] - tol && mid[a] <= (double)q[r][3 + a] + tol;
+                        in &= mid[a] >= (double)q[r][a] - tol[a] && mid[a] <= (double)q[r][3 + a] + tol[a];
                 }
                 if (!in)
                     return 0;
@@ -2099,14 +2099,18 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
             if (!problem[i])
                 memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
         /* A new box over several problem boxes may reach out of the old map
-         * by up to a cell (its parts' bounds in one and another): an avatar
-         * that stood at the old face would be inside it, and so free to
-         * walk on into the geometry (move.h's inside policy; 36 leaks in a
-         * desk round). Such a box is taken apart into its parts in each
+         * (its parts' bounds in one and another). By less than a cell, and
+         * than half the avatar's narrower width, the server pushes an
+         * avatar it encloses out (move.h, move_push_out). Further, one
+         * that stood at the old face would be left inside it, and so free
+         * to walk on into the geometry (move.h's inside policy; 36 leaks in
+         * a desk round): such a box is taken apart into its parts in each
          * problem box, tightened; if they pass the limit, the division runs
          * again with as many boxes fewer (APART_RETRIES times), and then the
          * problem boxes are only tightened. */
-        double tol = 1e3 * tt.eps;
+        double tol[3];
+        for (int a = 0; a < 3; a++)
+            tol[a] = fmax(1e3 * tt.eps, fmin(w.g.cell[a], fmin(p->avatar[0], p->avatar[2]) / 2));
         for (uint32_t retry = 0;; retry++) {
             uint32_t over = 0; /* boxes past the limit */
             uint32_t nb = whole ? nproblem : w.out.n + ntighten;

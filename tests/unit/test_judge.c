@@ -246,6 +246,34 @@ static void test_uncovered_wall_is_rejected(void **state)
     trimesh_free(&m.tm);
 }
 
+/* A candidate whose box of the wall's right part reaches 2 cm in front of
+ * the old face, where users stood pressed on it: the server pushes such an
+ * avatar out when the map comes in force (move_push_out), and so do the
+ * trials. Left inside, they would walk on into the wall (move.h's inside
+ * policy). Further than half the avatar's width, no push frees them. */
+static void test_sample_enclosed_by_a_new_box_pushed_out(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[8];
+    uint32_t ns = in_front(s, 8, 1.2f, 2.4f);
+    float near[3][6], deep[3][6];
+    memcpy(near, wall_parts, sizeof near);
+    memcpy(deep, wall_parts, sizeof deep);
+    near[1][2] = -0.02f;
+    deep[1][2] = -0.5f;
+    judge_input in = input(&m, wall_parts, 3, (const float(*)[6])near, 3, s, ns);
+    judge_result r = judged(&in);
+    assert_int_equal(r.opened_old, 0);
+    assert_int_equal(r.opened_new, 0);
+    in = input(&m, wall_parts, 3, (const float(*)[6])deep, 3, s, ns);
+    r = judged(&in);
+    assert_true(r.opened_new > 0);
+    assert_int_equal(r.better, 0);
+    trimesh_free(&m.tm);
+}
+
 /* The same input twice: the same figures; a cap picks samples evenly; a
  * sample that stood still is not walked; the object's scale and height
  * carry the trial into metres. */
@@ -446,6 +474,7 @@ int main(void)
         cmocka_unit_test(test_wall_at_the_end_of_the_reach_is_real),
         cmocka_unit_test(test_garage_base_opened_under_a_low_box_is_rejected),
         cmocka_unit_test(test_uncovered_wall_is_rejected),
+        cmocka_unit_test(test_sample_enclosed_by_a_new_box_pushed_out),
         cmocka_unit_test(test_deterministic_cap_still_scale),
         cmocka_unit_test(test_verdict_needs_a_clear_gain),
         cmocka_unit_test(test_bad_input),
