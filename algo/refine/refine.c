@@ -797,6 +797,16 @@ static void bit_clear(bits3 *b, uint32_t t, uint32_t y, uint32_t z)
     b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] &= ~((uint64_t)1 << (t % 64));
 }
 
+static void bit_set(bits3 *b, uint32_t t, uint32_t y, uint32_t z)
+{
+    b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] |= (uint64_t)1 << (t % 64);
+}
+
+static int bit_test(const bits3 *b, uint32_t t, uint32_t y, uint32_t z)
+{
+    return (int)((b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] >> (t % 64)) & 1u);
+}
+
 /* The face of the box the cluster names nearest its centroid: the axis
  * users cross, in every box the cluster presses on (a neighbour's nearest
  * face may be the one it shares with the named box). */
@@ -828,23 +838,39 @@ static void region_size(const ecm_params *p, double size[3])
     size[1] = p->avatar[1];
 }
 
+/* Whether cluster c's users stood inside b, the box it names: its
+ * centroid within the box, below its top by more than a step (not
+ * standing on it). */
+static int inside_named(const ecm_cluster *c, const float b[6], const ecm_params *p)
+{
+    for (int a = 0; a < 3; a++) {
+        double top = (double)b[3 + a] - (a == 1 ? (double)p->step : 0);
+        if (!(c->centroid[a] > b[a] && c->centroid[a] < top))
+            return 0;
+    }
+    return 1;
+}
+
 /*
  * Cluster cl's region (step 3), local: across the span of the boxes it
  * presses on along the face users cross and that face's horizontal axis;
  * on the other axes its points' reach, grown by half the avatar, and
- * upwards by up and the step height. named: the box it names. Returns the
- * face's axis.
+ * upwards by up and the step height. named: the box it names. Users who
+ * stood inside it cross no face: their region is their points' reach on
+ * every axis (mark_reachable adds where they walk on); *stretched says
+ * which. Returns the face's axis.
  */
 static int region_of(const ecm_cluster *cl, const float named[6], const float span[6], const ecm_params *p,
-                     double up, double lo[3], double hi[3])
+                     double up, double lo[3], double hi[3], int *stretched)
 {
     int face = crossed_face(cl, named), side = side_axis(face);
+    *stretched = !inside_named(cl, named, p);
     double size[3];
     region_size(p, size);
     for (int a = 0; a < 3; a++) {
         lo[a] = span[a];
         hi[a] = span[3 + a];
-        if (a != face && a != side) {
+        if (!*stretched || (a != face && a != side)) {
             lo[a] = (double)cl->min[a] - size[a] / 2;
             hi[a] = (double)cl->max[a] + size[a] / 2 + (a == 1 ? up + p->step : 0);
         }
@@ -860,9 +886,9 @@ static int meets_region(const ecm_cluster *cl, const float named[6], const float
                         const ecm_params *p, const double cell[3])
 {
     double lo[3], hi[3];
-    int face = region_of(cl, named, span, p, 2 * cell[1], lo, hi), side = side_axis(face);
+    int stretched, face = region_of(cl, named, span, p, 2 * cell[1], lo, hi, &stretched), side = side_axis(face);
     for (int a = 0; a < 3; a++) {
-        double grow = a != face && a != side ? cell[a] : 0;
+        double grow = !stretched || (a != face && a != side) ? cell[a] : 0;
         if (b[a] > hi[a] + grow || b[3 + a] < lo[a] - grow)
             return 0;
     }
@@ -888,7 +914,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     uint32_t n = w->n;
     double size[3], rlo[3], rhi[3];
     region_size(p, size);
-    int face = region_of(cl, named, span, p, g->cell[1], rlo, rhi);
+    int stretched, face = region_of(cl, named, span, p, g->cell[1], rlo, rhi, &stretched);
     uint32_t lo[3], hi[3], k[3], dim[3], top;
     /* The horizontal axis along the face users cross (none for a floor or
      * a ceiling), where the region reaches across the span: side_lo,
@@ -1041,6 +1067,138 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     return 0;
 }
 
+/*
+ * Step 3 for a cluster whose users stood inside the box it names (an
+ * object placed around them: a building they start in): they walk on to
+ * every place they can reach inside it, not only where this round's users
+ * went, so every empty cell an avatar placement reachable from the
+ * cluster's points covers gets pressure `weight`. A placement (the
+ * avatar's lowest cell corner) fits in free cells of the grid (cells
+ * outside it are not walked into) and stands: a blocked cell, or the grid's
+ * bottom, within the step height and a cell under some cell of its
+ * footprint, so that the walk climbs steps and stairs but never into the
+ * air. Reachable: 6-connected to a placement at the cluster's points, a
+ * breadth-first walk over the placements (each visited once).
+ */
+static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, uint32_t weight)
+{
+    const voxel_grid *g = &w->g;
+    uint32_t n = w->n, k[3], s;
+    double size[3];
+    region_size(p, size);
+    for (int a = 0; a < 3; a++) {
+        double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
+        k[a] = kc < 1 ? 1 : kc > n ? n : (uint32_t)kc;
+    }
+    double sc = g->cell[1] > 0 ? ceil(p->step / g->cell[1]) + 1 : 1;
+    s = sc > n ? n : (uint32_t)sc;
+    const uint32_t dim[3] = {n, n, n};
+    bits3 fit, under, seen;
+    int rc = bits3_init(&fit, dim);
+    if (rc < 0)
+        return rc;
+    if ((rc = bits3_init(&under, dim)) < 0 || (rc = bits3_init(&seen, dim)) < 0) {
+        free(fit.v);
+        free(under.v);
+        return rc;
+    }
+    uint32_t *queue = NULL;
+    /* fit: free cells, eroded to the placements that fit; under: cells
+     * with nothing blocked in the s cells below, eroded over the footprint
+     * (1: the placement stands on nothing). */
+    size_t lines = (size_t)n * n;
+    for (size_t l = 0; l < lines; l++)
+        for (size_t i = 0; i < fit.w; i++)
+            fit.v[l * fit.w + i] &= ~w->blocked[l * w->bw + i];
+    for (uint32_t z = 0; z < n; z++)
+        for (uint32_t y = 0; y < n; y++) {
+            uint64_t *ru = under.v + under.w * (y + (size_t)n * z);
+            if (y < s) {
+                memset(ru, 0, under.w * sizeof *ru);
+                continue;
+            }
+            for (uint32_t b = y - s; b < y; b++) {
+                const uint64_t *rb = w->blocked + w->bw * (b + (size_t)n * z);
+                for (size_t i = 0; i < under.w; i++)
+                    ru[i] &= ~rb[i];
+            }
+        }
+    for (int a = 0; a < 3; a++)
+        morph(&fit, a, k[a], 1);
+    morph(&under, 0, k[0], 1);
+    morph(&under, 2, k[2], 1);
+    size_t places = 0; /* the queue holds each placement once at most */
+    for (size_t i = 0; i < lines * fit.w; i++) {
+        fit.v[i] &= ~under.v[i];
+        places += (size_t)__builtin_popcountll(fit.v[i]);
+        seen.v[i] = 0;
+    }
+    /* The seeds: placements of the avatars whose middles are the points
+     * (contacts lie halfway up a side, inside contacts at the centre),
+     * their feet give or take s cells. */
+    uint32_t lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = cell_of(g, a, (double)cl->min[a] - size[a] / 2, 0);
+        hi[a] = cell_of(g, a, (double)cl->max[a] - size[a] / 2, 1);
+        if (a == 1) {
+            lo[1] = lo[1] > s ? lo[1] - s : 0;
+            hi[1] = hi[1] + s < n ? hi[1] + s : n;
+        }
+        if (hi[a] <= lo[a])
+            hi[a] = lo[a] + 1 < n ? lo[a] + 1 : n;
+    }
+    size_t head = 0, tail = 0;
+    queue = cvre_malloc((places ? places : 1) * sizeof *queue);
+    rc = -ENOMEM;
+    if (!queue)
+        goto done;
+    for (uint32_t z = lo[2]; z < hi[2]; z++)
+        for (uint32_t y = lo[1]; y < hi[1]; y++)
+            for (uint32_t x = lo[0]; x < hi[0]; x++)
+                if (bit_test(&fit, x, y, z) && !bit_test(&seen, x, y, z)) {
+                    bit_set(&seen, x, y, z);
+                    queue[tail++] = x + n * (y + n * z);
+                }
+    while (head < tail) {
+        uint32_t c = queue[head++], x = c % n, y = c / n % n, z = c / n / n;
+        const int64_t nb[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+        for (int d = 0; d < 6; d++) {
+            int64_t q[3] = {(int64_t)x + nb[d][0], (int64_t)y + nb[d][1], (int64_t)z + nb[d][2]};
+            if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[0] >= n || q[1] >= n || q[2] >= n)
+                continue;
+            uint32_t qx = (uint32_t)q[0], qy = (uint32_t)q[1], qz = (uint32_t)q[2];
+            if (!bit_test(&fit, qx, qy, qz) || bit_test(&seen, qx, qy, qz))
+                continue;
+            bit_set(&seen, qx, qy, qz);
+            queue[tail++] = qx + n * (qy + n * qz);
+        }
+    }
+    /* The cells the reached placements cover. */
+    for (int a = 0; a < 3; a++)
+        morph(&seen, a, k[a], 0);
+    for (uint32_t z = 0; z < n; z++)
+        for (uint32_t y = 0; y < n; y++) {
+            const uint64_t *row = seen.v + seen.w * (y + (size_t)n * z);
+            for (size_t q = 0; q < seen.w; q++)
+                for (uint64_t bits = row[q]; bits; bits &= bits - 1) {
+                    uint32_t x = (uint32_t)(q * 64) + (uint32_t)__builtin_ctzll(bits);
+                    size_t i = x + (size_t)n * (y + (size_t)n * z);
+                    if ((w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
+                        continue;
+                    w->wanted += w->pressure[i] == 0;
+                    uint32_t v = w->pressure[i] + weight;
+                    w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
+                }
+        }
+    rc = 0;
+done:
+    free(queue);
+    free(fit.v);
+    free(under.v);
+    free(seen.v);
+    return rc;
+}
+
 /* Whether cluster c presses on box i of boxes: the box it names, or any
  * box its points lie on or an avatar touching there may reach, stepping
  * up (their bounding box, grown by a hundredth of the avatar's width for
@@ -1055,20 +1213,6 @@ static int presses(const ecm_cluster *c, const float (*boxes)[6], uint32_t i, co
     for (int a = 0; a < 3; a++) {
         double up = a == 1 ? (double)p->avatar[1] + p->step : 0;
         if ((double)c->min[a] - tol > boxes[i][3 + a] || (double)c->max[a] + tol + up < boxes[i][a])
-            return 0;
-    }
-    return 1;
-}
-
-/* Whether cluster c's users stood inside the box it names: its centroid
- * (the avatars' feet) within the box, below its top by more than a step
- * (not standing on it). */
-static int inside_named(const ecm_cluster *c, const float (*boxes)[6], const ecm_params *p)
-{
-    const float *b = boxes[c->box];
-    for (int a = 0; a < 3; a++) {
-        double top = (double)b[3 + a] - (a == 1 ? (double)p->step : 0);
-        if (!(c->centroid[a] > b[a] && c->centroid[a] < top))
             return 0;
     }
     return 1;
@@ -1741,6 +1885,8 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
             PRESSURE_NEAR_MIN + (uint32_t)((uint64_t)(PRESSURE_MAX - PRESSURE_NEAR_MIN) * weight / wmax);
         if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0)
             return rc;
+        if (inside_named(&cl[i], boxes[cl[i].box], p) && (rc = mark_reachable(w, &cl[i], p, near / 16 ? near / 16 : 1)) < 0)
+            return rc;
     }
     r->wanted += w->wanted;
     voxel_svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
@@ -2060,7 +2206,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
         for (uint32_t i = 0; i < nclusters; i++)
-            w.inside |= inside_named(&clusters[i], boxes, p);
+            w.inside |= inside_named(&clusters[i], boxes[clusters[i].box], p);
         w.slack = w.inside ? DIVIDE_SLACK_INSIDE : DIVIDE_SLACK;
         if ((rc = build_grid(&w, &gp, m, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;

@@ -631,6 +631,35 @@ static void test_budget_spent_outside_kept_inside(void **state)
 }
 
 /*
+ * Users inside Sponza walked along its -z arcade in round 0 (the
+ * scenario's cluster, contacts at their centres). Later users walk on to
+ * wherever they can: through the +z arcade's arches (columns at x -11.3,
+ * -6.75 and -2.5, z 2.2..3.2) into the aisle behind it. Stretched along the
+ * floor's normal, the region spent 40 boxes on the upper galleries nobody
+ * reaches and kept the +z arcade one box, a phantom wall for later users
+ * (up to 271 per 1,000 moves); the space reachable on foot is wanted now
+ * (mark_reachable), and nothing above it that no stair leads to.
+ */
+static void test_inside_users_walk_on(void **state)
+{
+    (void)state;
+    float box[6];
+    ecm_params p;
+    import_mesh m = scaled_model("scenes/dabrovic_sponza.obj", 1, box, &p);
+    const ecm_cluster in = {.box = 0, .min = {-15.6777592f, 0.993f, -4.92351198f},
+                            .max = {15.6722403f, 0.993f, -0.198510006f},
+                            .centroid = {-0.079234004f, 0.993f, -2.68530369f}, .weight = 2400};
+    ecm_result r;
+    refine_model(&p, &m, CBOXES(box), 1, &in, 1, &r);
+    const float arches[2][6] = {{-9.3f, 0.2f, 2.3f, -8.7f, 2.0f, 3.1f}, {4.2f, 0.2f, 2.3f, 4.8f, 2.0f, 3.1f}};
+    for (int i = 0; i < 2; i++)
+        CHECK(!blocked(CBOXES(r.boxes), r.count, arches[i], arches[i] + 3), "the arch at x %g is blocked",
+              (double)arches[i][0]);
+    ecm_result_free(&r);
+    import_mesh_free(&m);
+}
+
+/*
  * Step 7 on the desk (local units, -1.5..0.5 x -0.5..0.5 x -0.5..0.5; the
  * scenario scales it 3x, so the avatar is 0.2 x 0.6 x 0.2). Its right
  * pedestal's inner panel is the plane x = -0.375 (z -0.437..0.5), and the
@@ -2166,6 +2195,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_archway_opens_stone_stays),
         cmocka_unit_test(test_archway_path_past_the_curve),
         cmocka_unit_test(test_budget_spent_outside_kept_inside),
+        cmocka_unit_test(test_inside_users_walk_on),
         cmocka_unit_test(test_split_frees_space_under_the_cell),
         cmocka_unit_test(test_roof_over_the_well_is_only_tightened),
         cmocka_unit_test(test_grazed_row_is_no_opening),
