@@ -305,6 +305,7 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
     const double grow_lo[3] = {cell[0], -JUDGE_FLOOR_TOLERANCE, cell[2]};
     const double shrink[3] = {-JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE};
     const float disp[3] = {dx * speed * p->dt, 0, dz * speed * p->dt};
+    uint64_t run = 0; /* phantom ticks in a row so far */
     for (uint32_t k = 0; k < ticks; k++) {
         float lo[3], hi[3];
         move_bounds(&p->move, &st, disp, p->dt, lo, hi);
@@ -330,7 +331,14 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
                      r.state.grounded == st.grounded;
         /* Stuck: every tick left would be this one again. */
         uint64_t times = stuck ? ticks - k : 1;
-        t->phantom += (uint64_t)phantom * times;
+        if (phantom) {
+            /* A run counts once it is JUDGE_HELD_TICKS long, from its first tick. */
+            run += times;
+            if (run >= JUDGE_HELD_TICKS)
+                t->phantom += run - times >= JUDGE_HELD_TICKS ? times : run;
+        } else {
+            run = 0;
+        }
         t->opened += (uint64_t)opened * times;
         if (stuck)
             return;

@@ -35,7 +35,10 @@
  *     upwards, its bottom raised by
  *     JUDGE_FLOOR_TOLERANCE (what it stands on is support), touches no
  *     triangle: the map stopped a user where nothing real was
- *     (tests/bench/scenario.py's phantom check);
+ *     (tests/bench/scenario.py's phantom check), for JUDGE_HELD_TICKS
+ *     ticks in a row or more (each of them counts; a lone tick is a
+ *     corner met at a glance: trials deflected by 30 degrees graze a
+ *     garage's bounding box at its corners, users do not stop there);
  *   - opened when the avatar's box, shrunk by JUDGE_LEAK_TOLERANCE, ends the
  *     tick overlapping a triangle: the map let a user into real geometry.
  *
@@ -105,6 +108,11 @@
  * stopped the same users at once and then held them on the door's real
  * jamb, which is no phantom. */
 #define JUDGE_HELD_BACK 0.5
+/* Phantom blocks count in runs of at least this many ticks (see above):
+ * at a garage's bounding box the old map's 10 blocks and the candidate's
+ * 6 were all lone ticks of different trials, and the candidate, published
+ * on that, stopped a user the single box never had. */
+#define JUDGE_HELD_TICKS 2u
 
 /* The least share of the old map's phantom blocks a new map must remove,
  * as a fraction JUDGE_GAIN_NUM / JUDGE_GAIN_DEN: a few blocks fewer on a

@@ -274,6 +274,37 @@ static void test_sample_enclosed_by_a_new_box_pushed_out(void **state)
     trimesh_free(&m.tm);
 }
 
+/* Users 1.7 m in front of the wall walking away from it, their backs 10
+ * cm into a box of the old map with nothing in it (phantom): they leave
+ * it within a tick, a lone held-back tick of each trial, which is how a
+ * trial grazes a corner, not a place users are stopped at, and counts
+ * nothing. 30 cm into it, they are held back for three ticks or four in
+ * a row, and every one of those counts. */
+static void test_lone_ticks_are_no_phantom(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[8];
+    for (uint32_t i = 0; i < 8; i++)
+        s[i] = (judge_sample){.pos = {-1.5f + 0.4f * (float)i, 0, -2.0f}, .vel = {0, 0, -1.5f}};
+    float old[4][6];
+    memcpy(old, wall_parts, sizeof wall_parts);
+    const float thin[6] = {-3, 0, -1.8f, 3, 3, -1.6f}, thick[6] = {-3, 0, -2.0f, 3, 3, -1.6f};
+    memcpy(old[3], thin, sizeof thin);
+    judge_input in = input(&m, (const float(*)[6])old, 4, wall_parts, 3, s, 8);
+    judge_result r = judged(&in);
+    assert_int_equal(r.phantom_old, 0);
+    assert_int_equal(r.phantom_new, 0);
+    memcpy(old[3], thick, sizeof thick);
+    in = input(&m, (const float(*)[6])old, 4, wall_parts, 3, s, 8);
+    r = judged(&in);
+    assert_true(r.phantom_old >= 8 * 3 * 3);
+    assert_int_equal(r.phantom_new, 0);
+    assert_int_equal(r.better, 1);
+    trimesh_free(&m.tm);
+}
+
 /* The same input twice: the same figures; a cap picks samples evenly; a
  * sample that stood still is not walked; the object's scale and height
  * carry the trial into metres. */
@@ -475,6 +506,7 @@ int main(void)
         cmocka_unit_test(test_garage_base_opened_under_a_low_box_is_rejected),
         cmocka_unit_test(test_uncovered_wall_is_rejected),
         cmocka_unit_test(test_sample_enclosed_by_a_new_box_pushed_out),
+        cmocka_unit_test(test_lone_ticks_are_no_phantom),
         cmocka_unit_test(test_deterministic_cap_still_scale),
         cmocka_unit_test(test_verdict_needs_a_clear_gain),
         cmocka_unit_test(test_bad_input),
