@@ -640,6 +640,8 @@ static void on_refiner_updates(ev_loop *loop, int fd, unsigned events, void *dat
         scene_box *old = cvre_malloc((size_t)before * sizeof *old);
         if (old)
             memcpy(old, o->world, (size_t)before * sizeof *old);
+        else
+            log_warn("object %u: out of memory: avatars its new boxes enclose are not pushed out", u.object_id);
         _Static_assert(sizeof(scene_box) == sizeof *u.boxes, "a box is six floats");
         int rc = scene_set_ecm(s->scene, u.object_id, u.version, (const scene_box *)u.boxes, u.count);
         refiner_update_free(&u);

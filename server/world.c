@@ -14,6 +14,8 @@
  * across; 4,096 boxes there would be a collision map of absurd density, and
  * past it the farthest found are ignored. */
 #define WORLD_MAX_CANDIDATES 4096
+/* The world's four sides and its ceiling, boxes in a push-out's trial. */
+#define WORLD_WALLS 5
 
 typedef struct avatar {
     world_avatar pub;
@@ -119,6 +121,15 @@ static void params(const world *w, const float box[3], move_params *mp)
     mp->floor_y = w->cfg.min[1];
 }
 
+/* w->boxes[k] becomes the box behind w->handles[i]. */
+static void candidate(world *w, const scene *sc, uint32_t i, uint32_t k)
+{
+    const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
+    w->boxes[k] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
+    memcpy(w->boxes[k].min, b->world.min, sizeof b->world.min);
+    memcpy(w->boxes[k].max, b->world.max, sizeof b->world.max);
+}
+
 /* Moves st by disp over dt through move_step against the boxes of sc the
  * move can reach (into w->boxes). Returns move_step's result. */
 static int controller(world *w, const scene *sc, const move_params *mp, const move_state *st, const float disp[3],
@@ -129,12 +140,8 @@ static int controller(world *w, const scene *sc, const move_params *mp, const mo
     uint32_t n = scene_query(sc, lo, hi, w->handles, WORLD_MAX_CANDIDATES);
     if (n > WORLD_MAX_CANDIDATES)
         n = WORLD_MAX_CANDIDATES;
-    for (uint32_t i = 0; i < n; i++) {
-        const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
-        w->boxes[i] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
-        memcpy(w->boxes[i].min, b->world.min, sizeof b->world.min);
-        memcpy(w->boxes[i].max, b->world.max, sizeof b->world.max);
-    }
+    for (uint32_t i = 0; i < n; i++)
+        candidate(w, sc, i, i);
     return move_step(mp, st, disp, dt, w->boxes, n, res);
 }
 
@@ -367,26 +374,42 @@ static int push_out(world *w, const scene *sc, avatar *a, const scene_object *o,
         if (meets(lo, hi, &old[i]))
             return 0; /* the object stood around it already */
     /* The boxes a push can meet: past the faces of those it overlaps, at
-     * most half its width away, or standing on one. */
+     * most half its width away, or standing on one (and a little below,
+     * what it may stand on). Past the candidates' room, no push: it could
+     * land in a box it never saw. */
     float reach = fmaxf(box[0], box[2]);
-    const float qlo[3] = {lo[0] - reach, lo[1], lo[2] - reach}, qhi[3] = {hi[0] + reach, hi[1] + reach, hi[2] + reach};
+    const float qlo[3] = {lo[0] - reach, lo[1] - reach, lo[2] - reach},
+                qhi[3] = {hi[0] + reach, hi[1] + reach, hi[2] + reach};
     uint32_t n = scene_query(sc, qlo, qhi, w->handles, WORLD_MAX_CANDIDATES), k = 0;
+    if (n > WORLD_MAX_CANDIDATES - WORLD_WALLS)
+        return -ENOSPC;
     int enclosed = 0;
-    if (n > WORLD_MAX_CANDIDATES)
-        n = WORLD_MAX_CANDIDATES;
     for (uint32_t i = 0; i < n; i++) {
         const scene_box_ref *b = scene_box_at(sc, w->handles[i]);
         int in = meets(lo, hi, &b->world);
         if (in && b->object_id != o->id)
             continue; /* another object's box it was inside: its inside policy holds */
         enclosed |= in != 0;
-        w->boxes[k] = (move_box){.object_id = b->object_id, .box_index = b->box_index, .handle = w->handles[i]};
-        memcpy(w->boxes[k].min, b->world.min, sizeof b->world.min);
-        memcpy(w->boxes[k].max, b->world.max, sizeof b->world.max);
-        k++;
+        candidate(w, sc, i, k++);
     }
     if (!enclosed)
         return 0;
+    /* The world's sides and ceiling, as boxes just outside it around the
+     * query: no push takes an avatar out of the world. */
+    const float *wl = w->cfg.min, *wh = w->cfg.max;
+    const float walls[WORLD_WALLS][6] = {
+        {qlo[0] - 1, qlo[1] - 1, qlo[2] - 1, wl[0], qhi[1] + 1, qhi[2] + 1},
+        {wh[0], qlo[1] - 1, qlo[2] - 1, qhi[0] + 1, qhi[1] + 1, qhi[2] + 1},
+        {qlo[0] - 1, qlo[1] - 1, qlo[2] - 1, qhi[0] + 1, qhi[1] + 1, wl[2]},
+        {qlo[0] - 1, qlo[1] - 1, wh[2], qhi[0] + 1, qhi[1] + 1, qhi[2] + 1},
+        {qlo[0] - 1, wh[1], qlo[2] - 1, qhi[0] + 1, qhi[1] + 1, qhi[2] + 1}};
+    for (int i = 0; i < WORLD_WALLS; i++)
+        if (walls[i][0] < walls[i][3] && walls[i][1] < walls[i][4] && walls[i][2] < walls[i][5]) {
+            w->boxes[k] = (move_box){.object_id = 0, .box_index = UINT32_MAX, .handle = UINT32_MAX};
+            memcpy(w->boxes[k].min, walls[i], 3 * sizeof(float));
+            memcpy(w->boxes[k].max, walls[i] + 3, 3 * sizeof(float));
+            k++;
+        }
     move_params mp;
     params(w, box, &mp);
     move_state st = {.pos = {p[0], p[1], p[2]}, .vy = a->pub.vy, .grounded = a->pub.grounded != 0};
@@ -396,7 +419,9 @@ static int push_out(world *w, const scene *sc, avatar *a, const scene_object *o,
     memcpy(a->pub.pos, st.pos, sizeof st.pos);
     a->pub.vy = st.vy;
     a->pub.grounded = st.grounded;
-    a->pub.changed_tick = w->step;
+    /* Between two steps: viewers hear of it with the next one, which this
+     * step's update has already gone out before (world_set_pose too). */
+    a->pub.changed_tick = w->step + 1;
     (void)grid_move(w->grid, world_slot(a->pub.id), a->pub.pos[0], a->pub.pos[2]); /* as in apply */
     return 1;
 }

@@ -108,8 +108,10 @@ uint32_t world_tick(const world *w);
  * as world AABBs: old, nold of them): pushes every avatar that a new box
  * of it overlaps, and that overlapped none of the old ones, out of the
  * scene's boxes (move_push_out; boxes of other objects it was already
- * inside stay out of the trial). Returns how many were pushed; *stuck
- * counts those no push-out frees, left to move.h's inside policy. */
+ * inside stay out of the trial), never out of the world; viewers hear of
+ * it with the next step. Returns how many were pushed; *stuck counts those
+ * no push-out frees (or with more boxes around than one move is checked
+ * against), left to move.h's inside policy. */
 uint32_t world_push_out(world *w, const scene *sc, uint32_t object_id, const scene_box *old, uint32_t nold,
                         uint32_t *stuck);
 

@@ -344,6 +344,9 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
             return;
         st = r.state;
     }
+    /* A run the reach cut short: the next tick would have held it too. */
+    if (run > 0 && run < JUDGE_HELD_TICKS)
+        t->phantom += run;
 }
 
 /* The pace of a sample walking at horizontal speed h (> 0): its speed

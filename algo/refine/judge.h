@@ -36,9 +36,10 @@
  *     JUDGE_FLOOR_TOLERANCE (what it stands on is support), touches no
  *     triangle: the map stopped a user where nothing real was
  *     (tests/bench/scenario.py's phantom check), for JUDGE_HELD_TICKS
- *     ticks in a row or more (each of them counts; a lone tick is a
- *     corner met at a glance: trials deflected by 30 degrees graze a
- *     garage's bounding box at its corners, users do not stop there);
+ *     ticks in a row or more (each of them counts, and so does a run the
+ *     trial's last tick cuts short; a lone tick is a corner met at a
+ *     glance: trials deflected by 30 degrees graze a garage's bounding box
+ *     at its corners, users do not stop there);
  *   - opened when the avatar's box, shrunk by JUDGE_LEAK_TOLERANCE, ends the
  *     tick overlapping a triangle: the map let a user into real geometry.
  *

@@ -1080,6 +1080,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
  * air. Reachable: 6-connected to a placement at the cluster's points, a
  * breadth-first walk over the placements (each visited once).
  */
+_Static_assert(((uint64_t)1 << (3 * ECM_DEPTH_MAX)) - 1 <= UINT32_MAX, "a placement's index fits its queue");
 static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, uint32_t weight)
 {
     const voxel_grid *g = &w->g;
@@ -1743,10 +1744,10 @@ static int by_double(const void *x, const void *y)
 /*
  * Whether box b lies in the union of the n boxes pb (the old map), give or
  * take tol on each axis: the planes of their faces cut b into cells, and
- * the middle of each cell wider than tol on every axis must be in one of
- * them, grown by tol. 0 also when b meets more than CONTAIN_MAX of them.
+ * each cell wider than thin (rounding) on every axis must lie in one of
+ * them grown by tol. 0 also when b meets more than CONTAIN_MAX of them.
  */
-static int within_old(const float b[6], const float (*pb)[6], uint32_t n, const double tol[3])
+static int within_old(const float b[6], const float (*pb)[6], uint32_t n, const double tol[3], double thin)
 {
     float q[CONTAIN_MAX][6];
     uint32_t m = 0;
@@ -1774,19 +1775,17 @@ static int within_old(const float b[6], const float (*pb)[6], uint32_t n, const 
         for (uint32_t j = 0; j + 1 < nc[1]; j++)
             for (uint32_t k = 0; k + 1 < nc[2]; k++) {
                 const uint32_t at[3] = {i, j, k};
-                double mid[3];
                 int wide = 1;
-                for (int a = 0; a < 3; a++) {
-                    wide &= cut[a][at[a] + 1] - cut[a][at[a]] > tol[a];
-                    mid[a] = (cut[a][at[a]] + cut[a][at[a] + 1]) / 2;
-                }
+                for (int a = 0; a < 3; a++)
+                    wide &= cut[a][at[a] + 1] - cut[a][at[a]] > thin;
                 if (!wide)
                     continue;
                 int in = 0;
                 for (uint32_t r = 0; r < m && !in; r++) {
                     in = 1;
                     for (int a = 0; a < 3; a++)
-                        in &= mid[a] >= (double)q[r][a] - tol[a] && mid[a] <= (double)q[r][3 + a] + tol[a];
+                        in &= cut[a][at[a]] >= (double)q[r][a] - tol[a] &&
+                              cut[a][at[a] + 1] <= (double)q[r][3 + a] + tol[a];
                 }
                 if (!in)
                     return 0;
@@ -2245,9 +2244,10 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
             if (!problem[i])
                 memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);
         /* A new box over several problem boxes may reach out of the old map
-         * (its parts' bounds in one and another). By less than a cell, and
-         * than half the avatar's narrower width, the server pushes an
-         * avatar it encloses out (move.h, move_push_out). Further, one
+         * (its parts' bounds in one and another). By less than two cells,
+         * and than a quarter of the avatar's narrower width on each axis (at a
+         * corner, both: still less than half its width), the server pushes
+         * an avatar it encloses out (move.h, move_push_out). Further, one
          * that stood at the old face would be left inside it, and so free
          * to walk on into the geometry (move.h's inside policy; 36 leaks in
          * a desk round): such a box is taken apart into its parts in each
@@ -2256,7 +2256,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
          * problem boxes are only tightened. */
         double tol[3];
         for (int a = 0; a < 3; a++)
-            tol[a] = fmax(1e3 * tt.eps, fmin(w.g.cell[a], fmin(p->avatar[0], p->avatar[2]) / 2));
+            tol[a] = fmax(1e3 * tt.eps, fmin(2 * w.g.cell[a], fmin(p->avatar[0], p->avatar[2]) / 4));
         for (uint32_t retry = 0;; retry++) {
             uint32_t over = 0; /* boxes past the limit */
             uint32_t nb = whole ? nproblem : w.out.n + ntighten;
@@ -2281,7 +2281,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
                 uint8_t st = svt_sum(&w.press, &near) > 0 ? 0 : 2;
                 uint32_t pressed = whole || (divided && svt_sum(&w.press, &w.out.b[j]) > 0) ? 1u : 0u;
                 /* The box itself, or its parts in each problem box. */
-                int apart = divided && !within_old(b, boxes, nboxes, tol);
+                int apart = divided && !within_old(b, boxes, nboxes, tol, 1e3 * tt.eps);
                 for (uint32_t i = 0; i < (apart ? nproblem : 1); i++) {
                     float c[6];
                     if (apart && !(intersect(b, pb[i], c) && tighten(&tt, c)))

@@ -103,13 +103,14 @@
  *      around it, so an opening never narrows by a cell per round. A box
  *      over several problem boxes whose parts' bounds reach out of the old
  *      map (a cell that met one problem box let it cover the corner of
- *      another's free space) by more than a cell of the grid, or more than
- *      half the avatar's narrower width, on an axis, is taken apart into
+ *      another's free space) by more than two cells of the grid, or more
+ *      than a quarter of the avatar's narrower width, on an axis (every
+ *      part of it), is taken apart into
  *      its parts in each problem box, each tightened; if they pass
  *      max_boxes, the division runs again with as many boxes fewer (twice
  *      at most), and then the problem boxes are only tightened. Less than
  *      that is kept: boxes an earlier grid tightened are offset from this
- *      grid's by less than a cell, and taking apart every box that joins
+ *      grid's by up to a cell or two, and taking apart every box that joins
  *      them passes the cap on curved geometry (a gazebo's ring by 69
  *      boxes). An avatar that such a box encloses when the map comes in
  *      force is pushed out of it (move.h, move_push_out, no further than

@@ -187,8 +187,8 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
  * a move). Returns 1 when it was pushed, 0 when it overlapped no box (st
  * unchanged), -ENOSPC when no such place is free (st unchanged: the inside
  * policy applies), -EINVAL as move_step.
- * O(k^2 n) for k boxes overlapped, at most MOVE_PUSH_BOXES of them (more:
- * -ENOSPC).
+ * At most 30 k n box tests for k boxes overlapped, at most MOVE_PUSH_BOXES
+ * of them (more: -ENOSPC).
  */
 #define MOVE_PUSH_BOXES 8
 int move_push_out(const move_params *p, move_state *st, const move_box *boxes, uint32_t nboxes);

@@ -829,13 +829,19 @@ static void test_push_out(void **state)
     free_s = s;
     assert_int_equal(move_push_out(&prm, &s, &deep, 1), -ENOSPC);
     assert_true(same_state(&free_s, &s));
-    const move_box capped[2] = {box(-1, 0, -1, 1, 0.1f, 1, 5), box(-1, 1.5f, -1, 1, 3, 1, 6)};
+    const move_box capped[2] = {box(-1, 0, -1, 1, 0.1f, 1, 5), box(-1, 1.85f, -1, 1, 3, 1, 6)};
     assert_int_equal(move_push_out(&prm, &s, capped, 2), -ENOSPC);
+    assert_true(same_state(&free_s, &s));
+    /* The nearest face leads into another box: the next nearest place,
+     * onto the low box's top. */
+    const move_box behind[2] = {box(0.28f, 0, -1, 1, 0.25f, 1, 7), box(-1, 0, -1, -0.31f, 3, 1, 8)};
+    assert_int_equal(move_push_out(&prm, &s, behind, 2), 1);
+    assert_true(s.pos[0] == 0 && s.pos[1] == 0.25f && s.pos[2] == 0 && s.grounded);
     /* Bad input. */
     s = at(NAN, 0, 0);
     assert_int_equal(move_push_out(&prm, &s, &wall, 1), -EINVAL);
     s = at(0, 0, 0);
-    const move_box bad = box(1, 0, 0, 0, 1, 1, 7);
+    const move_box bad = box(1, 0, 0, 0, 1, 1, 9);
     assert_int_equal(move_push_out(&prm, &s, &bad, 1), -EINVAL);
     assert_int_equal(move_push_out(&prm, &s, NULL, 1), -EINVAL);
 }

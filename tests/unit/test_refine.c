@@ -721,7 +721,7 @@ static int within_boxes(const float b[6], const float (*old)[6], uint32_t n, con
  * walk on into the board (move.h), 36 leaks in a round. They are pushed
  * out now (move_push_out: test_move, test_world_place, test_judge), no
  * further than half their width; so no new box may reach out of the old
- * map by more than that, nor by more than a cell.
+ * map by more than a quarter of it on an axis, nor by more than two cells.
  */
 static void test_new_boxes_stay_near_the_old_map(void **state)
 {
@@ -741,7 +741,7 @@ static void test_new_boxes_stay_near_the_old_map(void **state)
     assert_true(r.count > 4);
     float tol[3];
     for (int a = 0; a < 3; a++)
-        tol[a] = fminf(fminf(p.avatar[0], p.avatar[2]) / 2, (box[3 + a] - box[a]) / (float)(1u << p.depth)) + 1e-5f;
+        tol[a] = fminf(fminf(p.avatar[0], p.avatar[2]) / 4, 2 * (box[3 + a] - box[a]) / (float)(1u << p.depth)) + 1e-5f;
     for (uint32_t i = 0; i < r.count; i++)
         CHECK(within_boxes(r.boxes[i], old, 4, tol), "box %u (%g %g %g .. %g %g %g) reaches out of the old map", i,
               (double)r.boxes[i][0], (double)r.boxes[i][1], (double)r.boxes[i][2], (double)r.boxes[i][3],
@@ -881,8 +881,9 @@ static void test_grazed_row_is_no_opening(void **state)
     ecm_result_free(&r);
 
     /* At a cap of the 28 boxes it has, the new boxes join boxes of the
-     * well's ring whose faces are offset by less than a cell, and so reach
-     * out of the old map by less than a cell. Taken apart in each, they
+     * well's ring whose faces are offset by a cell or two, and so reach out
+     * of the old map by as much (5 boxes go over the cap when one cell is
+     * all a box may reach out by). Taken apart in each, they
      * passed the cap by 69 boxes and the round was only tightened; kept
      * (avatars there are pushed out, move_push_out), the round opens. */
     float box[6];

@@ -124,6 +124,17 @@ static int overlaps(const float p[3], const scene_box *b)
            lo[2] < b->max[2];
 }
 
+/* An avatar spawned beside the box [lo, hi] that walked `steps` steps
+ * along x (contacts counted into contacts). */
+static const world_avatar *walked(const float lo[3], const float hi[3], uint32_t steps, world **w, scene **sc,
+                                  int contacts[2])
+{
+    const world_avatar *a = spawn(lo, hi, 0, w, sc);
+    for (uint32_t k = 1; k <= steps; k++)
+        walk(*w, *sc, a, k, contacts);
+    return a;
+}
+
 /* Puts object 1's map version v of one box [x0, 3] x [0, 3] x [-2, 2] in
  * force and pushes avatars out of it; old: the map before. */
 static uint32_t new_map(world *w, scene *sc, uint32_t v, float x0, const scene_box *old, uint32_t *stuck)
@@ -139,11 +150,9 @@ static void test_pushed_out_of_a_new_map(void **state)
     const float lo[3] = {1, 0, -2}, hi[3] = {3, 3, 2};
     world *w;
     scene *sc;
-    const world_avatar *a = spawn(lo, hi, 0, &w, &sc);
-    /* Walks into the wall's face and stops there. */
     int contacts[2] = {0, 0};
-    for (uint32_t k = 1; k <= 60; k++)
-        walk(w, sc, a, k, contacts);
+    /* Walks into the wall's face and stops there. */
+    const world_avatar *a = walked(lo, hi, 60, &w, &sc, contacts);
     assert_true(contacts[0] > 0 && contacts[1] == 0);
     assert_float_equal(a->pos[0], 1 - 0.3f - (float)MOVE_SKIN, 1e-5);
     /* v2 reaches 2 cm past the old face: pushed back out of it. */
@@ -152,6 +161,9 @@ static void test_pushed_out_of_a_new_map(void **state)
     assert_int_equal(new_map(w, sc, 2, 0.98f, &v1, &stuck), 1);
     assert_int_equal(stuck, 0);
     assert_float_equal(a->pos[0], 0.98f - 0.3f - (float)MOVE_SKIN, 1e-5);
+    /* Its viewers hear of it with the next step (this one's update went
+     * out before the map came in force). */
+    assert_int_equal(a->changed_tick, world_tick(w) + 1);
     const scene_box v2 = scene_get(sc, 1)->world[0];
     assert_false(overlaps(a->pos, &v2));
     walk(w, sc, a, 61, contacts);
@@ -171,6 +183,30 @@ static void test_pushed_out_of_a_new_map(void **state)
     scene_destroy(sc);
 }
 
+/* At the world's edge: the only place near is outside the world, so the
+ * avatar is left inside the new box, not pushed out of the world. */
+static void test_never_pushed_out_of_the_world(void **state)
+{
+    (void)state;
+    const float lo[3] = {-40, 0, 30}, hi[3] = {-39, 1, 31};
+    world *w;
+    scene *sc;
+    int contacts[2] = {0, 0};
+    const world_avatar *a = walked(lo, hi, 300, &w, &sc, contacts);
+    assert_float_equal(a->pos[0], CFG.max[0] - 0.3f, 1e-5);
+    /* A thin wall 2 cm into its box on the inner side. */
+    const scene_box old = {{-40, 0, 30}, {-39, 1, 31}};
+    const scene_box b = {{CFG.max[0] - 0.62f, 0, -50}, {CFG.max[0] - 0.58f, 3, 50}};
+    assert_int_equal(scene_set_ecm(sc, 1, 2, &b, 1), 0);
+    const float at[3] = {a->pos[0], a->pos[1], a->pos[2]};
+    uint32_t stuck = 0;
+    assert_int_equal(world_push_out(w, sc, 1, &old, 1, &stuck), 0);
+    assert_int_equal(stuck, 1);
+    assert_true(a->pos[0] == at[0] && a->pos[1] == at[1] && a->pos[2] == at[2]);
+    world_destroy(w);
+    scene_destroy(sc);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -178,6 +214,7 @@ int main(void)
         cmocka_unit_test(test_tall_object_searched_around),
         cmocka_unit_test(test_crowded_when_nothing_free),
         cmocka_unit_test(test_pushed_out_of_a_new_map),
+        cmocka_unit_test(test_never_pushed_out_of_the_world),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
