@@ -851,6 +851,18 @@ static int inside_named(const ecm_cluster *c, const float b[6], const ecm_params
     return 1;
 }
 
+/* The avatar (size, local) in cells of g on each axis, rounded down (a
+ * smaller kernel finds more space, never less), 1 to n: a window as long as
+ * the grid meets it in the same prefixes, suffixes and whole lines as any
+ * longer one (space outside the grid is free). */
+static void kernel_cells(const voxel_grid *g, const double size[3], uint32_t k[3])
+{
+    for (int a = 0; a < 3; a++) {
+        double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
+        k[a] = kc < 1 ? 1 : kc > g->n ? g->n : (uint32_t)kc;
+    }
+}
+
 /*
  * Cluster cl's region (step 3), local: across the span of the boxes it
  * presses on along the face users cross and that face's horizontal axis;
@@ -930,13 +942,8 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         hi[a] = cell_of(g, a, rhi[a], 1);
         if (lo[a] >= hi[a])
             return 0;
-        /* The avatar in cells, rounded down (a smaller kernel finds more
-         * space, never less), at most n: a window as long as the grid
-         * meets it in the same prefixes, suffixes and whole lines as any
-         * longer one (space outside the grid is free). */
-        double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
-        k[a] = kc < 1 ? 1 : kc > n ? n : (uint32_t)kc;
     }
+    kernel_cells(g, size, k);
     /* Where the step band starts: the region's top before the step, a
      * cell above the avatar (a user stands on a box of the map, whose top
      * may be a cell above the geometry under it). */
@@ -1087,10 +1094,7 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
     uint32_t n = w->n, k[3], s;
     double size[3];
     region_size(p, size);
-    for (int a = 0; a < 3; a++) {
-        double kc = g->cell[a] > 0 ? floor(size[a] / g->cell[a]) : 1;
-        k[a] = kc < 1 ? 1 : kc > n ? n : (uint32_t)kc;
-    }
+    kernel_cells(g, size, k);
     double sc = g->cell[1] > 0 ? ceil(p->step / g->cell[1]) + 1 : 1;
     s = sc > n ? n : (uint32_t)sc;
     const uint32_t dim[3] = {n, n, n};
