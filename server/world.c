@@ -389,7 +389,7 @@ static int push_out(world *w, const scene *sc, avatar *a, const scene_object *o,
         int in = meets(lo, hi, &b->world);
         if (in && b->object_id != o->id)
             continue; /* another object's box it was inside: its inside policy holds */
-        enclosed |= in != 0;
+        enclosed |= in;
         candidate(w, sc, i, k++);
     }
     if (!enclosed)

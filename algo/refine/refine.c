@@ -851,6 +851,15 @@ static int inside_named(const ecm_cluster *c, const float b[6], const ecm_params
     return 1;
 }
 
+/* Adds weight to cell i's pressure, up to PRESSURE_MAX, counting it as
+ * wanted if it had none. */
+static void add_pressure(work *w, size_t i, uint32_t weight)
+{
+    w->wanted += w->pressure[i] == 0;
+    uint32_t v = w->pressure[i] + weight;
+    w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
+}
+
 /* The avatar (size, local) in cells of g on each axis, rounded down (a
  * smaller kernel finds more space, never less), 1 to n: a window as long as
  * the grid meets it in the same prefixes, suffixes and whole lines as any
@@ -1062,11 +1071,9 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
                         continue;
                     uint32_t c = face == 0 ? x : face == 1 ? y : z;
                     uint32_t sc = side == 0 ? x : z;
-                    w->wanted += w->pressure[i] == 0;
-                    uint32_t v = w->pressure[i] + (side >= 0 && (sc < side_lo || sc >= side_hi) ? beside
-                                                   : c >= near_lo && c < near_hi            ? near
-                                                                                            : far);
-                    w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
+                    add_pressure(w, i, side >= 0 && (sc < side_lo || sc >= side_hi) ? beside
+                                       : c >= near_lo && c < near_hi                  ? near
+                                                                                      : far);
                 }
             }
         }
@@ -1190,9 +1197,7 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
                     size_t i = x + (size_t)n * (y + (size_t)n * z);
                     if ((w->cls[i] & (CELL_PROBLEM | CELL_MUST)) != CELL_PROBLEM)
                         continue;
-                    w->wanted += w->pressure[i] == 0;
-                    uint32_t v = w->pressure[i] + weight;
-                    w->pressure[i] = (uint8_t)(v > PRESSURE_MAX ? PRESSURE_MAX : v);
+                    add_pressure(w, i, weight);
                 }
         }
     rc = 0;

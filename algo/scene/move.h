@@ -182,9 +182,8 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
  * from the start (the feet, lifted onto the floor) than half the avatar's
  * narrower width: refinement lets a new box reach past the old map by less
  * (algo/refine/refine.h, step 6), and a longer push could carry it through
- * a thin wall. Its
- * vertical speed becomes 0 and it stands if something is under it (as after
- * a move). Returns 1 when it was pushed, 0 when it overlapped no box (st
+ * a thin wall. Its vertical speed becomes 0 and it stands if something is
+ * under it (as after a move). Returns 1 when it was pushed, 0 when it overlapped no box (st
  * unchanged), -ENOSPC when no such place is free (st unchanged: the inside
  * policy applies), -EINVAL as move_step.
  * At most 30 k n box tests for k boxes overlapped, at most MOVE_PUSH_BOXES

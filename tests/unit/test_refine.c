@@ -584,6 +584,12 @@ static void test_archway_path_past_the_curve(void **state)
     import_mesh_free(&m);
 }
 
+/* Sponza, round 0 of the scenario: every user inside its one box, along
+ * its -z arcade (contacts at their centres). */
+static const ecm_cluster sponza_inside = {.box = 0, .min = {-15.6777592f, 0.993f, -4.92351198f},
+                                          .max = {15.6722403f, 0.993f, -0.198510006f},
+                                          .centroid = {-0.079234004f, 0.993f, -2.68530369f}, .weight = 2400};
+
 /*
  * How much of the budget a round spends. The colonnade at seed 1 of the
  * scenario, round 0's four clusters, users stopped on its front face: the
@@ -620,10 +626,7 @@ static void test_budget_spent_outside_kept_inside(void **state)
     import_mesh_free(&m);
 
     m = scaled_model("scenes/dabrovic_sponza.obj", 1, box, &p);
-    const ecm_cluster in = {.box = 0, .min = {-15.6777592f, 0.993f, -4.92351198f},
-                            .max = {15.6722403f, 0.993f, -0.198510006f},
-                            .centroid = {-0.079234004f, 0.993f, -2.68530369f}, .weight = 2400};
-    refine_model(&p, &m, CBOXES(box), 1, &in, 1, &r);
+    refine_model(&p, &m, CBOXES(box), 1, &sponza_inside, 1, &r);
     CHECK(r.capped > 0 && r.count <= p.max_boxes - p.max_boxes / 4, "inside: %u boxes of %u, %u pressed kept whole",
           r.count, p.max_boxes, r.capped);
     ecm_result_free(&r);
@@ -646,11 +649,8 @@ static void test_inside_users_walk_on(void **state)
     float box[6];
     ecm_params p;
     import_mesh m = scaled_model("scenes/dabrovic_sponza.obj", 1, box, &p);
-    const ecm_cluster in = {.box = 0, .min = {-15.6777592f, 0.993f, -4.92351198f},
-                            .max = {15.6722403f, 0.993f, -0.198510006f},
-                            .centroid = {-0.079234004f, 0.993f, -2.68530369f}, .weight = 2400};
     ecm_result r;
-    refine_model(&p, &m, CBOXES(box), 1, &in, 1, &r);
+    refine_model(&p, &m, CBOXES(box), 1, &sponza_inside, 1, &r);
     const float arches[2][6] = {{-9.3f, 0.2f, 2.3f, -8.7f, 2.0f, 3.1f}, {4.2f, 0.2f, 2.3f, 4.8f, 2.0f, 3.1f}};
     for (int i = 0; i < 2; i++)
         CHECK(!blocked(CBOXES(r.boxes), r.count, arches[i], arches[i] + 3), "the arch at x %g is blocked",
