@@ -807,6 +807,145 @@ static int bit_test(const bits3 *b, uint32_t t, uint32_t y, uint32_t z)
     return (int)((b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] >> (t % 64)) & 1u);
 }
 
+/* Cells of the step height and one more, on the grid's y axis (at most n):
+ * how far under a placement something to stand on may be. */
+static uint32_t step_cells(const work *w, const ecm_params *p)
+{
+    double sc = w->g.cell[1] > 0 ? ceil(p->step / w->g.cell[1]) + 1 : 1;
+    return sc > w->n ? w->n : (uint32_t)sc;
+}
+
+/* Clears in b (index 0 at cell o on each axis, o may be negative) every
+ * cell a triangle touches or a kept box meets; cells outside the grid stay
+ * as they are. */
+static void clear_blocked(const work *w, bits3 *b, const int64_t o[3])
+{
+    for (uint32_t z = 0; z < b->dim[2]; z++) {
+        int64_t cz = o[2] + z;
+        if (cz < 0 || cz >= w->n)
+            continue;
+        for (uint32_t y = 0; y < b->dim[1]; y++) {
+            int64_t cy = o[1] + y;
+            if (cy < 0 || cy >= w->n)
+                continue;
+            const uint64_t *line = w->blocked + w->bw * ((size_t)cy + (size_t)w->n * (size_t)cz);
+            uint64_t *r = b->v + b->w * (y + (size_t)b->dim[1] * z);
+            for (size_t i = 0; i < b->w; i++)
+                r[i] &= ~blocked_bits(w, line, o[0] + 64 * (int64_t)i);
+        }
+    }
+}
+
+/* under (all 1, index 0 at cell o) becomes 1 where a placement of footprint
+ * k stands on nothing: no cell is blocked in the s cells under any cell of
+ * its footprint, and the grid's bottom (the floor) is further down. */
+static void mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uint32_t s, const uint32_t k[3])
+{
+    for (uint32_t z = 0; z < under->dim[2]; z++) {
+        int64_t cz = o[2] + z;
+        for (uint32_t y = 0; y < under->dim[1]; y++) {
+            int64_t cy = o[1] + y;
+            uint64_t *ru = under->v + under->w * (y + (size_t)under->dim[1] * z);
+            if (cy < (int64_t)s) {
+                memset(ru, 0, under->w * sizeof *ru);
+                continue;
+            }
+            if (cz < 0 || cz >= w->n)
+                continue;
+            for (int64_t b = cy - s; b < cy && b < w->n; b++) {
+                const uint64_t *line = w->blocked + w->bw * ((size_t)b + (size_t)w->n * (size_t)cz);
+                for (size_t i = 0; i < under->w; i++)
+                    ru[i] &= ~blocked_bits(w, line, o[0] + 64 * (int64_t)i);
+            }
+        }
+    }
+    morph(under, 0, k[0], 1);
+    morph(under, 2, k[2], 1);
+}
+
+/* Fills in s, a line of nw words, the runs of set bits of mask (along the
+ * line, across words) that hold a bit of s (s within mask). */
+static void fill_runs(uint64_t *s, const uint64_t *mask, size_t nw)
+{
+    /* Up: adding the seeds to the mask carries through each run above them. */
+    uint64_t carry = 0;
+    for (size_t i = 0; i < nw; i++) {
+        uint64_t m = mask[i], a = s[i] | (carry & m);
+        s[i] = (((m + a) ^ m) & m) | a;
+        carry = s[i] >> 63;
+    }
+    /* Down: an occluded fill in each word, on into the word below. */
+    for (size_t i = nw; i-- > 0;) {
+        uint64_t gen = s[i], pro = mask[i];
+        for (unsigned k = 1; k < 64; k *= 2) {
+            gen |= pro & (gen >> k);
+            pro &= pro >> k;
+        }
+        s[i] = gen;
+        if (i && (gen & 1))
+            s[i - 1] |= mask[i - 1] & ((uint64_t)1 << 63);
+    }
+}
+
+/*
+ * Grows seen (its seeds) to every placement of fit 6-connected to one
+ * (fit and seen of the same dimensions): runs along x at once, then the
+ * lines beside (y and z +- 1) that gain placements, until none does.
+ */
+static int flood(const bits3 *fit, bits3 *seen)
+{
+    const uint32_t *dim = fit->dim;
+    size_t nw = fit->w, lines = (size_t)dim[1] * dim[2];
+    uint32_t *queue = cvre_malloc((lines ? lines : 1) * sizeof *queue);
+    uint8_t *queued = cvre_calloc(lines ? lines : 1, 1);
+    if (!queue || !queued) {
+        free(queue);
+        free(queued);
+        return -ENOMEM;
+    }
+    size_t head = 0, count = 0; /* a ring of the lines to visit, each once at a time */
+    for (size_t l = 0; l < lines; l++) {
+        int any = 0;
+        for (size_t i = 0; i < nw; i++)
+            any |= (seen->v[l * nw + i] &= fit->v[l * nw + i]) != 0;
+        if (any) {
+            queue[(head + count++) % lines] = (uint32_t)l;
+            queued[l] = 1;
+        }
+    }
+    while (count) {
+        size_t l = queue[head];
+        head = (head + 1) % lines;
+        count--;
+        queued[l] = 0;
+        uint64_t *s = seen->v + l * nw;
+        fill_runs(s, fit->v + l * nw, nw);
+        uint32_t y = (uint32_t)(l % dim[1]), z = (uint32_t)(l / dim[1]);
+        const int64_t nb[4][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
+        for (int d = 0; d < 4; d++) {
+            int64_t qy = (int64_t)y + nb[d][0], qz = (int64_t)z + nb[d][1];
+            if (qy < 0 || qz < 0 || qy >= dim[1] || qz >= dim[2])
+                continue;
+            size_t q = (size_t)qy + (size_t)dim[1] * (size_t)qz;
+            uint64_t *t = seen->v + q * nw;
+            const uint64_t *m = fit->v + q * nw;
+            int grew = 0;
+            for (size_t i = 0; i < nw; i++) {
+                uint64_t add = s[i] & m[i] & ~t[i];
+                t[i] |= add;
+                grew |= add != 0;
+            }
+            if (grew && !queued[q]) {
+                queue[(head + count++) % lines] = (uint32_t)q;
+                queued[q] = 1;
+            }
+        }
+    }
+    free(queue);
+    free(queued);
+    return 0;
+}
+
 /* The face of the box the cluster names nearest its centroid: the axis
  * users cross, in every box the cluster presses on (a neighbour's nearest
  * face may be the one it shares with the named box). */
@@ -917,6 +1056,93 @@ static int meets_region(const ecm_cluster *cl, const float named[6], const float
 }
 
 /*
+ * Step 3 for users outside the boxes they press on: of the placements in
+ * fit (mark_wanted's padded array, index 0 at cell o), keeps those they can
+ * walk to. A walk goes between placements that fit and stand on something
+ * within a step and a cell under some cell of their footprint (a blocked
+ * cell, or the grid's bottom: the floor), 6-connected, never wholly under
+ * the grid. It starts at the placements that overlap no box of the map
+ * (where a user can stand) and come within a cell of the cluster's points.
+ * The well inside a ring wall nobody can step over is no place to open:
+ * cutting it out spent a gazebo's budget on boxes around the hollow, and
+ * its outer face kept corners a hand's width proud. fit stays as it is
+ * when no placement starts a walk (points nearer the geometry than the
+ * cells let an avatar stand).
+ */
+static int keep_reached(const work *w, const ecm_cluster *cl, const ecm_params *p, bits3 *fit, const int64_t o[3],
+                        const uint32_t k[3])
+{
+    const voxel_grid *g = &w->g;
+    const uint32_t *dim = fit->dim;
+    bits3 walk, under = {0}, clear = {0}, seen = {0};
+    int rc = bits3_init(&walk, dim);
+    if (rc < 0 || (rc = bits3_init(&under, dim)) < 0 || (rc = bits3_init(&clear, dim)) < 0 ||
+        (rc = bits3_init(&seen, dim)) < 0)
+        goto done;
+    size_t lines = (size_t)dim[1] * dim[2], words = lines * fit->w;
+    memcpy(walk.v, fit->v, words * sizeof *walk.v);
+    mark_unsupported(w, &under, o, step_cells(w, p), k);
+    /* clear: cells no box of the map meets (outside the grid, or neither a
+     * problem box's nor blocked), eroded to the placements in them. */
+    clear_blocked(w, &clear, o);
+    for (uint32_t z = 0; z < dim[2]; z++)
+        for (uint32_t y = 0; y < dim[1]; y++) {
+            int64_t cz = o[2] + z, cy = o[1] + y;
+            if (cz < 0 || cz >= w->n || cy < 0 || cy >= w->n)
+                continue;
+            const uint8_t *row = w->cls + (size_t)w->n * ((size_t)cy + (size_t)w->n * (size_t)cz);
+            int64_t x1 = o[0] + dim[0] < w->n ? o[0] + dim[0] : w->n;
+            for (int64_t cx = o[0] > 0 ? o[0] : 0; cx < x1; cx++)
+                if (row[cx] & CELL_PROBLEM)
+                    bit_clear(&clear, (uint32_t)(cx - o[0]), y, z);
+        }
+    for (int a = 0; a < 3; a++)
+        morph(&clear, a, k[a], 1);
+    /* The seeds' corners: within a cell of the points' bounding box. */
+    int64_t lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = 0;
+        hi[a] = dim[a];
+        if (!(g->cell[a] > 0))
+            continue; /* a flat grid: every layer */
+        double l = floor(((double)cl->min[a] - g->min[a]) / g->cell[a]) - k[a] - 1 - (double)o[a];
+        double h = ceil(((double)cl->max[a] - g->min[a]) / g->cell[a]) + 1 - (double)o[a];
+        lo[a] = l <= 0 ? 0 : l >= dim[a] ? dim[a] : (int64_t)l;
+        hi[a] = h <= 0 ? 0 : h >= dim[a] ? dim[a] : (int64_t)h;
+    }
+    size_t seeds = 0;
+    for (uint32_t z = 0; z < dim[2]; z++)
+        for (uint32_t y = 0; y < dim[1]; y++) {
+            size_t l = (y + (size_t)dim[1] * z) * fit->w;
+            int below = o[1] + y + k[1] <= 0; /* wholly under the grid */
+            for (size_t i = 0; i < fit->w; i++) {
+                walk.v[l + i] &= below ? 0 : ~under.v[l + i];
+                seen.v[l + i] = 0;
+            }
+            if (z < lo[2] || z >= hi[2] || y < lo[1] || y >= hi[1])
+                continue;
+            for (int64_t x = lo[0]; x < hi[0]; x++)
+                if (bit_test(&walk, (uint32_t)x, y, z) && bit_test(&clear, (uint32_t)x, y, z)) {
+                    bit_set(&seen, (uint32_t)x, y, z);
+                    seeds++;
+                }
+        }
+    if (seeds) {
+        if ((rc = flood(&walk, &seen)) < 0)
+            goto done;
+        for (size_t i = 0; i < words; i++)
+            fit->v[i] &= seen.v[i];
+    }
+    rc = 0;
+done:
+    free(walk.v);
+    free(under.v);
+    free(clear.v);
+    free(seen.v);
+    return rc;
+}
+
+/*
  * Step 3 for one cluster: adds its pressure to the empty cells of its
  * region that an avatar-sized box of free cells covers (near: inside the
  * region before it is stretched along the axis users cross; a quarter of
@@ -990,20 +1216,9 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
      * the band: 1 = nothing to stand on in the two cells under the cell
      * (the kernel is rounded down, so a placement standing on something
      * may begin a cell above it). */
-    int64_t x0 = (int64_t)lo[0] - k[0];
-    for (uint32_t z = 0; z < dim[2]; z++) {
-        int64_t cz = (int64_t)lo[2] - k[2] + z;
-        int zin = cz >= 0 && cz < n;
-        for (uint32_t y = 0; y < dim[1]; y++) {
-            int64_t cy = (int64_t)lo[1] - k[1] + y;
-            if (!zin || cy < 0 || cy >= n)
-                continue;
-            const uint64_t *line = w->blocked + w->bw * ((size_t)cy + (size_t)n * (size_t)cz);
-            uint64_t *rb = b.v + b.w * (y + (size_t)dim[1] * z);
-            for (size_t i = 0; i < b.w; i++)
-                rb[i] &= ~blocked_bits(w, line, x0 + 64 * (int64_t)i);
-        }
-    }
+    const int64_t o[3] = {(int64_t)lo[0] - k[0], (int64_t)lo[1] - k[1], (int64_t)lo[2] - k[2]};
+    int64_t x0 = o[0];
+    clear_blocked(w, &b, o);
     /* u: the two cells under are both free as b has them, and above the
      * floor (below the grid is the floor: something to stand on). */
     for (uint32_t z = 0; u.v && z < dim[2]; z++)
@@ -1035,6 +1250,11 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 1);
+    if (stretched && face != 1 && (rc = keep_reached(w, cl, p, &b, o, k)) < 0) {
+        free(b.v);
+        free(u.v);
+        return rc;
+    }
     if (u.v) {
         /* A placement in the band needs something to stand on under some
          * cell of its footprint: u eroded along x and z is 1 where nothing
@@ -1094,17 +1314,15 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
  * air. Reachable: 6-connected to a placement at the cluster's points, a
  * breadth-first walk over the placements (each visited once).
  */
-_Static_assert(((uint64_t)1 << (3 * ECM_DEPTH_MAX)) - 1 <= UINT32_MAX, "a placement's index fits its queue");
 static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, uint32_t weight)
 {
     const voxel_grid *g = &w->g;
-    uint32_t n = w->n, k[3], s;
+    uint32_t n = w->n, k[3], s = step_cells(w, p);
     double size[3];
     region_size(p, size);
     kernel_cells(g, size, k);
-    double sc = g->cell[1] > 0 ? ceil(p->step / g->cell[1]) + 1 : 1;
-    s = sc > n ? n : (uint32_t)sc;
     const uint32_t dim[3] = {n, n, n};
+    const int64_t o[3] = {0, 0, 0};
     bits3 fit, under, seen;
     int rc = bits3_init(&fit, dim);
     if (rc < 0)
@@ -1114,35 +1332,15 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
         free(under.v);
         return rc;
     }
-    uint32_t *queue = NULL;
-    /* fit: free cells, eroded to the placements that fit; under: cells
-     * with nothing blocked in the s cells below, eroded over the footprint
-     * (1: the placement stands on nothing). */
-    size_t lines = (size_t)n * n;
-    for (size_t l = 0; l < lines; l++)
-        for (size_t i = 0; i < fit.w; i++)
-            fit.v[l * fit.w + i] &= ~w->blocked[l * w->bw + i];
-    for (uint32_t z = 0; z < n; z++)
-        for (uint32_t y = 0; y < n; y++) {
-            uint64_t *ru = under.v + under.w * (y + (size_t)n * z);
-            if (y < s) {
-                memset(ru, 0, under.w * sizeof *ru);
-                continue;
-            }
-            for (uint32_t b = y - s; b < y; b++) {
-                const uint64_t *rb = w->blocked + w->bw * (b + (size_t)n * z);
-                for (size_t i = 0; i < under.w; i++)
-                    ru[i] &= ~rb[i];
-            }
-        }
+    /* fit: free cells, eroded to the placements that fit, less those that
+     * stand on nothing. */
+    clear_blocked(w, &fit, o);
     for (int a = 0; a < 3; a++)
         morph(&fit, a, k[a], 1);
-    morph(&under, 0, k[0], 1);
-    morph(&under, 2, k[2], 1);
-    size_t places = 0; /* the queue holds each placement once at most */
-    for (size_t i = 0; i < lines * fit.w; i++) {
+    mark_unsupported(w, &under, o, s, k);
+    size_t words = (size_t)n * n * fit.w;
+    for (size_t i = 0; i < words; i++) {
         fit.v[i] &= ~under.v[i];
-        places += (size_t)__builtin_popcountll(fit.v[i]);
         seen.v[i] = 0;
     }
     /* The seeds: placements of the avatars whose middles are the points
@@ -1159,32 +1357,12 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
         if (hi[a] <= lo[a])
             hi[a] = lo[a] + 1 < n ? lo[a] + 1 : n;
     }
-    size_t head = 0, tail = 0;
-    queue = cvre_malloc((places ? places : 1) * sizeof *queue);
-    rc = -ENOMEM;
-    if (!queue)
-        goto done;
     for (uint32_t z = lo[2]; z < hi[2]; z++)
         for (uint32_t y = lo[1]; y < hi[1]; y++)
             for (uint32_t x = lo[0]; x < hi[0]; x++)
-                if (bit_test(&fit, x, y, z) && !bit_test(&seen, x, y, z)) {
-                    bit_set(&seen, x, y, z);
-                    queue[tail++] = x + n * (y + n * z);
-                }
-    while (head < tail) {
-        uint32_t c = queue[head++], x = c % n, y = c / n % n, z = c / n / n;
-        const int64_t nb[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
-        for (int d = 0; d < 6; d++) {
-            int64_t q[3] = {(int64_t)x + nb[d][0], (int64_t)y + nb[d][1], (int64_t)z + nb[d][2]};
-            if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[0] >= n || q[1] >= n || q[2] >= n)
-                continue;
-            uint32_t qx = (uint32_t)q[0], qy = (uint32_t)q[1], qz = (uint32_t)q[2];
-            if (!bit_test(&fit, qx, qy, qz) || bit_test(&seen, qx, qy, qz))
-                continue;
-            bit_set(&seen, qx, qy, qz);
-            queue[tail++] = qx + n * (qy + n * qz);
-        }
-    }
+                bit_set(&seen, x, y, z);
+    if ((rc = flood(&fit, &seen)) < 0)
+        goto done;
     /* The cells the reached placements cover. */
     for (int a = 0; a < 3; a++)
         morph(&seen, a, k[a], 0);
@@ -1202,7 +1380,6 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
         }
     rc = 0;
 done:
-    free(queue);
     free(fit.v);
     free(under.v);
     free(seen.v);
@@ -1647,20 +1824,33 @@ static double split_sides(tight *tt, const float b[6], const split *sp, float lo
     return (*has_lo ? box_volume(lo, lo + 3) : 0) + (*has_hi ? box_volume(hi, hi + 3) : 0);
 }
 
-/* Prices box b's best split into sp (step 7): 1 when it frees more than
- * gain_min of b, or when the two splits that peel both ends off along one
+/* Whether splitting box b across axis frees enough (step 7): more than
+ * an object's cell (cell: its sides), and more than gain_min of b or a
+ * slab half a cell deep across the whole face (a pedestal's box that also
+ * holds the end of a back board a cell further out: users stop a cell
+ * short of the pedestal's side, all along it). */
+static int frees_enough(const float b[6], int axis, double gain, double gain_min, const double cell[3])
+{
+    double vol = box_volume(b, b + 3), span = (double)b[3 + axis] - b[axis];
+    double face = span > 0 ? vol / span : 0;
+    return gain > cell[0] * cell[1] * cell[2] && (gain > gain_min * vol || gain >= face * cell[axis] / 2);
+}
+
+/* Prices box b's best split into sp (step 7): 1 when it frees enough
+ * (frees_enough), or when the two splits that peel both ends off along one
  * axis do (a wall's box that also holds the ends of the two walls meeting
  * it: one split frees nothing, two free it all; sp is then the first, and
  * its larger side is priced again), else 0; -ENOMEM. */
-static int price_split(tight *tt, const float b[6], double gain_min, double gain_abs, split *sp)
+static int price_split(tight *tt, const float b[6], double gain_min, const double cell[3], split *sp)
 {
     split peel;
     int rc = best_split(tt, b, sp, &peel);
     if (rc < 0)
         return rc;
     double vol = box_volume(b, b + 3);
+    double gain_abs = cell[0] * cell[1] * cell[2];
     sp->gain = rc == 1 ? vol - sp->volume : 0;
-    if (sp->gain > gain_min * vol && sp->gain > gain_abs)
+    if (rc == 1 && frees_enough(b, sp->axis, sp->gain, gain_min, cell))
         return 1;
     if (peel.volume < vol && vol - peel.volume > gain_min * vol && vol - peel.volume > gain_abs) {
         *sp = peel;
@@ -1685,7 +1875,7 @@ static int price_split(tight *tt, const float b[6], double gain_min, double gain
  * may be split again. Returns the new count, or -ENOMEM.
  */
 static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t count, uint32_t max, double gain_min,
-                       double gain_abs)
+                       const double cell[3])
 {
     split sp[ECM_MAX_BOXES_LIMIT];
     while (count < max) {
@@ -1693,7 +1883,7 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
         double bgain = 0;
         for (uint32_t j = 0; j < count; j++) {
             if (state[j] == 0) {
-                int rc = price_split(tt, boxes[j], gain_min, gain_abs, &sp[j]);
+                int rc = price_split(tt, boxes[j], gain_min, cell, &sp[j]);
                 if (rc < 0)
                     return rc;
                 state[j] = rc == 1 ? 1 : 2;
@@ -1714,7 +1904,8 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
         int has_lo, has_hi;
         double vol = box_volume(boxes[bi], boxes[bi] + 3);
         double after = split_sides(tt, boxes[bi], &sp[bi], lo, hi, &has_lo, &has_hi);
-        if (sp[bi].peel ? !(has_lo && has_hi) : (!(has_lo || has_hi) || !(vol - after > gain_min * vol))) {
+        if (sp[bi].peel ? !(has_lo && has_hi)
+                        : (!(has_lo || has_hi) || !frees_enough(boxes[bi], sp[bi].axis, vol - after, gain_min, cell))) {
             state[bi] = 2;
             continue;
         }
@@ -2318,7 +2509,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         if (!whole)
             out->apart_over = 0; /* a division again fitted */
         if ((rc = split_boxes(&tt, out->boxes, state, out->count, split_max, fmax(SPLIT_GAIN_MIN, p->max_empty),
-                              objcell[0] * objcell[1] * objcell[2])) < 0)
+                              objcell)) < 0)
             goto done;
         out->count = (uint32_t)rc;
         out->divide_ms += ms_since(&t0);

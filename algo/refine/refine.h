@@ -46,7 +46,16 @@
  *      above the geometry) and then by the step height. Only space an avatar fits in counts (a
  *      morphological opening of the cells no triangle touches and no kept
  *      box meets, space outside the grid counting as empty): the hollow
- *      inside a thick wall is never wanted. A placement of the avatar that
+ *      inside a thick wall is never wanted. Users outside the box they name
+ *      want only places they can walk to: placements reached from those
+ *      within a cell of the cluster's points that overlap no box of the
+ *      map (where users stood), through placements that fit and stand on
+ *      something within a step and a cell under their footprint (or the
+ *      floor under the grid), 6-connected. The well inside a ring wall
+ *      nobody steps over, or the inside of a closed drawer pedestal, is no
+ *      place to open (a gazebo's ring spent 45 boxes around its well and
+ *      kept corners a hand's width proud). Not for clusters on a floor or
+ *      a ceiling face, and not when no placement starts a walk. A placement of the avatar that
  *      reaches into the step band must stand on something (a blocked cell
  *      right under its footprint, or the floor under the grid): users step
  *      up onto a base, not into the air. Each wanted cell of a problem box
@@ -123,8 +132,10 @@
  *      the panel all along it). While the object has fewer than
  *      max_boxes less a quarter (left for later rounds), the box whose
  *      best plane frees the most is split across it, both parts tightened
- *      as in step 6, if that frees more than a quarter of it, more than
- *      max_empty and more than one of the object's cells. The plane is
+ *      as in step 6, if that frees more than one of the object's cells,
+ *      and more than a quarter of it and than max_empty, or a slab half a
+ *      cell deep across its whole face (a drawer pedestal's box that also
+ *      holds the end of the back board, a cell further out). The plane is
  *      chosen among the starts and ends of the triangles' bounding boxes
  *      in it, on each axis (boxes meeting more than SPLIT_PARTS_MAX
  *      triangles are left as they are: their surface already follows the

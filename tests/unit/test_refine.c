@@ -1386,6 +1386,52 @@ static void refine_ok(const ecm_params *p, const float *tris, uint32_t ntris, co
     check_result(p, tris, ntris, boxes, nboxes, cl, ncl, r, 16);
 }
 
+/* Walls 1 m high round a 2.6 m square yard (x and z 0..3, 0.2 thick),
+ * into t (60 triangles: the near wall at z 0 in two parts, x 0..gap_lo
+ * and gap_hi..3; no gap when they meet). */
+static void yard_walls(float *t, float gap_lo, float gap_hi)
+{
+    box_surface((const float[3]){0, 0, 0}, (const float[3]){gap_lo, 1, 0.2f}, t);
+    box_surface((const float[3]){gap_hi, 0, 0}, (const float[3]){3, 1, 0.2f}, t + 12 * 9);
+    box_surface((const float[3]){0, 0, 2.8f}, (const float[3]){3, 1, 3}, t + 24 * 9);
+    box_surface((const float[3]){0, 0, 0.2f}, (const float[3]){0.2f, 1, 2.8f}, t + 36 * 9);
+    box_surface((const float[3]){2.8f, 0, 0.2f}, (const float[3]){3, 1, 2.8f}, t + 48 * 9);
+}
+
+/* Only places users can walk to are wanted. Users stopped on the near face
+ * of a walled yard's box: with no way in (walls 1 m high, steps up to
+ * 0.35 m), the yard is no place anyone reaches, and its box stays whole
+ * (a gazebo's well spent 45 boxes on the hollow inside its ring wall,
+ * while the ring's outer face kept corners a hand's width proud). With a
+ * gate in the near wall the yard is walked into, and opened. */
+static void test_only_places_users_reach(void **state)
+{
+    (void)state;
+    const float box[6] = {0, 0, 0, 3, 1, 3}, yard[3] = {1.5f, 0.5f, 1.5f};
+    const ecm_cluster cl = {.box = 0, .min = {0.5f, 0.9f, 0}, .max = {2.5f, 0.9f, 0},
+                            .centroid = {1.5f, 0.9f, 0}, .weight = 100};
+    ecm_params p;
+    ecm_params_default(&p);
+    float tris[60 * 9];
+    ecm_result r;
+    snprintf(check_ctx, sizeof check_ctx, "closed yard");
+    yard_walls(tris, 1.5f, 1.5f);
+    refine_ok(&p, tris, 60, CBOXES(box), 1, &cl, 1, &r);
+    assert_int_equal(r.wanted, 0);
+    assert_int_equal(r.count, 1);
+    assert_true(blocked(CBOXES(r.boxes), r.count, yard, yard));
+    ecm_result_free(&r);
+
+    snprintf(check_ctx, sizeof check_ctx, "yard with a gate");
+    yard_walls(tris, 1.1f, 1.9f);
+    refine_ok(&p, tris, 60, CBOXES(box), 1, &cl, 1, &r);
+    assert_true(r.wanted > 0);
+    assert_false(blocked(CBOXES(r.boxes), r.count, yard, yard));
+    const float gate_lo[3] = {1.2f, 0, 0}, gate_hi[3] = {1.8f, 1, 0.2f};
+    assert_false(blocked(CBOXES(r.boxes), r.count, gate_lo, gate_hi));
+    ecm_result_free(&r);
+}
+
 /* Whether an avatar standing in a doorway of doorway_wall, moved dx along
  * x, is free (doorway_free, one place). */
 static int door_at_free(const ecm_result *r, float dx)
@@ -1642,17 +1688,18 @@ static void test_wanted_region(void **state)
     /* Space outside the grid is free. A plate at y = 0.25 over the whole
      * box (its cells: y layers 1 and 2), the avatar 2 x 2 x 2 (its kernel
      * held to a quarter of the grid, 8 cells), a cluster on the x = 0 face
-     * at y = 0.1, z = 2: the region is y layers 0..9, all of z. Above the
-     * plate layers 3..9 are wanted (the kernel reaches up into the free
-     * space above the region); below it layer 0 is too, a kernel there
-     * reaching down out of the box. */
+     * at y = 0.1, z = 2: the region is y layers 0..9, all of z. Below the
+     * plate layer 0 is wanted, a kernel there reaching down out of the
+     * box. Above it layers 3..9 would be too (the kernel reaches up into the
+     * free space above the region), but without a step (step 0) no user
+     * stopped under the plate gets up there: nobody walks to it. */
     snprintf(check_ctx, sizeof check_ctx, "low plate");
     const float plate[2 * 9] = {0, 0.25f, 0, 4, 0.25f, 0, 4, 0.25f, 4, 0, 0.25f, 0, 4, 0.25f, 4, 0, 0.25f, 4};
     ecm_cluster low = {.box = 0, .min = {0, 0.1f, 2}, .max = {0, 0.1f, 2}, .centroid = {0, 0.1f, 2}};
     p.avatar[0] = p.avatar[1] = p.avatar[2] = 2;
     assert_int_equal(ecm_refine(&p, plate, 2, CBOXES(box), 1, &low, 1, &r, err, sizeof err), 0);
     check_result(&p, plate, 2, CBOXES(box), 1, &low, 1, &r, 16);
-    assert_int_equal(r.wanted, 32 * 32 * (7 + 1));
+    assert_int_equal(r.wanted, 32 * 32);
     ecm_result_free(&r);
 }
 
@@ -1753,6 +1800,8 @@ static void test_merge_max_empty(void **state)
         ecm_params_default(&p);
         p.depth = 5;
         p.avatar[0] = p.avatar[1] = p.avatar[2] = 0.5f;
+        p.step = 4; /* the users on the x = 0 face stand in the air: let them
+                     * walk anywhere, so that only max_empty decides */
         p.max_empty = cases[i].max_empty;
         ecm_result r;
         char err[256];
@@ -1912,7 +1961,9 @@ static void test_cap_kept_boxes_over_cap(void **state)
             assert_int_equal(r.count, 8);
             assert_int_equal(r.capped, 3);
         } else if (caps[i] == 7) {
-            assert_true(r.capped >= 1); /* the door's octants wanted more */
+            /* Only what users walk to from the door is wanted: it fits. */
+            assert_int_equal(r.count, 7);
+            assert_int_equal(r.capped, 0);
         } else if (caps[i] == 10) {
             assert_true(r.count > 8 && r.capped < 3);
         } else {
@@ -2206,6 +2257,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_flat_objects),
         cmocka_unit_test(test_nothing_wanted_only_shrinks),
         cmocka_unit_test(test_thick_wall_stays_whole),
+        cmocka_unit_test(test_only_places_users_reach),
         cmocka_unit_test(test_doorway_three_cuts),
         cmocka_unit_test(test_cluster_over_two_boxes),
         cmocka_unit_test(test_neighbour_uses_the_named_face),
