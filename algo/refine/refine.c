@@ -104,6 +104,7 @@ typedef struct work {
     uint8_t *pressure; /* n^3: 0, or how hard users press for the cell to open */
     uint64_t *blocked; /* n^2 lines of bw words: bit x set when a triangle touches cell x
                         * or a kept box meets it (0 past n): see blocked() */
+    uint64_t *mapped;  /* the same lines: bit x set when cell x is blocked or a problem box's */
     size_t bw;
     ilist out;         /* boxes so far: no more division for them */
     double max_empty;
@@ -741,6 +742,7 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
         for (uint32_t y = 0; y < n; y++) {
             uint8_t *row = w->cls + (size_t)n * (y + (size_t)n * z);
             uint64_t *bits = w->blocked + w->bw * (y + (size_t)n * z);
+            uint64_t *mbits = w->mapped + w->bw * (y + (size_t)n * z);
             uint64_t base = (uint64_t)n * (y + (uint64_t)n * z); /* the row in w->g.bits */
             for (uint32_t x = 0; x < n; x++) {
                 if ((w->g.bits[(base + x) >> 6] >> ((base + x) & 63)) & 1u)
@@ -751,6 +753,8 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
                 }
                 if (row[x] & (CELL_OCCUPIED | CELL_KEPT))
                     bits[x / 64] |= (uint64_t)1 << (x % 64);
+                if (row[x] & (CELL_OCCUPIED | CELL_KEPT | CELL_PROBLEM))
+                    mbits[x / 64] |= (uint64_t)1 << (x % 64);
             }
         }
 }
@@ -816,9 +820,9 @@ static uint32_t step_cells(const work *w, const ecm_params *p)
 }
 
 /* Clears in b (index 0 at cell o on each axis, o may be negative) every
- * cell a triangle touches or a kept box meets; cells outside the grid stay
+ * cell set in cells (w->blocked or w->mapped); cells outside the grid stay
  * as they are. */
-static void clear_blocked(const work *w, bits3 *b, const int64_t o[3])
+static void clear_cells(const work *w, const uint64_t *cells, bits3 *b, const int64_t o[3])
 {
     for (uint32_t z = 0; z < b->dim[2]; z++) {
         int64_t cz = o[2] + z;
@@ -828,7 +832,7 @@ static void clear_blocked(const work *w, bits3 *b, const int64_t o[3])
             int64_t cy = o[1] + y;
             if (cy < 0 || cy >= w->n)
                 continue;
-            const uint64_t *line = w->blocked + w->bw * ((size_t)cy + (size_t)w->n * (size_t)cz);
+            const uint64_t *line = cells + w->bw * ((size_t)cy + (size_t)w->n * (size_t)cz);
             uint64_t *r = b->v + b->w * (y + (size_t)b->dim[1] * z);
             for (size_t i = 0; i < b->w; i++)
                 r[i] &= ~blocked_bits(w, line, o[0] + 64 * (int64_t)i);
@@ -1084,18 +1088,7 @@ static int keep_reached(const work *w, const ecm_cluster *cl, const ecm_params *
     mark_unsupported(w, &under, o, step_cells(w, p), k);
     /* clear: cells no box of the map meets (outside the grid, or neither a
      * problem box's nor blocked), eroded to the placements in them. */
-    clear_blocked(w, &clear, o);
-    for (uint32_t z = 0; z < dim[2]; z++)
-        for (uint32_t y = 0; y < dim[1]; y++) {
-            int64_t cz = o[2] + z, cy = o[1] + y;
-            if (cz < 0 || cz >= w->n || cy < 0 || cy >= w->n)
-                continue;
-            const uint8_t *row = w->cls + (size_t)w->n * ((size_t)cy + (size_t)w->n * (size_t)cz);
-            int64_t x1 = o[0] + dim[0] < w->n ? o[0] + dim[0] : w->n;
-            for (int64_t cx = o[0] > 0 ? o[0] : 0; cx < x1; cx++)
-                if (row[cx] & CELL_PROBLEM)
-                    bit_clear(&clear, (uint32_t)(cx - o[0]), y, z);
-        }
+    clear_cells(w, w->mapped, &clear, o);
     for (int a = 0; a < 3; a++)
         morph(&clear, a, k[a], 1);
     /* The seeds' corners: within a cell of the points' bounding box. */
@@ -1218,7 +1211,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
      * may begin a cell above it). */
     const int64_t o[3] = {(int64_t)lo[0] - k[0], (int64_t)lo[1] - k[1], (int64_t)lo[2] - k[2]};
     int64_t x0 = o[0];
-    clear_blocked(w, &b, o);
+    clear_cells(w, w->blocked, &b, o);
     /* u: the two cells under are both free as b has them, and above the
      * floor (below the grid is the floor: something to stand on). */
     for (uint32_t z = 0; u.v && z < dim[2]; z++)
@@ -1334,7 +1327,7 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
     }
     /* fit: free cells, eroded to the placements that fit, less those that
      * stand on nothing. */
-    clear_blocked(w, &fit, o);
+    clear_cells(w, w->blocked, &fit, o);
     for (int a = 0; a < 3; a++)
         morph(&fit, a, k[a], 1);
     mark_unsupported(w, &under, o, s, k);
@@ -2018,6 +2011,7 @@ static void work_free(work *w)
     free(w->cls);
     free(w->pressure);
     free(w->blocked);
+    free(w->mapped);
     free(w->out.b);
     memset(w, 0, sizeof *w);
 }
@@ -2061,7 +2055,8 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     w->cls = cvre_calloc(cells, 1);
     w->pressure = cvre_calloc(cells, 1);
     w->blocked = cvre_calloc((size_t)n * n * w->bw, sizeof *w->blocked);
-    if (!w->cls || !w->pressure || !w->blocked)
+    w->mapped = cvre_calloc((size_t)n * n * w->bw, sizeof *w->mapped);
+    if (!w->cls || !w->pressure || !w->blocked || !w->mapped)
         return -ENOMEM;
     classify(w, boxes, nboxes, problem);
     /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
