@@ -896,6 +896,7 @@ static void fill_runs(uint64_t *s, const uint64_t *mask, size_t nw)
  * (fit and seen of the same dimensions): runs along x at once, then the
  * lines beside (y and z +- 1) that gain placements, until none does.
  */
+_Static_assert(2 * ECM_DEPTH_MAX + 4 <= 32, "a line's index fits flood's queue: (n + 2k)^2 lines, k at most n");
 static int flood(const bits3 *fit, bits3 *seen)
 {
     const uint32_t *dim = fit->dim;
