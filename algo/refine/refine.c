@@ -103,7 +103,7 @@ typedef struct work {
     uint8_t *cls;      /* n^3: CELL_* bits */
     uint8_t *pressure; /* n^3: 0, or how hard users press for the cell to open */
     uint64_t *blocked; /* n^2 lines of bw words: bit x set when a triangle touches cell x
-                        * or a kept box meets it (0 past n): see blocked() */
+                        * or a kept box meets it (0 past n): no avatar can be in it */
     uint64_t *mapped;  /* the same lines: bit x set when cell x is blocked or a problem box's */
     size_t bw;
     ilist out;         /* boxes so far: no more division for them */
@@ -759,15 +759,8 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
         }
 }
 
-/* Whether an avatar cannot be in the cell: a triangle touches it, or it
- * meets a kept box (w->blocked, which classify fills). */
-static int blocked(const work *w, uint32_t x, uint32_t y, uint32_t z)
-{
-    return (int)((w->blocked[w->bw * (y + (size_t)w->n * z) + x / 64] >> (x % 64)) & 1u);
-}
-
-/* The 64 bits of a line of w->blocked from cell x on (x may be negative:
- * cells outside the grid are not blocked). */
+/* The 64 bits of a line of w->blocked or w->mapped from cell x on (x may
+ * be negative: cells outside the grid are not set). */
 static uint64_t blocked_bits(const work *w, const uint64_t *line, int64_t x)
 {
     if (x < 0)
@@ -794,11 +787,6 @@ static int bits3_init(bits3 *b, const uint32_t dim[3])
             r[i] = dim[0] - 64 * i >= 64 ? UINT64_MAX : ((uint64_t)1 << (dim[0] - 64 * i)) - 1;
     }
     return 0;
-}
-
-static void bit_clear(bits3 *b, uint32_t t, uint32_t y, uint32_t z)
-{
-    b->v[b->w * (y + (size_t)b->dim[1] * z) + t / 64] &= ~((uint64_t)1 << (t % 64));
 }
 
 static void bit_set(bits3 *b, uint32_t t, uint32_t y, uint32_t z)
@@ -1206,42 +1194,14 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         free(b.v);
         return rc;
     }
-    /* b: 1 = free (empty cells, and every cell outside the grid); u, in
-     * the band: 1 = nothing to stand on in the two cells under the cell
-     * (the kernel is rounded down, so a placement standing on something
-     * may begin a cell above it). */
+    /* b: 1 = free (empty cells, and every cell outside the grid). */
     const int64_t o[3] = {(int64_t)lo[0] - k[0], (int64_t)lo[1] - k[1], (int64_t)lo[2] - k[2]};
-    int64_t x0 = o[0];
     clear_cells(w, w->blocked, &b, o);
-    /* u: the two cells under are both free as b has them, and above the
-     * floor (below the grid is the floor: something to stand on). */
-    for (uint32_t z = 0; u.v && z < dim[2]; z++)
-        for (uint32_t y = band; y < dim[1]; y++) {
-            int64_t cy = (int64_t)lo[1] - k[1] + y;
-            uint64_t *ru = u.v + u.w * (y + (size_t)dim[1] * z);
-            if (cy - 2 < 0) {
-                memset(ru, 0, u.w * sizeof *ru);
-                continue;
-            }
-            if (y < 2) { /* the cells under lie below the padded rows */
-                int zin = (int64_t)lo[2] - k[2] + z >= 0 && (int64_t)lo[2] - k[2] + z < n;
-                uint32_t cz = (uint32_t)((int64_t)lo[2] - k[2] + z);
-                for (uint32_t t = 0; t < dim[0]; t++) {
-                    int64_t cx = x0 + t;
-                    for (int64_t below = cy - 2; below < cy; below++)
-                        if (zin && cx >= 0 && cx < n && below < n &&
-                            blocked(w, (uint32_t)cx, (uint32_t)below, cz)) {
-                            bit_clear(&u, t, y, z);
-                            break;
-                        }
-                }
-                continue;
-            }
-            const uint64_t *r1 = b.v + b.w * ((y - 1) + (size_t)dim[1] * z);
-            const uint64_t *r2 = b.v + b.w * ((y - 2) + (size_t)dim[1] * z);
-            for (size_t i = 0; i < u.w; i++)
-                ru[i] &= r1[i] & r2[i];
-        }
+    /* u: 1 where a placement has nothing to stand on in the two cells under
+     * its footprint (the kernel is rounded down, so a placement standing on
+     * something may begin a cell above it), the grid's bottom the floor. */
+    if (u.v)
+        mark_unsupported(w, &u, o, 2, k);
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 1);
     if (stretched && face != 1 && (rc = keep_reached(w, cl, p, &b, o, k)) < 0) {
@@ -1250,11 +1210,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         return rc;
     }
     if (u.v) {
-        /* A placement in the band needs something to stand on under some
-         * cell of its footprint: u eroded along x and z is 1 where nothing
-         * is under the whole footprint. */
-        morph(&u, 0, k[0], 1);
-        morph(&u, 2, k[2], 1);
+        /* A placement in the band needs something to stand on. */
         for (uint32_t z = 0; z < dim[2]; z++)
             for (uint32_t y = band; y < dim[1]; y++) {
                 uint64_t *rb = b.v + b.w * (y + (size_t)dim[1] * z);
