@@ -406,6 +406,58 @@ static int file_node(work *w, heap *h, const ibox *b)
     return press ? heap_push(h, b, press) : push(&w->out, b);
 }
 
+/* What cutting b at `at` on axis a leaves wanted: the pressure in the two
+ * parts, each shrunk to the cells it must cover, and their volume. */
+static void parts_left(const work *w, const ibox *b, int a, uint16_t at, uint64_t *press, uint64_t *vol)
+{
+    *press = 0;
+    *vol = 0;
+    for (int side = 0; side < 2; side++) {
+        ibox c = *b;
+        if (side)
+            c.lo[a] = at;
+        else
+            c.hi[a] = at;
+        if (!shrink(&w->must, &c))
+            continue;
+        *press += svt_sum(&w->press, &c);
+        *vol += volume(&c);
+    }
+}
+
+/* Planes tried per axis by best_plane: every cell border of a node up to
+ * this wide, else this many spread evenly. */
+#define PLANES_PER_AXIS 32u
+
+/*
+ * The plane across b whose parts, shrunk, leave the least pressure (then
+ * the least volume): the cut that frees the most of what users want, when
+ * they want something at every face of b (the treads of a spiral stair,
+ * each a step above the last). 0 when no plane frees any pressure.
+ */
+static int best_plane(const work *w, const ibox *b, int *axis, uint16_t *at)
+{
+    uint64_t press = svt_sum(&w->press, b), best_p = press, best_v = volume(b);
+    int found = 0;
+    for (int a = 0; a < 3; a++) {
+        uint32_t len = (uint32_t)(b->hi[a] - b->lo[a]);
+        uint32_t stride = len <= PLANES_PER_AXIS ? 1u : (len + PLANES_PER_AXIS - 1) / PLANES_PER_AXIS;
+        for (uint32_t o = stride; o < len; o += stride) {
+            uint16_t pos = (uint16_t)(b->lo[a] + o);
+            uint64_t p, v;
+            parts_left(w, b, a, pos, &p, &v);
+            if (p < best_p || (p == best_p && found && v < best_v)) {
+                best_p = p;
+                best_v = v;
+                *axis = a;
+                *at = pos;
+                found = 1;
+            }
+        }
+    }
+    return found;
+}
+
 /*
  * Cuts b in two (step 4) and shrinks the parts to the cells they must
  * cover; returns how many are not empty (their boxes in ch). The cells to
@@ -413,7 +465,8 @@ static int file_node(work *w, heap *h, const ibox *b)
  * plane: a face of their bounding box, the one that cuts off the largest
  * slab without them (a doorway in a wall: the wall on one side, then on
  * the other, and what is left shrinks to the lintel: three boxes); when
- * they reach every face of b, the middle of b's longest side.
+ * they reach every face of b, best_plane for pressed cells, else (or when
+ * no plane frees any) the middle of b's longest side.
  */
 static int cut(const work *w, const ibox *b, int outside_cells, ibox ch[2])
 {
@@ -436,7 +489,7 @@ static int cut(const work *w, const ibox *b, int outside_cells, ibox ch[2])
             at = want.hi[a];
         }
     }
-    if (axis < 0) {
+    if (axis < 0 && (outside_cells || !best_plane(w, b, &axis, &at))) {
         axis = 0;
         for (int a = 1; a < 3; a++)
             if (b->hi[a] - b->lo[a] > b->hi[axis] - b->lo[axis])
@@ -2359,6 +2412,10 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         for (uint32_t i = 0; i < nclusters; i++)
             w.inside |= inside_named(&clusters[i], boxes[clusters[i].box], p);
         w.slack = w.inside ? DIVIDE_SLACK_INSIDE : DIVIDE_SLACK;
+        if (w.inside && p->max_boxes > nboxes) {
+            uint32_t spend = nproblem + (p->max_boxes - nboxes) * 3 / 4;
+            w.budget = w.budget < spend ? w.budget : spend;
+        }
         if ((rc = build_grid(&w, &gp, m, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
         struct timespec t0;
