@@ -425,25 +425,20 @@ static void parts_left(const work *w, const ibox *b, int a, uint16_t at, uint64_
     }
 }
 
-/* Planes tried per axis by best_plane: every cell border of a node up to
- * this wide, else this many spread evenly. */
-#define PLANES_PER_AXIS 32u
-
 /*
- * The plane across b whose parts, shrunk, leave the least pressure (then
- * the least volume): the cut that frees the most of what users want, when
- * they want something at every face of b (the treads of a spiral stair,
- * each a step above the last). 0 when no plane frees any pressure.
+ * The plane across b (every cell border) whose parts, shrunk, leave the
+ * least pressure (then the least volume): the cut that frees the most of
+ * what users want, when they want something at every face of b (the
+ * treads of a spiral stair, each a step above the last). 0 when no plane
+ * frees any pressure. At most 3 x 2^ECM_DEPTH_MAX planes, each two
+ * shrinks (O(depth) table sums).
  */
 static int best_plane(const work *w, const ibox *b, int *axis, uint16_t *at)
 {
     uint64_t press = svt_sum(&w->press, b), best_p = press, best_v = volume(b);
     int found = 0;
-    for (int a = 0; a < 3; a++) {
-        uint32_t len = (uint32_t)(b->hi[a] - b->lo[a]);
-        uint32_t stride = len <= PLANES_PER_AXIS ? 1u : (len + PLANES_PER_AXIS - 1) / PLANES_PER_AXIS;
-        for (uint32_t o = stride; o < len; o += stride) {
-            uint16_t pos = (uint16_t)(b->lo[a] + o);
+    for (int a = 0; a < 3; a++)
+        for (uint16_t pos = (uint16_t)(b->lo[a] + 1); pos < b->hi[a]; pos++) {
             uint64_t p, v;
             parts_left(w, b, a, pos, &p, &v);
             if (p < best_p || (p == best_p && found && v < best_v)) {
@@ -454,7 +449,6 @@ static int best_plane(const work *w, const ibox *b, int *axis, uint16_t *at)
                 found = 1;
             }
         }
-    }
     return found;
 }
 

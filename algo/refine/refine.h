@@ -84,11 +84,10 @@
  *      side, then on the other, and the rest shrinks to the lintel: three
  *      boxes); when they reach every face of the node, outside cells
  *      halve it across its longest side, and pressed cells choose the
- *      plane (a cell border, at most 32 tried per axis) whose two parts,
- *      shrunk, keep the least pressure, then the least volume (the treads
- *      of a spiral stair: halves freed little of the air over them, and 53
- *      of its 64 boxes were nodes kept whole at the cap); halved when no
- *      plane frees any. Nodes without pressure are kept whole: fine near
+ *      plane (any cell border) whose two parts, shrunk, keep the least
+ *      pressure, then the least volume (the treads of a spiral stair:
+ *      halves freed little of the air over them, and 53 of its 64 boxes
+ *      were nodes kept whole at the cap); halved when no plane frees any. Nodes without pressure are kept whole: fine near
  *      the clusters, coarse elsewhere; one cut adds at most one box.
  *   5. Merge and cap: the budget is max_boxes less the kept boxes, for the
  *      whole object. When the next pressed cut would pass the budget by
