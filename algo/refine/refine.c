@@ -407,12 +407,14 @@ static int file_node(work *w, heap *h, const ibox *b)
 }
 
 /* What cutting b at `at` on axis a leaves wanted: the pressure in the two
- * parts, each shrunk to the cells it must cover, and their volume. */
-static void parts_left(const work *w, const ibox *b, int a, uint16_t at, uint64_t *press, uint64_t *vol)
+ * parts, each shrunk to the cells it must cover, and their volume; once
+ * the pressure passes limit, only that it does. */
+static void parts_left(const work *w, const ibox *b, int a, uint16_t at, uint64_t limit, uint64_t *press,
+                       uint64_t *vol)
 {
     *press = 0;
     *vol = 0;
-    for (int side = 0; side < 2; side++) {
+    for (int side = 0; side < 2 && *press <= limit; side++) {
         ibox c = *b;
         if (side)
             c.lo[a] = at;
@@ -440,7 +442,7 @@ static int best_plane(const work *w, const ibox *b, int *axis, uint16_t *at)
     for (int a = 0; a < 3; a++)
         for (uint16_t pos = (uint16_t)(b->lo[a] + 1); pos < b->hi[a]; pos++) {
             uint64_t p, v;
-            parts_left(w, b, a, pos, &p, &v);
+            parts_left(w, b, a, pos, best_p, &p, &v);
             if (p < best_p || (p == best_p && found && v < best_v)) {
                 best_p = p;
                 best_v = v;
