@@ -2408,6 +2408,8 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         for (uint32_t i = 0; i < nclusters; i++)
             w.inside |= inside_named(&clusters[i], boxes[clusters[i].box], p);
         w.slack = w.inside ? DIVIDE_SLACK_INSIDE : DIVIDE_SLACK;
+        /* Users inside leave a quarter of what the object may still add
+         * to later rounds (refine.h, step 5). */
         if (w.inside && p->max_boxes > nboxes) {
             uint32_t spend = nproblem + (p->max_boxes - nboxes) * 3 / 4;
             w.budget = w.budget < spend ? w.budget : spend;

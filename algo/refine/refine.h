@@ -87,8 +87,9 @@
  *      plane (any cell border) whose two parts, shrunk, keep the least
  *      pressure, then the least volume (the treads of a spiral stair:
  *      halves freed little of the air over them, and 53 of its 64 boxes
- *      were nodes kept whole at the cap); halved when no plane frees any. Nodes without pressure are kept whole: fine near
- *      the clusters, coarse elsewhere; one cut adds at most one box.
+ *      were nodes kept whole at the cap); halved when no plane frees
+ *      any. Nodes without pressure are kept whole: fine near the
+ *      clusters, coarse elsewhere; one cut adds at most one box.
  *   5. Merge and cap: the budget is max_boxes less the kept boxes, for the
  *      whole object. When the next pressed cut would pass the budget by
  *      more than a slack even after merging, division stops and the
@@ -97,14 +98,13 @@
  *      step), they show only the part they stand in, and later rounds need
  *      boxes for the rest: the slack is smaller, and the budget holds the
  *      problem boxes and three quarters of the boxes the object may still
- *      add. When merging then leaves
- *      boxes of the budget unused (the parts of nodes kept whole join
- *      back), the division runs again with as much more slack (twice at
- *      most; not for users inside). Two boxes (of any problem boxes:
- *      merges cross the old boxes' borders) whose hull holds no outside
- *      cell, adds no pressure and adds at most max_empty of its volume as
- *      new empty space become one, cheapest first: slivers that free no
- *      wanted cell go back. Then, while there are more boxes than the
+ *      add. When merging then leaves boxes of the budget unused (the
+ *      parts of nodes kept whole join back), the division runs again with
+ *      as much more slack (twice at most; not for users inside). Two
+ *      boxes (of any problem boxes: merges cross the old boxes' borders)
+ *      whose hull holds no outside cell, adds no pressure and adds at most
+ *      max_empty of its volume as new empty space become one, cheapest
+ *      first: slivers that free no wanted cell go back. Then, while there are more boxes than the
  *      budget, the pair whose hull adds the least pressure, then the fewest
  *      empty cells, and holds no outside cell, merges. If that cannot meet
  *      the budget (or keeping outside cells out would take more than
