@@ -104,9 +104,10 @@
  *      boxes (of any problem boxes: merges cross the old boxes' borders)
  *      whose hull holds no outside cell, adds no pressure and adds at most
  *      max_empty of its volume as new empty space become one, cheapest
- *      first: slivers that free no wanted cell go back. Then, while there are more boxes than the
- *      budget, the pair whose hull adds the least pressure, then the fewest
- *      empty cells, and holds no outside cell, merges. If that cannot meet
+ *      first: slivers that free no wanted cell go back. Then, while
+ *      there are more boxes than the budget, the pair whose hull adds the
+ *      least pressure, then the fewest empty cells, and holds no outside
+ *      cell, merges. If that cannot meet
  *      the budget (or keeping outside cells out would take more than
  *      4 x ECM_MAX_BOXES_LIMIT boxes and nodes), the problem boxes are only
  *      tightened (step 6): never more boxes than the object had.
