@@ -35,44 +35,43 @@
  *      problem box; it is outside when it meets no problem box (space the
  *      map leaves free, or only a kept box's): no new box may hold an
  *      outside cell, so openings of earlier rounds stay open.
- *   3. Pressure: each cluster stands for a region: its points' bounding
- *      box, grown by half the avatar's size, stretched along the axis of
- *      the face of its box nearest its centroid through the problem boxes
- *      it presses on (users walk in across that face: a tunnel under an
- *      arch, a room behind a door), across them too along that face's
- *      horizontal axis (users who came in roam sideways: the far wall of a
- *      tunnel, the column pair past the last one pressed), and upwards by
- *      one cell (a user stands on a box of the map, whose top may be a cell
- *      above the geometry) and then by the step height. Only space an avatar fits in counts (a
- *      morphological opening of the cells no triangle touches and no kept
- *      box meets, space outside the grid counting as empty): the hollow
- *      inside a thick wall is never wanted. Users outside the box they name
- *      want only places they can walk to: placements reached from those
- *      within a cell of the cluster's points that overlap no box of the
- *      map (where users stood), through placements that fit and stand on
- *      something within a step and a cell under their footprint (or the
- *      floor under the grid), 6-connected. The well inside a ring wall
- *      nobody steps over, or the inside of a closed drawer pedestal, is no
- *      place to open (a gazebo's ring spent 45 boxes around its well and
- *      kept corners a hand's width proud). Not for clusters on a floor or
- *      a ceiling face, and not when no placement starts a walk. A placement of the avatar that
- *      reaches into the step band must stand on something (a blocked cell
- *      right under its footprint, or the floor under the grid): users step
- *      up onto a base, not into the air. Each wanted cell of a problem box
- *      gets the cluster's pressure, by its weight: from 4 for the lightest
- *      to 255 for the heaviest near its points, a quarter of that where the
- *      region is only stretched, a sixteenth beside the points' own reach;
- *      pressures of several clusters add, up to 255. Users who stood inside
- *      the box they name (a building they start in) cross no face: their
- *      region is their points' reach, and they walk on to every place they
- *      can reach in the grid, so the cells covered by every avatar
- *      placement reachable on foot from their points (placements that fit
- *      and stand on something within a step and a cell below, 6-connected:
- *      steps and stairs climbed, never the air) get a sixteenth too. Only
- *      where this round's users went, the rest of the building stayed one
- *      box of arcades and aisles for later users (Sponza: up to 271 phantom
- *      blocks per 1,000 moves at round 3); stretched up through the floor,
- *      the region spent 40 boxes on galleries nobody reaches.
+ *   3. Pressure: each cluster stands for a region: its points' bounding box,
+ *      grown by half the avatar's size, stretched along the axis of the face of
+ *      its box nearest its centroid through the problem boxes it presses on
+ *      (users walk in across that face: a tunnel under an arch, a room behind a
+ *      door), across them too along that face's horizontal axis (users who came
+ *      in roam sideways: the far wall of a tunnel, the column pair past the
+ *      last one pressed), and upwards by one cell (a user stands on a box of
+ *      the map, whose top may be a cell above the geometry) and then by the
+ *      step height. Only space an avatar fits in counts (a morphological
+ *      opening of the cells no triangle touches and no kept box meets, space
+ *      outside the grid counting as empty): the hollow inside a thick wall is
+ *      never wanted. Users outside the box they name want only places they can
+ *      walk to: placements reached from those within a cell of the cluster's
+ *      points that overlap no box of the map (where users stood), through
+ *      placements that fit and stand on something within a step and a cell
+ *      under their footprint (or the floor under the grid), 6-connected. The
+ *      well inside a ring wall nobody steps over, or the inside of a closed
+ *      drawer pedestal, is no place to open (a gazebo's ring spent 45 boxes
+ *      around its well and kept corners a hand's width proud). Not for clusters
+ *      on a floor or a ceiling face, and not when no placement starts a walk. A
+ *      placement of the avatar that reaches into the step band must stand on
+ *      something (a blocked cell right under its footprint, or the floor under
+ *      the grid): users step up onto a base, not into the air. Each wanted cell
+ *      of a problem box gets the cluster's pressure, by its weight: from 4 for
+ *      the lightest to 255 for the heaviest near its points, a quarter of that
+ *      where the region is only stretched, a sixteenth beside the points' own
+ *      reach; pressures of several clusters add, up to 255. Users who stood
+ *      inside the box they name (a building they start in) cross no face: their
+ *      region is their points' reach, and they walk on to every place they can
+ *      reach in the grid, so the cells covered by every avatar placement
+ *      reachable on foot from their points (placements that fit and stand on
+ *      something within a step and a cell below, 6-connected: steps and stairs
+ *      climbed, never the air) get a sixteenth too. Only where this round's
+ *      users went, the rest of the building stayed one box of arcades and
+ *      aisles for later users (Sponza: up to 271 phantom blocks per 1,000 moves
+ *      at round 3); stretched up through the floor, the region spent 40 boxes
+ *      on galleries nobody reaches.
  *   4. Divide, best first: shrink the grid to its cells to cover; cut the
  *      node first in line in two and shrink the parts (empty parts go).
  *      Nodes holding outside cells come first and are always cut (the cut
