@@ -45,33 +45,34 @@
  *      the map, whose top may be a cell above the geometry) and then by the
  *      step height. Only space an avatar fits in counts (a morphological
  *      opening of the cells no triangle touches and no kept box meets, space
- *      outside the grid counting as empty): the hollow inside a thick wall is
- *      never wanted. Users outside the box they name want only places they can
- *      walk to: placements reached from those within a cell of the cluster's
- *      points that overlap no box of the map (where users stood), through
- *      placements that fit and stand on something within a step and a cell
- *      under their footprint (or the floor under the grid), 6-connected. The
- *      well inside a ring wall nobody steps over, or the inside of a closed
- *      drawer pedestal, is no place to open (a gazebo's ring spent 45 boxes
- *      around its well and kept corners a hand's width proud). Not for clusters
- *      on a floor or a ceiling face, and not when no placement starts a walk. A
- *      placement of the avatar that reaches into the step band must stand on
- *      something (a blocked cell right under its footprint, or the floor under
- *      the grid): users step up onto a base, not into the air. Each wanted cell
- *      of a problem box gets the cluster's pressure, by its weight: from 4 for
- *      the lightest to 255 for the heaviest near its points, a quarter of that
- *      where the region is only stretched, a sixteenth beside the points' own
- *      reach; pressures of several clusters add, up to 255. Users who stood
- *      inside the box they name (a building they start in) cross no face: their
- *      region is their points' reach, and they walk on to every place they can
- *      reach in the grid, so the cells covered by every avatar placement
- *      reachable on foot from their points (placements that fit and stand on
- *      something within a step and a cell below, 6-connected: steps and stairs
- *      climbed, never the air) get a sixteenth too. Only where this round's
- *      users went, the rest of the building stayed one box of arcades and
- *      aisles for later users (Sponza: up to 271 phantom blocks per 1,000 moves
- *      at round 3); stretched up through the floor, the region spent 40 boxes
- *      on galleries nobody reaches.
+ *      outside the grid counting as empty, and nothing under the world's
+ *      floor): the hollow inside a thick wall, or the space under a table or a
+ *      spiral stair's treads, is never wanted. Users outside the box they name
+ *      want only places they can walk to: placements reached from those within
+ *      a cell of the cluster's points that overlap no box of the map (where
+ *      users stood), through placements that fit and stand on something within
+ *      a step and a cell under their footprint (or the floor under the grid),
+ *      6-connected. The well inside a ring wall nobody steps over, or the
+ *      inside of a closed drawer pedestal, is no place to open (a gazebo's ring
+ *      spent 45 boxes around its well and kept corners a hand's width proud).
+ *      Not for clusters on a floor or a ceiling face, and not when no placement
+ *      starts a walk. A placement of the avatar that reaches into the step band
+ *      must stand on something (a blocked cell right under its footprint, or
+ *      the floor under the grid): users step up onto a base, not into the air.
+ *      Each wanted cell of a problem box gets the cluster's pressure, by its
+ *      weight: from 4 for the lightest to 255 for the heaviest near its points,
+ *      a quarter of that where the region is only stretched, a sixteenth beside
+ *      the points' own reach; pressures of several clusters add, up to 255.
+ *      Users who stood inside the box they name (a building they start in)
+ *      cross no face: their region is their points' reach, and they walk on to
+ *      every place they can reach in the grid, so the cells covered by every
+ *      avatar placement reachable on foot from their points (placements that
+ *      fit and stand on something within a step and a cell below, 6-connected:
+ *      steps and stairs climbed, never the air) get a sixteenth too. Only where
+ *      this round's users went, the rest of the building stayed one box of
+ *      arcades and aisles for later users (Sponza: up to 271 phantom blocks per
+ *      1,000 moves at round 3); stretched up through the floor, the region
+ *      spent 40 boxes on galleries nobody reaches.
  *   4. Divide, best first: shrink the grid to its cells to cover; cut the
  *      node first in line in two and shrink the parts (empty parts go).
  *      Nodes holding outside cells come first and are always cut (the cut
@@ -194,10 +195,13 @@ typedef struct ecm_params {
     double max_empty;   /* share of a merged box that may be new empty space, 0..1 */
     float avatar[3];    /* the avatar's size in object-local units (> 0) */
     float step;         /* the highest step the avatar climbs, object-local units (>= 0) */
+    float floor;        /* the world's floor, object-local height: no avatar stands
+                         * below it (step 3); -INFINITY (the default): none */
 } ecm_params;
 
 /* Fills p with the defaults above and the default avatar's size and step
- * (avatar.h; for an object of scale 1: divide by the object's scale). */
+ * (avatar.h; for an object of scale 1: divide by the object's scale), and
+ * no floor (server/pipeline/apply.c sets the world's). */
 void ecm_params_default(ecm_params *p);
 
 /* A cluster of unexpected collisions, in object-local coordinates. */

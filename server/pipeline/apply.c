@@ -219,6 +219,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     for (int a = 0; a < 3; a++)
         lp.avatar[a] = (float)(p->avatar[a] / scale);
     lp.step = (float)(p->step / scale);
+    lp.floor = (float)(-at.pos[1] / scale); /* the world's floor, y = 0 */
     char why[256];
     /* The triangles' boxes, for the refinement and its judge. */
     if (trimesh_init(&mesh, o.tris, o.tri_count, why, sizeof why) < 0 ||

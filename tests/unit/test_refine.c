@@ -1606,6 +1606,47 @@ static void test_step_onto_base(void **state)
     ecm_result_free(&r);
 }
 
+/* No avatar stands below the world's floor. A table 0.7 m high (a top
+ * x, z 0..2, legs 0.1 m square at its corners) that users stopped at its
+ * near face: nobody fits under it, so nothing there is wanted and its box
+ * stays whole. Without a floor, avatars sunk to the waist below the grid
+ * reached the space between the legs (a spiral stair's treads: 12% of the
+ * wanted cells), and the division opened it. */
+static void test_no_one_stands_below_the_floor(void **state)
+{
+    (void)state;
+    float tris[60 * 9];
+    box_surface((const float[3]){0, 0.7f, 0}, (const float[3]){2, 0.8f, 2}, tris);
+    for (int i = 0; i < 4; i++) {
+        float x = i & 1 ? 1.9f : 0, z = i & 2 ? 1.9f : 0;
+        box_surface((const float[3]){x, 0, z}, (const float[3]){x + 0.1f, 0.7f, z + 0.1f}, tris + (1 + i) * 12 * 9);
+    }
+    const float box[6] = {0, 0, 0, 2, 0.8f, 2}, under[3] = {1, 0.3f, 1};
+    const ecm_cluster cl = {.box = 0, .min = {0.5f, 0.4f, 0}, .max = {1.5f, 0.8f, 0},
+                            .centroid = {1, 0.6f, 0}, .weight = 100};
+    ecm_params p;
+    ecm_params_default(&p);
+    ecm_result r;
+    snprintf(check_ctx, sizeof check_ctx, "table on the floor");
+    p.floor = 0;
+    refine_ok(&p, tris, 60, CBOXES(box), 1, &cl, 1, &r);
+    CHECK(r.wanted == 0, "%llu cells wanted", (unsigned long long)r.wanted);
+    CHECK(r.count == 1, "%u boxes", r.count);
+    ecm_result_free(&r);
+
+    snprintf(check_ctx, sizeof check_ctx, "table with no floor");
+    p.floor = -INFINITY;
+    refine_ok(&p, tris, 60, CBOXES(box), 1, &cl, 1, &r);
+    CHECK(r.wanted > 0, "nothing wanted");
+    CHECK(!blocked(CBOXES(r.boxes), r.count, under, under), "the space under the table stayed shut");
+    ecm_result_free(&r);
+
+    char err[256];
+    p.floor = NAN;
+    CHECK(ecm_refine(&p, tris, 60, CBOXES(box), 1, &cl, 1, &r, err, sizeof err) == -EINVAL, "a NaN floor passed");
+    assert_non_null(strstr(err, "floor"));
+}
+
 /* A thick wall (z 1.9..3.1) with a doorway tunnel through it (x 1.5..2.5,
  * y up to 2.2), its right half set back to z = 1.95, in a map of two boxes
  * split at x = 2; users stopped in front of the named left box, close to
@@ -2312,6 +2353,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_outside_stays_open),
         cmocka_unit_test(test_merge_across_borders),
         cmocka_unit_test(test_step_onto_base),
+        cmocka_unit_test(test_no_one_stands_below_the_floor),
         cmocka_unit_test(test_wanted_region),
         cmocka_unit_test(test_cap_exact),
         cmocka_unit_test(test_cut_frees_the_most), cmocka_unit_test(test_merge_max_empty),
