@@ -1018,7 +1018,8 @@ static ecm_cluster random_cluster(rng *r, const float b[6], uint32_t idx)
 
 /* Random parameters at the given depth: any cap from 1 to the limit, any
  * share of empty space, an avatar from a hundredth of the object to twice
- * its size. */
+ * its size, and no floor or one from half the box's height under it to
+ * half way up (the ground may cut through the object). */
 static void random_params(rng *r, const float b[6], uint32_t depth, ecm_params *p)
 {
     static const uint32_t caps[] = {1, 2, 3, 8, ECM_MAX_BOXES_DEFAULT, ECM_MAX_BOXES_LIMIT};
@@ -1033,6 +1034,9 @@ static void random_params(rng *r, const float b[6], uint32_t depth, ecm_params *
     ext = ext > 0 ? ext : 1;
     for (int a = 0; a < 3; a++)
         p->avatar[a] = (float)(ext * pow(10, -2 + 2.3 * rng_unit(r)));
+    double h = (double)b[4] - b[1];
+    if (rng_below(r, 3))
+        p->floor = (float)(b[1] + h * (rng_unit(r) - 0.5));
 }
 
 /* One random object: ntris triangles in a random box; the object's one box
