@@ -861,10 +861,10 @@ static uint32_t step_cells(const work *w, const ecm_params *p)
 /* Clears in b (index 0 at cell o on each axis, o may be negative) every
  * cell set in cells (w->blocked or w->mapped), and every cell under the
  * world's floor (ecm_params.floor), inside the grid or not: the ground.
- * Cells outside the grid above it stay as they are. Without the ground, avatars sunk to
- * the waist below the floor reached the space under a spiral stair's
- * treads, 0.4 m high, and the division spent boxes opening it (12% of the
- * wanted cells, and 14 of the 64 boxes, were such space). */
+ * Cells outside the grid above it stay as they are. Without the ground,
+ * avatars sunk to the waist below the floor reached the space under a
+ * spiral stair's treads, 0.4 m high, and the division spent boxes opening
+ * it (12% of the wanted cells were such space). */
 static void clear_cells(const work *w, const uint64_t *cells, bits3 *b, const int64_t o[3])
 {
     for (uint32_t z = 0; z < b->dim[2]; z++) {
@@ -2066,7 +2066,7 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     uint32_t n = w->n = w->g.n;
     /* The ground: rows whose top is at or under the floor. */
     double below = w->g.cell[1] > 0 ? floor(((double)p->floor - w->g.min[1]) / w->g.cell[1] + 1e-6) : -INFINITY;
-    w->floor_row = below > INT32_MIN ? (int64_t)below : INT32_MIN;
+    w->floor_row = (int64_t)fmin(fmax(below, INT32_MIN), INT32_MAX); /* any float floor, no overflow */
     size_t cells = (size_t)n * n * n, table = (size_t)(n + 1) * (n + 1) * (n + 1);
     w->bw = (n + 63) / 64;
     w->cls = cvre_calloc(cells, 1);
