@@ -359,8 +359,11 @@ class Client:
         self.events = []
         self.partial = b""  # stdout read by until(), short of a newline
         if script is not None:
-            self.send(script)
-            self.proc.stdin.close()
+            try:
+                self.send(script)
+                self.proc.stdin.close()
+            except BrokenPipeError:
+                pass  # it ended before reading its script: wait() tells how
             self.proc.stdin = None  # so that communicate() does not touch it
 
     def send(self, text):
