@@ -789,25 +789,47 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
             mark_range(w, boxes[i], -KEPT_MARGIN, CELL_KEPT);
         }
     }
+    /* Eight cells at a time, one byte each in a 64-bit word (flag f of
+     * the eight at bit log2(f) of each byte): 2M cells took 5 ms one by
+     * one, a tenth of a bunny's refinement. */
+    uint64_t spread[256]; /* bit i of the index -> bit 0 of byte i */
+    for (uint32_t v = 0; v < 256; v++) {
+        spread[v] = 0;
+        for (int i = 0; i < 8; i++)
+            spread[v] |= (uint64_t)((v >> i) & 1u) << (8 * i);
+    }
+    const uint64_t ones = 0x0101010101010101ull;
+    const int problem_at = __builtin_ctz(CELL_PROBLEM), kept_at = __builtin_ctz(CELL_KEPT),
+              must_at = __builtin_ctz(CELL_MUST), occ_at = __builtin_ctz(CELL_OCCUPIED);
+    uint64_t outside = 0;
     for (uint32_t z = 0; z < n; z++)
         for (uint32_t y = 0; y < n; y++) {
             uint8_t *row = w->cls + (size_t)n * (y + (size_t)n * z);
             uint64_t *bits = w->blocked + w->bw * (y + (size_t)n * z);
             uint64_t *mbits = w->mapped + w->bw * (y + (size_t)n * z);
             uint64_t base = (uint64_t)n * (y + (uint64_t)n * z); /* the row in w->g.bits */
-            for (uint32_t x = 0; x < n; x++) {
-                if ((w->g.bits[(base + x) >> 6] >> ((base + x) & 63)) & 1u)
-                    row[x] |= (row[x] & CELL_PROBLEM) ? CELL_OCCUPIED | CELL_MUST : CELL_OCCUPIED;
-                if (!(row[x] & (CELL_MUST | CELL_PROBLEM))) {
-                    row[x] |= CELL_OUT;
-                    w->any_outside = 1;
-                }
-                if (row[x] & (CELL_OCCUPIED | CELL_KEPT))
-                    bits[x / 64] |= (uint64_t)1 << (x % 64);
-                if (row[x] & (CELL_OCCUPIED | CELL_KEPT | CELL_PROBLEM))
-                    mbits[x / 64] |= (uint64_t)1 << (x % 64);
+            for (uint32_t x = 0; x < n; x += 8) {
+                uint32_t cnt = n - x < 8 ? n - x : 8;
+                uint64_t at = base + x, c = 0, keep = cnt == 8 ? ~(uint64_t)0 : ((uint64_t)1 << (8 * cnt)) - 1;
+                uint64_t occ = w->g.bits[at >> 6] >> (at & 63);
+                if ((at & 63) + cnt > 64)
+                    occ |= w->g.bits[(at >> 6) + 1] << (64 - (at & 63));
+                occ = spread[occ & 0xff] & keep;
+                for (uint32_t i = 0; i < cnt; i++)
+                    c |= (uint64_t)row[x + i] << (8 * i);
+                c |= (occ << occ_at) | ((occ & (c >> problem_at)) << must_at);
+                uint64_t out = ~((c >> must_at) | (c >> problem_at)) & ones & keep;
+                c |= out * CELL_OUT;
+                outside |= out;
+                for (uint32_t i = 0; i < cnt; i++)
+                    row[x + i] = (uint8_t)(c >> (8 * i));
+                /* Each byte's flag to a bit: byte i's bit 0 lands on bit 56 + i. */
+                uint64_t blocked = ((c >> occ_at) | (c >> kept_at)) & ones, mapped = blocked | ((c >> problem_at) & ones);
+                bits[x / 64] |= ((blocked * 0x0102040810204080ull) >> 56) << (x % 64);
+                mbits[x / 64] |= ((mapped * 0x0102040810204080ull) >> 56) << (x % 64);
             }
         }
+    w->any_outside = outside != 0;
 }
 
 /* The 64 bits of a line of w->blocked or w->mapped from cell x on (x may
