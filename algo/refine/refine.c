@@ -1521,7 +1521,13 @@ static void add_parts(const tight *tt, uint32_t t, const double whole[6], uint32
             }
             return; /* the whole triangle: no other part adds anything */
         }
-        clip_into(tt->tris + 9 * (size_t)t, c, bb);
+        /* The part lies in tb and c: when bb holds that already, clipping
+         * cannot grow it (most triangles, once bb nears its final size). */
+        int held = 1;
+        for (int a = 0; a < 3; a++)
+            held &= bb[a] <= dmax(tb[a], c[a]) && bb[3 + a] >= dmin(tb[3 + a], c[3 + a]);
+        if (!held)
+            clip_into(tt->tris + 9 * (size_t)t, c, bb);
     }
 }
 
