@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The test suite: installs what is missing, then builds and tests in the
 # trees named (by default gcc and asan) under build-test/:
-#   gcc   warnings are errors, RelWithDebInfo: every test;
+#   gcc   warnings are errors, RelWithDebInfo (-O3 -g): every test;
 #   asan  clang, AddressSanitizer and UndefinedBehaviorSanitizer at -O1:
 #         every test;
 #   tsan  clang, ThreadSanitizer at -O1: the tests labelled `threads` (the
