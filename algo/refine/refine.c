@@ -1246,13 +1246,20 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     top = face == 1 ? hi[1] : cell_of(g, 1, (double)cl->max[1] + size[1] / 2 + g->cell[1], 1);
     uint32_t near_lo = cell_of(g, face, (double)cl->min[face] - size[face] / 2, 0);
     uint32_t near_hi = cell_of(g, face, (double)cl->max[face] + size[face] / 2, 1);
-    /* Bounded memory: past WANTED_CELLS_MAX the longest kernel is halved
-     * (more space counts as wanted, never less; only deep grids with a
-     * large avatar get there). */
+    /* The padding under the region starts at the floor: rows wholly under
+     * it are ground (clear_cells), hold no placement and pass nothing up
+     * to the rows above, through an erosion (which looks up) or a
+     * dilation (whose rows under the array are nothing). A region on the
+     * floor so loses a quarter of its rows. Bounded memory: past
+     * WANTED_CELLS_MAX the longest kernel is halved (more space counts as
+     * wanted, never less; only deep grids with a large avatar get there). */
+    uint32_t trim;
     for (;;) {
+        int64_t under = w->floor_row - ((int64_t)lo[1] - k[1]);
+        trim = under <= 0 ? 0 : under >= k[1] ? k[1] : (uint32_t)under;
         size_t total = 1;
         for (int a = 0; a < 3; a++) {
-            dim[a] = hi[a] - lo[a] + 2 * k[a]; /* index i is cell lo - k + i */
+            dim[a] = hi[a] - lo[a] + 2 * k[a] - (a == 1 ? trim : 0); /* index i is cell o + i (below) */
             total *= dim[a];
         }
         int longest = k[0] >= k[1] && k[0] >= k[2] ? 0 : k[1] >= k[2] ? 1 : 2;
@@ -1262,9 +1269,8 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     }
     /* Placements whose lowest corner is on this padded row or above reach
      * the step band (none when users cross a horizontal face). */
-    uint32_t band = face == 1 || top >= hi[1] ? dim[1] : top - lo[1] + 1;
-    if (band > dim[1])
-        band = dim[1];
+    int64_t band_at = (int64_t)top + 1 - lo[1] - trim; /* the row of cell top - k + 1 */
+    uint32_t band = face == 1 || top >= hi[1] || band_at >= dim[1] ? dim[1] : band_at <= 0 ? 0 : (uint32_t)band_at;
     bits3 b, u = {0};
     int rc = bits3_init(&b, dim);
     if (rc < 0)
@@ -1274,7 +1280,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
         return rc;
     }
     /* b: 1 = free (empty cells, and every cell outside the grid). */
-    const int64_t o[3] = {(int64_t)lo[0] - k[0], (int64_t)lo[1] - k[1], (int64_t)lo[2] - k[2]};
+    const int64_t o[3] = {(int64_t)lo[0] - k[0], (int64_t)lo[1] - k[1] + trim, (int64_t)lo[2] - k[2]};
     clear_cells(w, w->blocked, &b, o);
     /* u: 1 where a placement has nothing to stand on in the two cells under
      * its footprint (the kernel is rounded down, so a placement standing on
@@ -1304,7 +1310,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     uint32_t far = near / 4 ? near / 4 : 1, beside = near / 16 ? near / 16 : 1;
     for (uint32_t z = lo[2]; z < hi[2]; z++)
         for (uint32_t y = lo[1]; y < hi[1]; y++) {
-            const uint64_t *row = b.v + b.w * ((y - lo[1] + k[1]) + (size_t)dim[1] * (z - lo[2] + k[2]));
+            const uint64_t *row = b.v + b.w * ((y - lo[1] + k[1] - trim) + (size_t)dim[1] * (z - lo[2] + k[2]));
             /* The set bits of the region's cells, k[0] to t1 on the row. */
             uint32_t t1 = k[0] + hi[0] - lo[0];
             for (uint32_t q = k[0] / 64; q <= (t1 - 1) / 64; q++) {
