@@ -909,11 +909,32 @@ static void clear_cells(const work *w, const uint64_t *cells, bits3 *b, const in
 
 /* under (all 1, index 0 at cell o) becomes 1 where a placement of footprint
  * k stands on nothing: no cell is blocked in the s cells under any cell of
- * its footprint, and the grid's bottom (the floor) is further down. */
-static void mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uint32_t s, const uint32_t k[3])
+ * its footprint, and the grid's bottom (the floor) is further down. A slab
+ * of blocked lines at a time, dilated up by s, answers each row in one
+ * pass (s passes a row took 8% of a room's refinement with the step's 16
+ * cells). Returns 0 or -ENOMEM. */
+static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uint32_t s, const uint32_t k[3])
 {
+    /* near: row b of a z slab, the blocked cells of grid row b (none past
+     * the grid), dilated: those of rows b - s + 1 .. b. */
+    int64_t top = o[1] + (int64_t)under->dim[1];
+    const uint32_t ndim[3] = {under->dim[0], (uint32_t)(top > (int64_t)w->n ? top : (int64_t)w->n), 1};
+    bits3 near;
+    int rc = bits3_init(&near, ndim);
+    if (rc < 0)
+        return rc;
     for (uint32_t z = 0; z < under->dim[2]; z++) {
         int64_t cz = o[2] + z;
+        int in_grid = cz >= 0 && cz < w->n;
+        if (in_grid) {
+            for (uint32_t b = 0; b < ndim[1]; b++) {
+                uint64_t *r = near.v + near.w * b;
+                const uint64_t *line = w->blocked + w->bw * ((size_t)b + (size_t)w->n * (size_t)cz);
+                for (size_t i = 0; i < near.w; i++)
+                    r[i] = b < w->n ? blocked_bits(w, line, o[0] + 64 * (int64_t)i) : 0;
+            }
+            morph(&near, 1, s, 0);
+        }
         for (uint32_t y = 0; y < under->dim[1]; y++) {
             int64_t cy = o[1] + y;
             uint64_t *ru = under->v + under->w * (y + (size_t)under->dim[1] * z);
@@ -921,17 +942,17 @@ static void mark_unsupported(const work *w, bits3 *under, const int64_t o[3], ui
                 memset(ru, 0, under->w * sizeof *ru);
                 continue;
             }
-            if (cz < 0 || cz >= w->n)
+            if (!in_grid)
                 continue;
-            for (int64_t b = cy - s; b < cy && b < w->n; b++) {
-                const uint64_t *line = w->blocked + w->bw * ((size_t)b + (size_t)w->n * (size_t)cz);
-                for (size_t i = 0; i < under->w; i++)
-                    ru[i] &= ~blocked_bits(w, line, o[0] + 64 * (int64_t)i);
-            }
+            const uint64_t *rn = near.v + near.w * (size_t)(cy - 1);
+            for (size_t i = 0; i < under->w; i++)
+                ru[i] &= ~rn[i];
         }
     }
+    free(near.v);
     morph(under, 0, k[0], 1);
     morph(under, 2, k[2], 1);
+    return 0;
 }
 
 /* Fills in s, a line of nw words, the runs of set bits of mask (along the
@@ -1153,7 +1174,8 @@ static int keep_reached(const work *w, const ecm_cluster *cl, const ecm_params *
         goto done;
     size_t lines = (size_t)dim[1] * dim[2], words = lines * fit->w;
     memcpy(walk.v, fit->v, words * sizeof *walk.v);
-    mark_unsupported(w, &under, o, step_cells(w, p), k);
+    if ((rc = mark_unsupported(w, &under, o, step_cells(w, p), k)) < 0)
+        goto done;
     /* clear: cells no box of the map meets (outside the grid, or neither a
      * problem box's nor blocked), eroded to the placements in them. */
     clear_cells(w, w->mapped, &clear, o);
@@ -1285,8 +1307,11 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     /* u: 1 where a placement has nothing to stand on in the two cells under
      * its footprint (the kernel is rounded down, so a placement standing on
      * something may begin a cell above it), the grid's bottom the floor. */
-    if (u.v)
-        mark_unsupported(w, &u, o, 2, k);
+    if (u.v && (rc = mark_unsupported(w, &u, o, 2, k)) < 0) {
+        free(b.v);
+        free(u.v);
+        return rc;
+    }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 1);
     if (stretched && face != 1 && (rc = keep_reached(w, cl, p, &b, o, k)) < 0) {
@@ -1372,7 +1397,8 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
     clear_cells(w, w->blocked, &fit, o);
     for (int a = 0; a < 3; a++)
         morph(&fit, a, k[a], 1);
-    mark_unsupported(w, &under, o, s, k);
+    if ((rc = mark_unsupported(w, &under, o, s, k)) < 0)
+        goto done;
     size_t words = (size_t)n * n * fit.w;
     for (size_t i = 0; i < words; i++) {
         fit.v[i] &= ~under.v[i];
