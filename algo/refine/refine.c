@@ -911,8 +911,8 @@ static void clear_cells(const work *w, const uint64_t *cells, bits3 *b, const in
  * k stands on nothing: no cell is blocked in the s cells under any cell of
  * its footprint, and the grid's bottom (the floor) is further down. A slab
  * of blocked lines at a time, dilated up by s, answers each row in one
- * pass (s passes a row took 8% of a room's refinement with the step's 16
- * cells). Returns 0 or -ENOMEM. */
+ * pass (s passes a row took 8% of a room's later-round refinement, s 17
+ * there). Returns 0 or -ENOMEM. */
 static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uint32_t s, const uint32_t k[3])
 {
     /* near: row b of a z slab, the blocked cells of grid row b (none past
@@ -929,9 +929,13 @@ static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uin
         if (in_grid) {
             for (uint32_t b = 0; b < ndim[1]; b++) {
                 uint64_t *r = near.v + near.w * b;
+                if (b >= w->n) {
+                    memset(r, 0, near.w * sizeof *r);
+                    continue;
+                }
                 const uint64_t *line = w->blocked + w->bw * ((size_t)b + (size_t)w->n * (size_t)cz);
                 for (size_t i = 0; i < near.w; i++)
-                    r[i] = b < w->n ? blocked_bits(w, line, o[0] + 64 * (int64_t)i) : 0;
+                    r[i] = blocked_bits(w, line, o[0] + 64 * (int64_t)i);
             }
             morph(&near, 1, s, 0);
         }
