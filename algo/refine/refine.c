@@ -915,10 +915,11 @@ static void clear_cells(const work *w, const uint64_t *cells, bits3 *b, const in
  * there). Returns 0 or -ENOMEM. */
 static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uint32_t s, const uint32_t k[3])
 {
-    /* near: row b of a z slab, the blocked cells of grid row b (none past
-     * the grid), dilated: those of rows b - s + 1 .. b. */
-    int64_t top = o[1] + (int64_t)under->dim[1];
-    const uint32_t ndim[3] = {under->dim[0], (uint32_t)(top > (int64_t)w->n ? top : (int64_t)w->n), 1};
+    /* near: row i of a z slab, the blocked cells of grid row b0 + i (none
+     * past the grid), dilated: those of rows b0 + i - s + 1 .. b0 + i. Its
+     * rows: those under the rows of under, from s under the first. */
+    int64_t b0 = o[1] > (int64_t)s ? o[1] - (int64_t)s : 0, top = o[1] + (int64_t)under->dim[1];
+    const uint32_t ndim[3] = {under->dim[0], (uint32_t)(top - 1 > b0 ? top - 1 - b0 : 1), 1};
     bits3 near;
     int rc = bits3_init(&near, ndim);
     if (rc < 0)
@@ -927,15 +928,16 @@ static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uin
         int64_t cz = o[2] + z;
         int in_grid = cz >= 0 && cz < w->n;
         if (in_grid) {
-            for (uint32_t b = 0; b < ndim[1]; b++) {
-                uint64_t *r = near.v + near.w * b;
+            for (uint32_t i = 0; i < ndim[1]; i++) {
+                uint64_t *r = near.v + near.w * i;
+                int64_t b = b0 + i;
                 if (b >= w->n) {
                     memset(r, 0, near.w * sizeof *r);
                     continue;
                 }
                 const uint64_t *line = w->blocked + w->bw * ((size_t)b + (size_t)w->n * (size_t)cz);
-                for (size_t i = 0; i < near.w; i++)
-                    r[i] = blocked_bits(w, line, o[0] + 64 * (int64_t)i);
+                for (size_t q = 0; q < near.w; q++)
+                    r[q] = blocked_bits(w, line, o[0] + 64 * (int64_t)q);
             }
             morph(&near, 1, s, 0);
         }
@@ -948,7 +950,7 @@ static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uin
             }
             if (!in_grid)
                 continue;
-            const uint64_t *rn = near.v + near.w * (size_t)(cy - 1);
+            const uint64_t *rn = near.v + near.w * (size_t)(cy - 1 - b0);
             for (size_t i = 0; i < under->w; i++)
                 ru[i] &= ~rn[i];
         }
