@@ -1992,10 +1992,6 @@ static int split_boxes(tight *tt, float (*boxes)[6], uint8_t *state, uint32_t co
     return (int)count;
 }
 
-/* Most old boxes a new box may meet for within_old to test it cell by
- * cell ((2m + 2)^3 cells); past it the box is taken apart. */
-#define CONTAIN_MAX 16u
-
 /* The closed intersection of boxes a and b into c; 0 when they do not meet. */
 static int intersect(const float a[6], const float b[6], float c[6])
 {
@@ -2008,62 +2004,98 @@ static int intersect(const float a[6], const float b[6], float c[6])
     return meets;
 }
 
-static int by_double(const void *x, const void *y)
+/* Most regions covers() looks at for one box: past it the box counts as
+ * not covered (taken apart: never a box out of the old map), and the
+ * recursion stays shallow. Boxes of a spiral stair's later rounds, over 20
+ * to 40 old boxes, take at most a few dozen. */
+#define COVER_REGIONS_MAX 1024u
+
+/* Whether the n boxes g[idx[..]] cover region r, but for slabs no wider
+ * than thin (rounding): r is cut at a face of one of them inside it, the
+ * one nearest its middle along its longest axis that has one, until one
+ * box holds each part or none meets it. idx is reordered (the boxes
+ * meeting r first), which keeps it the same set for the caller. *left:
+ * regions it may still look at (COVER_REGIONS_MAX); 0 when they ran out. */
+static int covers(const double r[6], const double (*g)[6], uint32_t *idx, uint32_t n, double thin, uint32_t *left)
 {
-    double a = *(const double *)x, b = *(const double *)y;
-    return (a > b) - (a < b);
+    if (*left == 0)
+        return 0;
+    --*left;
+    for (int a = 0; a < 3; a++)
+        if (r[3 + a] - r[a] <= thin)
+            return 1;
+    uint32_t m = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        const double *q = g[idx[i]];
+        int meets = 1, holds = 1;
+        for (int a = 0; a < 3; a++) {
+            meets &= q[a] < r[3 + a] - thin && q[3 + a] > r[a] + thin;
+            holds &= q[a] <= r[a] + thin && q[3 + a] >= r[3 + a] - thin;
+        }
+        if (holds)
+            return 1;
+        if (meets) {
+            uint32_t t = idx[m];
+            idx[m++] = idx[i];
+            idx[i] = t;
+        }
+    }
+    /* Longest axes first: the face nearest the middle of the first that has one. */
+    int order[3] = {0, 1, 2};
+    for (int i = 0; i < 3; i++)
+        for (int j = i + 1; j < 3; j++)
+            if (r[3 + order[j]] - r[order[j]] > r[3 + order[i]] - r[order[i]]) {
+                int t = order[i];
+                order[i] = order[j];
+                order[j] = t;
+            }
+    for (int o = 0; o < 3; o++) {
+        int a = order[o];
+        double mid = (r[a] + r[3 + a]) / 2, at = 0, best = INFINITY;
+        for (uint32_t i = 0; i < m; i++)
+            for (int f = 0; f < 2; f++) {
+                double v = g[idx[i]][3 * f + a];
+                if (v > r[a] + thin && v < r[3 + a] - thin && fabs(v - mid) < best) {
+                    best = fabs(v - mid);
+                    at = v;
+                }
+            }
+        if (best < INFINITY) {
+            double lo[6], hi[6];
+            memcpy(lo, r, sizeof lo);
+            memcpy(hi, r, sizeof hi);
+            lo[3 + a] = hi[a] = at;
+            return covers(lo, g, idx, m, thin, left) && covers(hi, g, idx, m, thin, left);
+        }
+    }
+    /* No face inside r: every box meeting it would hold it. */
+    return 0;
 }
 
 /*
  * Whether box b lies in the union of the n boxes pb (the old map), give or
- * take tol on each axis: the planes of their faces cut b into cells, and
- * each cell wider than thin (rounding) on every axis must lie in one of
- * them grown by tol. 0 also when b meets more than CONTAIN_MAX of them.
+ * take tol on each axis: its parts in each of them, grown by tol, cover it
+ * (covers; slabs no wider than thin are rounding). parts and idx: room for
+ * n each.
  */
-static int within_old(const float b[6], const float (*pb)[6], uint32_t n, const double tol[3], double thin)
+static int within_old(const float b[6], const float (*pb)[6], uint32_t n, const double tol[3], double thin,
+                      double (*parts)[6], uint32_t *idx)
 {
-    float q[CONTAIN_MAX][6];
     uint32_t m = 0;
     for (uint32_t i = 0; i < n; i++) {
         float c[6];
         if (!intersect(b, pb[i], c))
             continue;
-        if (m == CONTAIN_MAX)
-            return 0;
-        memcpy(q[m++], c, sizeof c);
-    }
-    double cut[3][2 * CONTAIN_MAX + 2];
-    uint32_t nc[3];
-    for (int a = 0; a < 3; a++) {
-        nc[a] = 0;
-        cut[a][nc[a]++] = b[a];
-        cut[a][nc[a]++] = b[3 + a];
-        for (uint32_t i = 0; i < m; i++) {
-            cut[a][nc[a]++] = q[i][a];
-            cut[a][nc[a]++] = q[i][3 + a];
+        for (int a = 0; a < 3; a++) {
+            parts[m][a] = (double)c[a] - tol[a];
+            parts[m][3 + a] = (double)c[3 + a] + tol[a];
         }
-        qsort(cut[a], nc[a], sizeof cut[a][0], by_double);
+        idx[m] = m;
+        m++;
     }
-    for (uint32_t i = 0; i + 1 < nc[0]; i++)
-        for (uint32_t j = 0; j + 1 < nc[1]; j++)
-            for (uint32_t k = 0; k + 1 < nc[2]; k++) {
-                const uint32_t at[3] = {i, j, k};
-                int wide = 1;
-                for (int a = 0; a < 3; a++)
-                    wide &= cut[a][at[a] + 1] - cut[a][at[a]] > thin;
-                if (!wide)
-                    continue;
-                int in = 0;
-                for (uint32_t r = 0; r < m && !in; r++) {
-                    in = 1;
-                    for (int a = 0; a < 3; a++)
-                        in &= cut[a][at[a]] >= (double)q[r][a] - tol[a] &&
-                              cut[a][at[a] + 1] <= (double)q[r][3 + a] + tol[a];
-                }
-                if (!in)
-                    return 0;
-            }
-    return 1;
+    const double r[6] = {b[0], b[1], b[2], b[3], b[4], b[5]};
+    uint32_t left = COVER_REGIONS_MAX;
+    return covers(r, (const double(*)[6])parts, idx, m, thin, &left);
 }
 
 /* Local float coordinates of a box of cells grown by twice RANGE_MARGIN
@@ -2344,6 +2376,8 @@ int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[
         return cvre_fail(err, errlen, -EINVAL, "the step height must be finite and not negative");
     if (isnan(p->floor) || p->floor == INFINITY)
         return cvre_fail(err, errlen, -EINVAL, "the floor must be finite or -infinity");
+    if (p->nstood && !p->stood)
+        return cvre_fail(err, errlen, -EINVAL, "%u places where users stood, and none given", p->nstood);
     if (!m || !m->box || m->ntris == 0)
         return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
     int rc = check_rest(boxes, nboxes, clusters, nclusters, err, errlen);
@@ -2449,6 +2483,99 @@ static uint32_t tighten_only(const ecm_params *p, const double objcell[3], const
  * and step 7 stopping at split_max. Fills *out (empty on error) as
  * ecm_refine does.
  */
+/* Whether box b meets an avatar where users stood (p->stood). */
+static int meets_stood(const ecm_params *p, const float b[6])
+{
+    for (uint32_t i = 0; i < p->nstood; i++) {
+        int meets = 1;
+        for (int a = 0; a < 3; a++)
+            meets &= p->stood[i][a] < b[3 + a] && p->stood[i][3 + a] > b[a];
+        if (meets)
+            return 1;
+    }
+    return 0;
+}
+
+/* The old map a new box must stay in (step 6), and within_old's room. */
+typedef struct old_map {
+    const float (*b)[6];
+    uint32_t n;
+    double tol[3];       /* how far a new box may reach out of it, */
+    double thin;         /* and by rounding alone (on every axis) */
+    const ecm_params *p; /* where users stood: by rounding alone there */
+    double (*parts)[6];
+    uint32_t *idx;
+} old_map;
+
+/* Whether new box b stays in the old map o. */
+static int fits_old(const old_map *o, const float b[6])
+{
+    const double exact[3] = {o->thin, o->thin, o->thin};
+    return within_old(b, o->b, o->n, o->tol, o->thin, o->parts, o->idx) &&
+           (!meets_stood(o->p, b) || within_old(b, o->b, o->n, exact, o->thin, o->parts, o->idx));
+}
+
+/* Most parts rejoin() joins again (it tests pairs, each against the old
+ * map): a box over more problem boxes than that stays in its parts. */
+#define REJOIN_MAX 64u
+
+/*
+ * The k parts of a box taken apart (step 6) join again, two at a time,
+ * while their hull lies in the old map (the n boxes pb, give or take tol:
+ * within_old), the pair with the smallest hull first; each join tightened.
+ * ok: room for k * k flags (pair i < j at i * k + j), k <= REJOIN_MAX.
+ * Returns the parts left, first in c.
+ */
+static uint32_t rejoin(tight *tt, float (*c)[6], uint32_t k, const old_map *o, uint8_t *ok)
+{
+    const uint32_t stride = k;
+#define PAIR(i, j) ok[((i) < (j) ? (i) : (j)) * stride + ((i) < (j) ? (j) : (i))]
+    for (uint32_t i = 0; i < k; i++)
+        for (uint32_t j = i + 1; j < k; j++) {
+            float h[6];
+            memcpy(h, c[i], sizeof h);
+            widen(h, c[j]);
+            PAIR(i, j) = (uint8_t)fits_old(o, h);
+        }
+    for (;;) {
+        uint32_t bi = 0, bj = 0;
+        double best = INFINITY;
+        for (uint32_t i = 0; i < k; i++)
+            for (uint32_t j = i + 1; j < k; j++)
+                if (PAIR(i, j)) {
+                    float h[6];
+                    memcpy(h, c[i], sizeof h);
+                    widen(h, c[j]);
+                    double v = box_volume(h, h + 3);
+                    if (v < best) {
+                        best = v;
+                        bi = i;
+                        bj = j;
+                    }
+                }
+        if (best == INFINITY)
+            return k;
+        widen(c[bi], c[bj]);
+        tighten(tt, c[bi]);
+        /* The last part takes bj's place, and its flags with it. */
+        k--;
+        if (bj != k) {
+            memcpy(c[bj], c[k], sizeof c[bj]);
+            for (uint32_t i = 0; i < k; i++)
+                if (i != bj)
+                    PAIR(i, bj) = PAIR(i, k);
+        }
+        for (uint32_t i = 0; i < k; i++)
+            if (i != bi) {
+                float h[6];
+                memcpy(h, c[i], sizeof h);
+                widen(h, c[bi]);
+                PAIR(i, bi) = (uint8_t)fits_old(o, h);
+            }
+    }
+#undef PAIR
+}
+
 static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
                         const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
                         ecm_result *out, char *err, size_t errlen)
@@ -2457,8 +2584,10 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
     int rc = -ENOMEM;
     uint8_t *problem = cvre_calloc(nboxes, 1);
     float(*pb)[6] = NULL;
-    double(*clip)[6] = NULL;
-    uint8_t *state = NULL;
+    double(*clip)[6] = NULL, (*parts)[6] = NULL;
+    float(*pc)[6] = NULL;
+    uint8_t *state = NULL, *ok = NULL;
+    uint32_t *idx = NULL;
     work w = {0};
     tight tt = {0};
     if (!problem)
@@ -2502,13 +2631,17 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         whole = rc;
         pb = cvre_malloc(nproblem * sizeof *pb);
         clip = cvre_malloc(nproblem * sizeof *clip);
+        parts = cvre_malloc(nboxes * sizeof *parts);
+        idx = cvre_malloc(nboxes * sizeof *idx);
+        pc = cvre_malloc(nproblem * sizeof *pc);
+        ok = cvre_malloc((size_t)REJOIN_MAX * REJOIN_MAX);
         /* Never more than max boxes, or the object's own count (only
          * tightened); one more for the box being placed. */
         uint32_t limit = p->max_boxes > nboxes ? p->max_boxes : nboxes, room = limit + 1;
         out->boxes = cvre_malloc((size_t)room * sizeof *out->boxes);
         state = cvre_malloc(room);
         rc = -ENOMEM;
-        if (!pb || !clip || !out->boxes || !state)
+        if (!pb || !clip || !parts || !idx || !pc || !ok || !out->boxes || !state)
             goto done;
         double scale = 0;
         for (int a = 0; a < 6; a++)
@@ -2540,9 +2673,9 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
          * problem box, tightened; if they pass the limit, the division runs
          * again with as many boxes fewer (APART_RETRIES times), and then the
          * problem boxes are only tightened. */
-        double tol[3];
+        old_map om = {.b = boxes, .n = nboxes, .thin = 1e3 * tt.eps, .p = p, .parts = parts, .idx = idx};
         for (int a = 0; a < 3; a++)
-            tol[a] = fmax(1e3 * tt.eps, fmin(2 * w.g.cell[a], fmin(p->avatar[0], p->avatar[2]) / 4));
+            om.tol[a] = fmax(om.thin, fmin(2 * w.g.cell[a], fmin(p->avatar[0], p->avatar[2]) / 4));
         for (uint32_t retry = 0;; retry++) {
             uint32_t over = 0; /* boxes past the limit */
             uint32_t nb = whole ? nproblem : w.out.n + ntighten;
@@ -2566,17 +2699,24 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
                                   {(uint16_t)hi[0], (uint16_t)hi[1], (uint16_t)hi[2]}};
                 uint8_t st = svt_sum(&w.press, &near) > 0 ? 0 : 2;
                 uint32_t pressed = whole || (divided && svt_sum(&w.press, &w.out.b[j]) > 0) ? 1u : 0u;
-                /* The box itself, or its parts in each problem box. */
-                int apart = divided && !within_old(b, boxes, nboxes, tol, 1e3 * tt.eps);
-                for (uint32_t i = 0; i < (apart ? nproblem : 1); i++) {
-                    float c[6];
-                    if (apart && !(intersect(b, pb[i], c) && tighten(&tt, c)))
-                        continue;
+                /* The box itself, or its parts in each problem box, joined
+                 * again where they can. */
+                uint32_t k = 1;
+                memcpy(pc[0], b, sizeof b);
+                if (divided && !fits_old(&om, b)) {
+                    k = 0;
+                    for (uint32_t i = 0; i < nproblem; i++)
+                        if (intersect(b, pb[i], pc[k]) && tighten(&tt, pc[k]))
+                            k++;
+                    if (k <= REJOIN_MAX)
+                        k = rejoin(&tt, pc, k, &om, ok);
+                }
+                for (uint32_t i = 0; i < k; i++) {
                     if (out->count == limit) {
                         over++;
                         continue;
                     }
-                    memcpy(out->boxes[out->count], apart ? c : b, sizeof c);
+                    memcpy(out->boxes[out->count], pc[i], sizeof pc[i]);
                     state[out->count++] = st;
                     out->capped += pressed;
                 }
@@ -2615,6 +2755,10 @@ done:
     work_free(&w);
     free(pb);
     free(clip);
+    free(parts);
+    free(idx);
+    free(pc);
+    free(ok);
     free(state);
     tribins_free(&tt.bins);
     free(problem);

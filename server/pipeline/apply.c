@@ -195,6 +195,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     trimesh mesh = {0};
     ecm_result r = {0};
     judge_sample *samples = NULL;
+    float(*stood)[6] = NULL;
     uint32_t nsamples = 0;
     double scale = 0;
     proto_transform at;
@@ -221,6 +222,19 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     lp.step = (float)(p->step / scale);
     lp.floor = (float)(-at.pos[1] / scale); /* the world's floor, y = 0 */
     char why[256];
+    if ((rc = load_samples(d, f, n, &at, &samples, &nsamples, err, errlen)) < 0)
+        goto done;
+    /* The avatars at the samples, in local units: no new box may reach out
+     * of the old map where they stood (refine.h, step 6). */
+    stood = cvre_xmalloc((nsamples ? nsamples : 1) * sizeof *stood);
+    for (uint32_t i = 0; i < nsamples; i++)
+        for (int a = 0; a < 3; a++) {
+            double half = a == 1 ? 0 : p->avatar[a] / 2;
+            stood[i][a] = (float)((samples[i].pos[a] - half) / scale);
+            stood[i][3 + a] = (float)((samples[i].pos[a] + (a == 1 ? p->avatar[1] : half)) / scale);
+        }
+    lp.stood = (const float(*)[6])stood;
+    lp.nstood = nsamples;
     /* The triangles' boxes, for the refinement and its judge. */
     if (trimesh_init(&mesh, o.tris, o.tri_count, why, sizeof why) < 0 ||
         ecm_refine_mesh(&lp, &mesh, (const float(*)[6])o.boxes, o.box_count, clusters, n, &r, why, sizeof why) < 0) {
@@ -233,8 +247,6 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     out->boxes_after = r.count;
     if (same_boxes((const float(*)[6])r.boxes, r.count, (const float(*)[6])o.boxes, o.box_count))
         goto done; /* unchanged: rc is 0, out->version 0 */
-    if ((rc = load_samples(d, f, n, &at, &samples, &nsamples, err, errlen)) < 0)
-        goto done;
     judge_params jp;
     judge_params_default(&jp);
     memcpy(jp.move.size, p->avatar, sizeof jp.move.size);
@@ -278,6 +290,7 @@ done:
     trimesh_free(&mesh);
     db_ecm_object_free(&o);
     free(samples);
+    free(stood);
     free(clusters);
     free(cluster_ids);
     return rc;

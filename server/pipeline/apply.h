@@ -58,7 +58,9 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len);
  * version, of run run_id; 0: none recorded). p's avatar is in metres; it is
  * divided by the object's scale. The judge's samples are the object's
  * collisions with that version (the newest APPLY_SAMPLES_READ) that lie in
- * a cluster's extent, turned into the object's metric frame. Returns:
+ * a cluster's extent, turned into the object's metric frame; the avatars
+ * there are where users stood for the refinement too (refine.h, step 6).
+ * Returns:
  *   0         done: out->version is the version written; or out->candidate
  *             the candidate the judge rejected (stored; not published), or
  *             the one it rejected earlier for the same clusters (then

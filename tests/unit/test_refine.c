@@ -749,6 +749,27 @@ static void test_new_boxes_stay_near_the_old_map(void **state)
               (double)r.boxes[i][0], (double)r.boxes[i][1], (double)r.boxes[i][2], (double)r.boxes[i][3],
               (double)r.boxes[i][4], (double)r.boxes[i][5]);
     ecm_result_free(&r);
+
+    /* A user stood at the back board's face (the avatar's box touching it):
+     * one new box reached half a millimetre in front of it, within the
+     * tolerance; the user would have stood inside it. Where users stood,
+     * no new box reaches out of the old map at all. */
+    const float stood[1][6] = {{-1.0f, -0.5f, 0.238f, -0.8f, 0.1f, 0.437999964f}};
+    p.stood = stood;
+    p.nstood = 1;
+    refine_model(&p, &m, CBOXES(old), 4, &cl, 1, &r);
+    assert_true(r.count > 4);
+    const float exact[3] = {1e-5f, 1e-5f, 1e-5f};
+    for (uint32_t i = 0; i < r.count; i++) {
+        int meets = 1;
+        for (int a = 0; a < 3; a++)
+            meets &= r.boxes[i][a] < stood[0][3 + a] && r.boxes[i][3 + a] > stood[0][a];
+        CHECK(!meets || within_boxes(r.boxes[i], old, 4, exact),
+              "box %u (%g %g %g .. %g %g %g) meets the user and reaches out of the old map", i,
+              (double)r.boxes[i][0], (double)r.boxes[i][1], (double)r.boxes[i][2], (double)r.boxes[i][3],
+              (double)r.boxes[i][4], (double)r.boxes[i][5]);
+    }
+    ecm_result_free(&r);
     import_mesh_free(&m);
 }
 
@@ -1229,12 +1250,34 @@ static void test_flat_objects(void **state)
 
 /* ---- what is not wanted stays covered ---------------------------------- */
 
+/* Refines the 12 triangles tris (a box's surface) in the nboxes boxes
+ * pressed by cl, where nothing is wanted: the result is one box, want
+ * (rounded outwards by at most one float step). */
+static void one_box_left(const ecm_params *p, const float *tris, const float (*boxes)[6], uint32_t nboxes,
+                         const ecm_cluster *cl, const float want[6])
+{
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(p, tris, 12, boxes, nboxes, cl, 1, &r, err, sizeof err), 0);
+    check_result(p, tris, 12, boxes, nboxes, cl, 1, &r, 1 << p->depth);
+    assert_int_equal(r.wanted, 0);
+    assert_int_equal(r.capped, 0);
+    CHECK(r.count == 1, "%u boxes", r.count);
+    assert_true(box_near(r.boxes[0], want));
+    ecm_result_free(&r);
+}
+
 /* Users stopped beside the object, out of its box on the other axes: no
  * cell is wanted, so the box only shrinks to the geometry. A cube [-1,
  * 1]^3 in a box [-2, 2]^3 at depth 4 (cells of 1/4): its faces lie on cell
  * faces and touch the cells on both sides (cells are closed), but the box
- * is tightened to the triangles, so the one box left is [-1, 1]^3, rounded
- * outwards by at most one float step. */
+ * is tightened to the triangles, so the one box left is [-1, 1]^3.
+ *
+ * A slab 5 x 1 x 5 whose map is 25 columns of 1 x 1 (an earlier round's),
+ * pressed by users standing all over it: nothing is wanted either, so the
+ * division keeps the slab one box, which lies in the old map although it
+ * meets all 25 of its boxes. Step 6 took every box meeting more than 16
+ * old ones apart, and the map came back as the 25 columns. */
 static void test_nothing_wanted_only_shrinks(void **state)
 {
     (void)state;
@@ -1247,15 +1290,20 @@ static void test_nothing_wanted_only_shrinks(void **state)
     ecm_params_default(&p);
     p.depth = 4;
     p.avatar[0] = p.avatar[1] = p.avatar[2] = 0.3f;
-    ecm_result r;
-    char err[256];
-    assert_int_equal(ecm_refine(&p, tris, 12, CBOXES(box), 1, &cl, 1, &r, err, sizeof err), 0);
-    check_result(&p, tris, 12, CBOXES(box), 1, &cl, 1, &r, 16);
-    assert_int_equal(r.wanted, 0);
-    assert_int_equal(r.capped, 0);
-    assert_int_equal(r.count, 1);
-    assert_true(box_near(r.boxes[0], (const float[6]){-1, -1, -1, 1, 1, 1}));
-    ecm_result_free(&r);
+    one_box_left(&p, tris, CBOXES(box), 1, &cl, (const float[6]){-1, -1, -1, 1, 1, 1});
+
+    snprintf(check_ctx, sizeof check_ctx, "slab over 25 columns");
+    box_surface((const float[3]){0, 0, 0}, (const float[3]){5, 1, 5}, tris);
+    float old[25][6];
+    for (int i = 0; i < 25; i++) {
+        const float x = (float)(i % 5), z = (float)(i / 5);
+        memcpy(old[i], (const float[6]){x, 0, z, x + 1, 1, z + 1}, sizeof old[i]);
+    }
+    cl = (ecm_cluster){.box = 12, .min = {0.4f, 1, 0.4f}, .max = {4.6f, 1, 4.6f}, .centroid = {2.5f, 1, 2.5f},
+                       .weight = 500};
+    ecm_params_default(&p);
+    p.depth = 5;
+    one_box_left(&p, tris, CBOXES(old), 25, &cl, (const float[6]){0, 0, 0, 5, 1, 5});
 }
 
 /* A closed wall 4 x 3 x 0.3 m (its two faces 0.3 apart, the avatar 0.6
