@@ -174,18 +174,6 @@ static int maybe_touches(const geometry *g, const double lo[3], const double hi[
     return voxel_svt_sum(&g->svt, a, b) > 0;
 }
 
-/* Whether triangle t (9 floats) with bounding box b overlaps the local box
- * [lo, hi]. */
-static int tri_overlaps(const float *t, const float b[6], const double lo[3], const double hi[3])
-{
-    if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
-        return 0;
-    double v[9];
-    for (int k = 0; k < 9; k++)
-        v[k] = t[k];
-    return voxel_tri_box_overlap(v, lo, hi);
-}
-
 /* Whether the metric box [lo, hi] overlaps a triangle, exactly. */
 static int touches_exactly(geometry *g, const double lo[3], const double hi[3])
 {
@@ -199,7 +187,7 @@ static int touches_exactly(geometry *g, const double lo[3], const double hi[3])
     if (!inside) { /* beyond the triangles indexed: all of them, one by one */
         const trimesh *m = g->in->mesh;
         for (uint32_t i = 0; i < m->ntris; i++)
-            if (tri_overlaps(m->tris + 9 * (size_t)i, m->box[i], l, h))
+            if (trimesh_tri_overlaps(m->tris + 9 * (size_t)i, m->box[i], l, h))
                 return 1;
         return 0;
     }
@@ -208,7 +196,7 @@ static int touches_exactly(geometry *g, const double lo[3], const double hi[3])
     tribins_iter it;
     tribins_query(&g->bins, l, h, &it);
     for (uint32_t t; (t = tribins_next(&it)) != TRIBINS_END;)
-        if (tri_overlaps(g->tris + 9 * (size_t)t, g->tbox[t], l, h))
+        if (trimesh_tri_overlaps(g->tris + 9 * (size_t)t, g->tbox[t], l, h))
             return 1;
     return 0;
 }

@@ -58,3 +58,13 @@ void trimesh_free(trimesh *m)
     voxel_table_free(m->box);
     memset(m, 0, sizeof *m);
 }
+
+int trimesh_tri_overlaps(const float *t, const float b[6], const double lo[3], const double hi[3])
+{
+    if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
+        return 0;
+    double v[9];
+    for (int k = 0; k < 9; k++)
+        v[k] = t[k];
+    return voxel_tri_box_overlap(v, lo, hi);
+}

@@ -27,5 +27,8 @@ typedef struct trimesh {
 int trimesh_init(trimesh *m, const float *tris, uint32_t ntris, char *err, size_t errlen);
 /* Frees m's table and zeroes m; a zeroed mesh may be freed again. */
 void trimesh_free(trimesh *m);
+/* Whether triangle t (9 floats) with bounding box b overlaps the box
+ * [lo, hi]: the boxes first, then exactly (voxel.h). */
+int trimesh_tri_overlaps(const float *t, const float b[6], const double lo[3], const double hi[3]);
 
 #endif
