@@ -2208,9 +2208,12 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     return 0;
 }
 
+/* Steps 1 to 7 for the clusters of one group, over the boxes that allow
+ * flags (NULL: any). Returns 0, 1 when the problem boxes were only
+ * tightened, or a negative errno with the message in err. */
 static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
-                        const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
-                        ecm_result *out, char *err, size_t errlen);
+                        const float (*boxes)[6], uint32_t nboxes, const uint8_t *allow, const ecm_cluster *clusters,
+                        uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
 
 /* Union-find over clusters: the root of i. */
 static uint32_t group_root(uint32_t *up, uint32_t i)
@@ -2234,6 +2237,43 @@ static int cmp_group(const void *a, const void *b)
     return x->first < y->first ? -1 : x->first > y->first;
 }
 
+/* Whether the n boxes a are the m boxes b, in any order. */
+static int same_set(const float (*a)[6], uint32_t n, const float (*b)[6], uint32_t m)
+{
+    if (n != m)
+        return 0;
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t j = 0;
+        while (j < m && memcmp(a[i], b[j], sizeof a[i]) != 0)
+            j++;
+        if (j == m)
+            return 0;
+    }
+    return 1;
+}
+
+/* Adds part's counts and times to out, and its boxes become *cur (*ncur). */
+static void take_part(ecm_result *out, ecm_result *part, float (**cur)[6], uint32_t *ncur)
+{
+    out->capped += part->capped;
+    out->apart_over += part->apart_over;
+    out->cells += part->cells;
+    out->occupied += part->occupied;
+    out->wanted += part->wanted;
+    out->voxel_ms += part->voxel_ms;
+    out->divide_ms += part->divide_ms;
+    free(*cur);
+    *cur = part->boxes;
+    *ncur = part->count;
+    part->boxes = NULL;
+}
+
+/* Step 8 (see refine.h): 1 with out filled, 0 when it has nothing to
+ * offer (out empty), or a negative errno with the message in err. */
+static int rebalance(const ecm_params *p, const trimesh *m, const double objcell[3], uint32_t split_max,
+                     const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
+                     ecm_result *out, char *err, size_t errlen);
+
 /*
  * Clusters that press on a common box are one group; each group is refined
  * on its own grid over the hull of its own boxes, heaviest first, the
@@ -2242,7 +2282,7 @@ static int cmp_group(const void *a, const void *b)
  * the space between them out, and its cells are coarser. Each group may
  * add a share of the boxes left under max_boxes, by its weight among the
  * groups still to come (what one leaves goes to the next); step 7 stops at
- * max_boxes less a quarter in all.
+ * max_boxes less a quarter in all. At the cap, step 8 may follow.
  */
 static int refine_groups(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
                          const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
@@ -2257,7 +2297,7 @@ static int refine_groups(const ecm_params *p, const trimesh *m, const float (*bo
     uint32_t *where = cvre_malloc(nboxes * sizeof *where);
     float(*cur)[6] = NULL;
     ecm_result part = {0};
-    int rc = -ENOMEM;
+    int rc = -ENOMEM, whole = 0;
     if (!up || !g || !mine || !where)
         goto done;
     /* At the cap no group may grow, and one division can still move boxes
@@ -2311,9 +2351,10 @@ static int refine_groups(const ecm_params *p, const trimesh *m, const float (*bo
         gp.max_boxes = ncur > p->max_boxes ? p->max_boxes : ncur + (uint32_t)(spare * g[k].weight / left);
         left -= g[k].weight;
         uint32_t smax = split_max < gp.max_boxes ? split_max : gp.max_boxes;
-        if ((rc = refine_group(&gp, objcell, smax, m, (const float(*)[6])cur, ncur, mine, n, &part, err, errlen)) <
-            0)
+        if ((rc = refine_group(&gp, objcell, smax, m, (const float(*)[6])cur, ncur, NULL, mine, n, &part, err,
+                               errlen)) < 0)
             goto done;
+        whole = rc;
         /* The boxes it kept keep their order, first; its new ones follow.
          * (A new box of an earlier group may reach a cell into this one's
          * boxes, and be pressed and refined again with them.) */
@@ -2326,17 +2367,18 @@ static int refine_groups(const ecm_params *p, const trimesh *m, const float (*bo
                 where[b] = pressed ? UINT32_MAX : kept++;
                 out->problem_boxes += (uint32_t)pressed;
             }
-        out->capped += part.capped;
-        out->apart_over += part.apart_over;
-        out->cells += part.cells;
-        out->occupied += part.occupied;
-        out->wanted += part.wanted;
-        out->voxel_ms += part.voxel_ms;
-        out->divide_ms += part.divide_ms;
-        free(cur);
-        cur = part.boxes;
-        ncur = part.count;
-        part.boxes = NULL;
+        take_part(out, &part, &cur, &ncur);
+    }
+    /* At the cap, a round whose division did not fit, or changed nothing,
+     * may still move boxes to where users were stopped (step 8). */
+    if (at_cap && p->nstood && (whole || same_set(boxes, nboxes, (const float(*)[6])cur, ncur))) {
+        if ((rc = rebalance(p, m, objcell, split_max, boxes, nboxes, clusters, nclusters, &part, err, errlen)) < 0)
+            goto done;
+        if (rc == 1) {
+            out->problem_boxes = part.problem_boxes;
+            out->capped = out->apart_over = 0;
+            take_part(out, &part, &cur, &ncur);
+        }
     }
     out->boxes = cur;
     out->count = ncur;
@@ -2487,9 +2529,10 @@ static uint32_t tighten_only(const ecm_params *p, const double objcell[3], const
 static int meets_stood(const ecm_params *p, const float b[6])
 {
     for (uint32_t i = 0; i < p->nstood; i++) {
+        const float *s = p->stood[i].box;
         int meets = 1;
         for (int a = 0; a < 3; a++)
-            meets &= p->stood[i][a] < b[3 + a] && p->stood[i][3 + a] > b[a];
+            meets &= s[a] < b[3 + a] && s[3 + a] > b[a];
         if (meets)
             return 1;
     }
@@ -2577,8 +2620,8 @@ static uint32_t rejoin(tight *tt, float (*c)[6], uint32_t k, const old_map *o, u
 }
 
 static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
-                        const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
-                        ecm_result *out, char *err, size_t errlen)
+                        const float (*boxes)[6], uint32_t nboxes, const uint8_t *allow, const ecm_cluster *clusters,
+                        uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
 {
     memset(out, 0, sizeof *out);
     int rc = -ENOMEM;
@@ -2597,7 +2640,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
     memcpy(hb, EMPTY_HULL, sizeof hb);
     for (uint32_t i = 0; i < nclusters; i++)
         for (uint32_t b = 0; b < nboxes; b++)
-            if (!problem[b] && presses(&clusters[i], boxes, b, p)) {
+            if (!problem[b] && (!allow || allow[b]) && presses(&clusters[i], boxes, b, p)) {
                 problem[b] = PROBLEM_DIVIDE;
                 kept--;
                 nproblem++;
@@ -2746,7 +2789,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         memcpy(out->boxes, boxes, (size_t)nboxes * sizeof *boxes);
         out->count = nboxes;
     }
-    rc = 0;
+    rc = whole;
 done:
     if (rc == -ENOMEM)
         cvre_fail(err, errlen, rc, "out of memory");
@@ -2764,5 +2807,192 @@ done:
     free(problem);
     if (rc < 0)
         ecm_result_free(out);
+    return rc;
+}
+
+/* Step 8: phantom collisions on a box that make it one to divide, most
+ * such boxes (those with the most), boxes joined elsewhere for each, and
+ * pairs tried in all (each against every place users stood). */
+#define HOT_MIN 3u
+#define HOT_MAX 8u
+#define FREED_PER_HOT 3u
+#define JOIN_TRIES 4096u
+
+/* Whether the avatar's box s touches no triangle of m (bins index them),
+ * grown by the object's cell sideways and upwards, its bottom raised by
+ * half of it (what it stands on is support): its collision was a phantom,
+ * as the judge counts them. */
+static int phantom_at(tribins *bins, const trimesh *m, const float s[6], const double objcell[3])
+{
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = (double)s[a] + (a == 1 ? objcell[a] / 2 : -objcell[a]);
+        hi[a] = (double)s[3 + a] + objcell[a];
+    }
+    tribins_iter it;
+    tribins_query(bins, lo, hi, &it);
+    for (uint32_t t; (t = tribins_next(&it)) != TRIBINS_END;)
+        if (trimesh_tri_overlaps(m->tris + 9 * (size_t)t, m->box[t], lo, hi))
+            return 0;
+    return 1;
+}
+
+/* A pair of boxes that may join, and the volume its hull adds. */
+typedef struct join {
+    double add;
+    uint32_t i, j;
+} join;
+
+static int by_add(const void *x, const void *y)
+{
+    const join *a = x, *b = y;
+    return a->add < b->add ? -1 : a->add > b->add ? 1 : a->i != b->i ? (a->i > b->i) - (a->i < b->i)
+                                                                     : (a->j > b->j) - (a->j < b->j);
+}
+
+/* Where the flag of pair {a, b} (a != b) is: the smaller index's row. */
+static size_t pair_at(uint32_t a, uint32_t b, uint32_t stride)
+{
+    return a < b ? (size_t)a * stride + b : (size_t)b * stride + a;
+}
+
+/* Joins the pair of the n boxes b whose hull adds the least volume, of
+ * those no collision named (busy) and whose hull, grown by margin (not
+ * downwards), meets no avatar where users stood; pairs refused are flagged
+ * in no (pair_at) and not tried again; *tries counts down the pairs tried.
+ * The hull takes the first's place, the last box the second's (where, of
+ * nold boxes, follows). cand: room for the n (n - 1) / 2 pairs. Returns 0
+ * when no pair joined. */
+static int join_cheapest(const ecm_params *p, float (*b)[6], uint32_t *n, uint8_t *busy, uint32_t *where,
+                         uint32_t nold, uint8_t *no, uint32_t stride, const double margin[3], join *cand,
+                         uint32_t *tries)
+{
+    size_t nc = 0;
+    for (uint32_t i = 0; i < *n; i++)
+        for (uint32_t j = i + 1; j < *n && !busy[i]; j++)
+            if (!busy[j] && !no[pair_at(i, j, stride)]) {
+                float h[6];
+                memcpy(h, b[i], sizeof h);
+                widen(h, b[j]);
+                cand[nc++] = (join){.add = box_volume(h, h + 3) - box_volume(b[i], b[i] + 3) -
+                                           box_volume(b[j], b[j] + 3),
+                                    .i = i, .j = j};
+            }
+    qsort(cand, nc, sizeof *cand, by_add);
+    for (size_t c = 0; c < nc && *tries; c++, --*tries) {
+        uint32_t bi = cand[c].i, bj = cand[c].j;
+        float h[6], g[6];
+        memcpy(h, b[bi], sizeof h);
+        widen(h, b[bj]);
+        for (int a = 0; a < 3; a++) {
+            g[a] = (float)(h[a] - (a == 1 ? 0 : margin[a]));
+            g[3 + a] = (float)(h[3 + a] + margin[a]);
+        }
+        if (meets_stood(p, g)) {
+            no[pair_at(bi, bj, stride)] = 1;
+            continue;
+        }
+        memcpy(b[bi], h, sizeof h);
+        uint32_t last = --*n;
+        memcpy(b[bj], b[last], sizeof b[bj]);
+        busy[bj] = busy[last];
+        /* The last box's flags go with it; the hull's pairs are new. */
+        for (uint32_t x = 0; x < *n; x++) {
+            if (x != bj)
+                no[pair_at(x, bj, stride)] = no[pair_at(x, last, stride)];
+            if (x != bi)
+                no[pair_at(x, bi, stride)] = 0;
+        }
+        for (uint32_t k = 0; k < nold; k++)
+            where[k] = where[k] == bj ? bi : where[k] == last ? bj : where[k];
+        return 1;
+    }
+    return 0;
+}
+
+static int rebalance(const ecm_params *p, const trimesh *m, const double objcell[3], uint32_t split_max,
+                     const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
+                     ecm_result *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    int rc = -ENOMEM;
+    uint32_t *hot = cvre_calloc(nboxes, sizeof *hot), *where = cvre_malloc(nboxes * sizeof *where);
+    uint8_t *busy = cvre_calloc(nboxes, 1), *allow = cvre_calloc(nboxes, 1);
+    uint8_t *no = cvre_calloc((size_t)nboxes * nboxes, 1);
+    float(*cur)[6] = cvre_malloc(nboxes * sizeof *cur);
+    ecm_cluster *mine = cvre_malloc((nclusters ? nclusters : 1) * sizeof *mine);
+    join *cand = cvre_malloc(((size_t)nboxes * (nboxes - 1) / 2 + 1) * sizeof *cand);
+    tribins bins = {0};
+    if (!hot || !where || !busy || !allow || !no || !cur || !mine || !cand)
+        goto done;
+    const double region[6] = {m->min[0], m->min[1], m->min[2], m->max[0], m->max[1], m->max[2]};
+    if ((rc = tribins_build(&bins, region, BUCKETS, (const float(*)[6])m->box, m->ntris, 0, 0)) < 0)
+        goto done;
+    for (uint32_t i = 0; i < p->nstood; i++) {
+        uint32_t b = p->stood[i].hit;
+        if (b >= nboxes)
+            continue;
+        busy[b] = 1;
+        hot[b] += (uint32_t)phantom_at(&bins, m, p->stood[i].box, objcell);
+    }
+    /* The HOT_MAX boxes with the most phantoms, HOT_MIN or more each
+     * (allow flags them; the first of equals first). */
+    uint32_t nhot = 0;
+    for (; nhot < HOT_MAX; nhot++) {
+        uint32_t best = nboxes;
+        for (uint32_t b = 0; b < nboxes; b++)
+            if (!allow[b] && hot[b] >= HOT_MIN && (best == nboxes || hot[b] > hot[best]))
+                best = b;
+        if (best == nboxes)
+            break;
+        allow[best] = 1;
+    }
+    rc = 0;
+    if (!nhot)
+        goto done;
+    memcpy(cur, boxes, (size_t)nboxes * sizeof *cur);
+    uint32_t ncur = nboxes;
+    for (uint32_t b = 0; b < nboxes; b++)
+        where[b] = b;
+    const double narrow = fmin(p->avatar[0], p->avatar[2]) / 4;
+    const double margin[3] = {narrow, narrow, narrow};
+    uint32_t tries = JOIN_TRIES;
+    for (uint32_t k = 0; k < FREED_PER_HOT * nhot &&
+                         join_cheapest(p, cur, &ncur, busy, where, nboxes, no, nboxes, margin, cand, &tries);
+         k++)
+        ;
+    if (ncur == nboxes)
+        goto done;
+    /* allow, of the old boxes, becomes allow of cur (the hot boxes never
+     * joined: a collision named them). */
+    for (uint32_t b = 0; b < nboxes; b++)
+        hot[b] = allow[b];
+    memset(allow, 0, nboxes);
+    for (uint32_t b = 0; b < nboxes; b++)
+        if (hot[b])
+            allow[where[b]] = 1;
+    for (uint32_t i = 0; i < nclusters; i++) {
+        mine[i] = clusters[i];
+        mine[i].box = where[clusters[i].box];
+    }
+    rc = refine_group(p, objcell, split_max, m, (const float(*)[6])cur, ncur, allow, mine, nclusters, out, err, errlen);
+    if (rc != 0) {
+        ecm_result_free(out);
+        rc = rc < 0 ? rc : 0;
+        goto done;
+    }
+    rc = 1;
+done:
+    if (rc == -ENOMEM)
+        cvre_fail(err, errlen, rc, "out of memory");
+    tribins_free(&bins);
+    free(hot);
+    free(where);
+    free(busy);
+    free(allow);
+    free(no);
+    free(cur);
+    free(mine);
+    free(cand);
     return rc;
 }

@@ -128,17 +128,18 @@
  *      moves into them on later rounds' maps), is taken apart into its parts
  *      in each problem box, each tightened, and then two parts whose hull
  *      stays in the old map by the same rule join again, the smallest hull
- *      first; if they pass max_boxes, the division runs again with as many boxes
- *      fewer (twice at most), and then the problem boxes are only tightened.
- *      Whether a box stays in the old map is worked out exactly, however many
- *      old boxes it meets (a staircase's later-round boxes meet 20 to 40).
- *      Less than that is kept: boxes an earlier grid tightened are
- *      offset from this grid's by up to a cell or two, and taking apart every
- *      box that joins them passes the cap on curved geometry (a gazebo's ring
- *      by 69 boxes). An avatar that such a box encloses when the map comes in
- *      force is pushed out of it (move.h, move_push_out, no further than half
- *      its narrower width), so it never stands inside a new box, which would
- *      let it walk on into the geometry (move.h's inside policy).
+ *      first; if they pass max_boxes, the division runs again with as many
+ *      boxes fewer (twice at most), and then the problem boxes are only
+ *      tightened. Whether a box stays in the old map is worked out exactly,
+ *      however many old boxes it meets (a staircase's later-round boxes
+ *      meet 20 to 40). Less than the tolerance is kept: boxes an earlier
+ *      grid tightened are offset from this grid's by up to a cell or two,
+ *      and taking apart every box that joins them passes the cap on curved
+ *      geometry (a gazebo's ring by 69 boxes). An avatar that such a box
+ *      encloses when the map comes in force is pushed out of it (move.h,
+ *      move_push_out, no further than half its narrower width), so it never
+ *      stands inside a new box, which would let it walk on into the geometry
+ *      (move.h's inside policy).
  *   7. Split under the cell: a new box with wanted cells in it or next to
  *      it may still hold empty space along the geometry that no cell
  *      border separates (a desk's side panel in one box with the last
@@ -156,6 +157,25 @@
  *      cells). When no one plane frees enough, two that peel both ends off
  *      along an axis may (a wall's box that also holds the first cell of
  *      the two walls meeting it: users stop a cell short of the wall).
+ *   8. Move boxes to where users were stopped: when the object already has
+ *      max_boxes boxes and steps 1 to 7 only tightened the problem boxes or
+ *      gave back the map in force (a spiral stair's later round: its one
+ *      cluster presses on 55 of its 64 boxes, and a division that stays in
+ *      the old map takes 40 boxes and more before any is taken apart), the
+ *      places where users stood (stood) tell which boxes stopped them where
+ *      nothing real was. A box is hot when HOT_MIN (3) collisions or more
+ *      named it while the avatar's box, grown by a cell of the object
+ *      sideways and upwards, touched no triangle (a phantom, as the judge
+ *      counts it); the HOT_MAX (8) with the most count. For each hot box,
+ *      up to FREED_PER_HOT (3) pairs of boxes
+ *      that no collision named join into their hull, the pair adding the
+ *      least volume first, if the hull, grown by a quarter of the avatar's
+ *      narrower width, meets no avatar where users stood; then steps 1 to
+ *      7 divide the hot boxes alone, with the boxes freed. Joins close
+ *      space where no user was seen, the one place a refinement closes
+ *      space: the judge decides, as for any candidate (the scenario's
+ *      staircase at seeds 1 to 5: 4 of its 10 later jobs write a map, where
+ *      none did).
  *
  * `capped` counts the new boxes left holding pressure (wanted cells), or
  * every problem box when they were only tightened: the opening may stay
@@ -169,8 +189,8 @@
  * union of the object's boxes still contains every triangle. Refinement
  * only ever removes space in which no triangle lies: no amount of
  * deliberate bumping opens a real wall. And every new box lies in the old
- * map's union (to a millionth of the object's size): it never closes
- * space, not even by a cell.
+ * map's union, give or take the tolerance of step 6 (none where users
+ * stood): it never closes space but by that, and by step 8's joins.
  */
 #ifndef CVRE_ECM_REFINE_H
 #define CVRE_ECM_REFINE_H
@@ -204,10 +224,17 @@ typedef struct ecm_params {
     float step;         /* the highest step the avatar climbs, object-local units (>= 0) */
     float floor;        /* the world's floor, object-local height: no avatar stands
                          * below it (step 3); -INFINITY (the default): none */
-    const float (*stood)[6]; /* nstood avatar boxes, local, where users stood when they
-                              * collided (step 6; the default: none) */
+    const struct ecm_stood *stood; /* nstood places where users stood when they collided
+                                    * (steps 6 and 8; the default: none) */
     uint32_t nstood;
 } ecm_params;
+
+/* Where a user stood when it collided: its avatar's box, local, and the box
+ * its collision named (an index among the object's boxes; past them: none). */
+typedef struct ecm_stood {
+    float box[6];
+    uint32_t hit;
+} ecm_stood;
 
 /* Fills p with the defaults above and the default avatar's size and step
  * (avatar.h; for an object of scale 1: divide by the object's scale), and
@@ -245,8 +272,9 @@ typedef struct ecm_result {
 /*
  * Refines an object (see above). tris: ntris triangles, 9 floats each;
  * boxes: nboxes boxes; clusters: nclusters, each naming a box below nboxes.
- * Boxes without clusters are copied unchanged, in their order, followed by
- * the boxes replacing the problem boxes, all inside their hull; the same
+ * Boxes without clusters are copied unchanged, in their order (but for
+ * those step 8 joins), followed by the boxes replacing the problem boxes,
+ * all inside their hull; the same
  * input always gives the same output. The count is at most max_boxes, or
  * the object's own count when its kept boxes leave no room.
  *

@@ -124,21 +124,23 @@ static int in_a_cluster(const cluster_found *f, uint32_t n, const float p[3])
  * clusters' object and version whose contact lies in a cluster, in the
  * object's metric frame (at). Reads from the first collision segment of the
  * version's time on (collision ids grow with the time they were written),
- * so a long log is not scanned. *out (cvre_xmalloc'd) gets *n samples.
- * Returns 0, or the store's negative errno with the message in err. */
+ * so a long log is not scanned. *out and *hit (cvre_xmalloc'd) get *n
+ * samples and the box each one's collision named. Returns 0, or the
+ * store's negative errno with the message in err. */
 static int load_samples(db *d, const cluster_found *f, uint32_t nf, const proto_transform *at, judge_sample **out,
-                        uint32_t *n, char *err, size_t errlen)
+                        uint32_t **hit, uint32_t *n, char *err, size_t errlen)
 {
     sqlite3 *s = db_sqlite(d);
     sqlite3_stmt *st = NULL;
     *out = cvre_xmalloc(APPLY_SAMPLES_READ * sizeof **out);
+    *hit = cvre_xmalloc(APPLY_SAMPLES_READ * sizeof **hit);
     *n = 0;
     /* The version's bucket less one: a collision is logged after the version it
      * met was made, a bucket of margin for clocks. */
     int rc = sqlite3_prepare_v2(
         s,
-        "SELECT c.avatar_x, c.avatar_y, c.avatar_z, c.vel_x, c.vel_y, c.vel_z, c.local_x, c.local_y, c.local_z "
-        "FROM collisions c WHERE c.id >= (SELECT coalesce(min(g.first_id), 1 << 62) FROM collision_segments g "
+        "SELECT c.avatar_x, c.avatar_y, c.avatar_z, c.vel_x, c.vel_y, c.vel_z, c.local_x, c.local_y, c.local_z, "
+        "c.box_index FROM collisions c WHERE c.id >= (SELECT coalesce(min(g.first_id), 1 << 62) FROM collision_segments g "
         "WHERE g.bucket >= (SELECT CAST(v.created_at / 10 AS INTEGER) - 1 FROM ecm_versions v "
         "WHERE v.object_id = ?1 AND v.version = ?2)) AND c.object_id = ?1 AND c.ecm_version = ?2 "
         "ORDER BY c.id DESC LIMIT ?3",
@@ -157,6 +159,8 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const proto_
             }
             if (!in_a_cluster(f, nf, local))
                 continue;
+            sqlite3_int64 box = sqlite3_column_int64(st, 9);
+            (*hit)[*n] = box >= 0 && box < UINT32_MAX ? (uint32_t)box : UINT32_MAX;
             judge_sample *j = &(*out)[(*n)++];
             scene_to_local(at, w, j->pos);
             scene_to_local(&turn, v, j->vel);
@@ -195,8 +199,8 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     trimesh mesh = {0};
     ecm_result r = {0};
     judge_sample *samples = NULL;
-    float(*stood)[6] = NULL;
-    uint32_t nsamples = 0;
+    ecm_stood *stood = NULL;
+    uint32_t *hit = NULL, nsamples = 0;
     double scale = 0;
     proto_transform at;
     int64_t evidence = ecm_evidence(f, n);
@@ -222,18 +226,20 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     lp.step = (float)(p->step / scale);
     lp.floor = (float)(-at.pos[1] / scale); /* the world's floor, y = 0 */
     char why[256];
-    if ((rc = load_samples(d, f, n, &at, &samples, &nsamples, err, errlen)) < 0)
+    if ((rc = load_samples(d, f, n, &at, &samples, &hit, &nsamples, err, errlen)) < 0)
         goto done;
-    /* The avatars at the samples, in local units: no new box may reach out
-     * of the old map where they stood (refine.h, step 6). */
+    /* The avatars at the samples, in local units, and the boxes they met
+     * (refine.h, steps 6 and 8). */
     stood = cvre_xmalloc((nsamples ? nsamples : 1) * sizeof *stood);
-    for (uint32_t i = 0; i < nsamples; i++)
+    for (uint32_t i = 0; i < nsamples; i++) {
         for (int a = 0; a < 3; a++) {
             double half = a == 1 ? 0 : p->avatar[a] / 2;
-            stood[i][a] = (float)((samples[i].pos[a] - half) / scale);
-            stood[i][3 + a] = (float)((samples[i].pos[a] + (a == 1 ? p->avatar[1] : half)) / scale);
+            stood[i].box[a] = (float)((samples[i].pos[a] - half) / scale);
+            stood[i].box[3 + a] = (float)((samples[i].pos[a] + (a == 1 ? p->avatar[1] : half)) / scale);
         }
-    lp.stood = (const float(*)[6])stood;
+        stood[i].hit = hit[i];
+    }
+    lp.stood = stood;
     lp.nstood = nsamples;
     /* The triangles' boxes, for the refinement and its judge. */
     if (trimesh_init(&mesh, o.tris, o.tri_count, why, sizeof why) < 0 ||
@@ -290,6 +296,7 @@ done:
     trimesh_free(&mesh);
     db_ecm_object_free(&o);
     free(samples);
+    free(hit);
     free(stood);
     free(clusters);
     free(cluster_ids);

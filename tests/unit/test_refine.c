@@ -754,8 +754,8 @@ static void test_new_boxes_stay_near_the_old_map(void **state)
      * one new box reached half a millimetre in front of it, within the
      * tolerance; the user would have stood inside it. Where users stood,
      * no new box reaches out of the old map at all. */
-    const float stood[1][6] = {{-1.0f, -0.5f, 0.238f, -0.8f, 0.1f, 0.437999964f}};
-    p.stood = stood;
+    const ecm_stood stood = {.box = {-1.0f, -0.5f, 0.238f, -0.8f, 0.1f, 0.437999964f}, .hit = 3};
+    p.stood = &stood;
     p.nstood = 1;
     refine_model(&p, &m, CBOXES(old), 4, &cl, 1, &r);
     assert_true(r.count > 4);
@@ -763,7 +763,7 @@ static void test_new_boxes_stay_near_the_old_map(void **state)
     for (uint32_t i = 0; i < r.count; i++) {
         int meets = 1;
         for (int a = 0; a < 3; a++)
-            meets &= r.boxes[i][a] < stood[0][3 + a] && r.boxes[i][3 + a] > stood[0][a];
+            meets &= r.boxes[i][a] < stood.box[3 + a] && r.boxes[i][3 + a] > stood.box[a];
         CHECK(!meets || within_boxes(r.boxes[i], old, 4, exact),
               "box %u (%g %g %g .. %g %g %g) meets the user and reaches out of the old map", i,
               (double)r.boxes[i][0], (double)r.boxes[i][1], (double)r.boxes[i][2], (double)r.boxes[i][3],
@@ -771,6 +771,56 @@ static void test_new_boxes_stay_near_the_old_map(void **state)
     }
     ecm_result_free(&r);
     import_mesh_free(&m);
+}
+
+/*
+ * Step 8. An earlier round's box over two pillars 3 m apart, users stopped
+ * at its face between them where nothing is, and three crates far off, a
+ * box each, nobody near them: the object holds max_boxes (4). A pillar
+ * each takes one box more than the cap leaves, so the round changes
+ * nothing, and users stay stopped. The places where they stood name the
+ * pillars' box, and their avatars touch no triangle: the crates' boxes
+ * join, and the pillars get a box each.
+ */
+static void test_cap_moves_boxes_to_where_users_were_stopped(void **state)
+{
+    (void)state;
+    snprintf(check_ctx, sizeof check_ctx, "pillars and crates at the cap");
+    static const float lo[5][3] = {{0, 0, 0}, {3.5f, 0, 0}, {10, 0, 0}, {10.6f, 0, 0}, {11.2f, 0, 0}};
+    static const float hi[5][3] = {
+        {0.5f, 2, 0.5f}, {4, 2, 0.5f}, {10.5f, 0.5f, 0.5f}, {11.1f, 0.5f, 0.5f}, {11.7f, 0.5f, 0.5f}};
+    float tris[5 * 12 * 9];
+    for (int i = 0; i < 5; i++)
+        box_surface(lo[i], hi[i], tris + 12 * 9 * i);
+    static const float old[4][6] = {{0, 0, 0, 4, 2, 0.5f},
+                                    {10, 0, 0, 10.5f, 0.5f, 0.5f},
+                                    {10.6f, 0, 0, 11.1f, 0.5f, 0.5f},
+                                    {11.2f, 0, 0, 11.7f, 0.5f, 0.5f}};
+    const ecm_cluster cl = {.box = 0, .min = {1.5f, 0.9f, 0}, .max = {2.5f, 0.9f, 0}, .centroid = {2, 0.9f, 0},
+                            .weight = 100};
+    ecm_stood stood[3];
+    for (int i = 0; i < 3; i++)
+        stood[i] = (ecm_stood){.box = {1.4f + 0.3f * (float)i, 0, -0.6f, 2.0f + 0.3f * (float)i, 1.8f, 0}, .hit = 0};
+    const float gap_lo[3] = {1, 0.2f, 0.1f}, gap_hi[3] = {3, 1.5f, 0.4f};
+    ecm_params p;
+    ecm_params_default(&p);
+    p.max_boxes = 4;
+    ecm_result r;
+    char err[256];
+    assert_int_equal(ecm_refine(&p, tris, 60, CBOXES(old), 4, &cl, 1, &r, err, sizeof err), 0);
+    CHECK(r.count == 4 && blocked(CBOXES(r.boxes), r.count, gap_lo, gap_hi),
+          "without where users stood: %u boxes, the gap %s", r.count,
+          blocked(CBOXES(r.boxes), r.count, gap_lo, gap_hi) ? "blocked" : "open");
+    ecm_result_free(&r);
+
+    p.stood = stood;
+    p.nstood = 3;
+    assert_int_equal(ecm_refine(&p, tris, 60, CBOXES(old), 4, &cl, 1, &r, err, sizeof err), 0);
+    CHECK(r.count <= p.max_boxes, "%u boxes", r.count);
+    CHECK(!blocked(CBOXES(r.boxes), r.count, gap_lo, gap_hi), "the space between the pillars is still blocked");
+    size_t bad = uncovered(tris, 60, CBOXES(r.boxes), r.count, 16);
+    CHECK(bad == 0, "%zu triangle samples outside every box", bad);
+    ecm_result_free(&r);
 }
 
 /* A round of the gazebo replayed: the map in force (nold boxes) and the
@@ -2390,6 +2440,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_inside_users_walk_on),
         cmocka_unit_test(test_split_frees_space_under_the_cell),
         cmocka_unit_test(test_roof_over_the_well_is_only_tightened),
+        cmocka_unit_test(test_cap_moves_boxes_to_where_users_were_stopped),
         cmocka_unit_test(test_grazed_row_is_no_opening),
         cmocka_unit_test(test_new_boxes_stay_near_the_old_map),
         cmocka_unit_test(test_soups),
