@@ -79,8 +79,8 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len)
 {
     if (a->stats.apart_over)
         snprintf(buf, len,
-                 "the new boxes reach out of the old map by more than a cell between the boxes they join, and "
-                 "taken apart in each they pass the cap by %u (%u boxes; %u problem boxes, only tightened)",
+                 "the new boxes reach out of the old map (by more than two cells, or at all where users "
+                 "stood), and taken apart they pass the cap by %u (%u boxes; %u problem boxes, only tightened)",
                  a->stats.apart_over, a->boxes_before, a->stats.problem_boxes);
     else if (a->stats.wanted && a->stats.capped)
         snprintf(buf, len,

@@ -875,7 +875,7 @@ def report(a, scenes, rounds, bump):
              "found no better, not published. After the round: what clustering and refinement did with the "
              "object (written: a new version; rejected; unchanged: the refined map is the old one; "
              "unchanged, apart: so because its new boxes reached out of the old map by more than two cells, "
-             "or met more than 16 of its boxes, and, taken apart, passed the cap; no cluster). Tightness: "
+             "or at all where users stood, and, taken apart, passed the cap; no cluster). Tightness: "
              "volume of occupied cells / volume of the boxes (grid 2^7 over the MBR). Full-voxel baseline: "
              "every occupied cell its own box.", "",
              "| scene | round | version | moves | collisions | phantom | phantom / 1000 moves | leaks | boxes | "
