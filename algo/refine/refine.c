@@ -824,7 +824,8 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
                 for (uint32_t i = 0; i < cnt; i++)
                     row[x + i] = (uint8_t)(c >> (8 * i));
                 /* Each byte's flag to a bit: byte i's bit 0 lands on bit 56 + i. */
-                uint64_t blocked = ((c >> occ_at) | (c >> kept_at)) & ones, mapped = blocked | ((c >> problem_at) & ones);
+                uint64_t blocked = ((c >> occ_at) | (c >> kept_at)) & ones;
+                uint64_t mapped = blocked | ((c >> problem_at) & ones);
                 bits[x / 64] |= ((blocked * 0x0102040810204080ull) >> 56) << (x % 64);
                 mbits[x / 64] |= ((mapped * 0x0102040810204080ull) >> 56) << (x % 64);
             }
@@ -2208,9 +2209,6 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     return 0;
 }
 
-/* Steps 1 to 7 for the clusters of one group, over the boxes that allow
- * flags (NULL: any). Returns 0, 1 when the problem boxes were only
- * tightened, or a negative errno with the message in err. */
 static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
                         const float (*boxes)[6], uint32_t nboxes, const uint8_t *allow, const ecm_cluster *clusters,
                         uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
@@ -2519,12 +2517,6 @@ static uint32_t tighten_only(const ecm_params *p, const double objcell[3], const
     return n;
 }
 
-/*
- * One group of clusters (refine_groups): steps 1 to 7 over the boxes they
- * press, the other boxes kept; the new boxes no more than max_boxes in all
- * and step 7 stopping at split_max. Fills *out (empty on error) as
- * ecm_refine does.
- */
 /* Whether box b meets an avatar where users stood (p->stood). */
 static int meets_stood(const ecm_params *p, const float b[6])
 {
@@ -2558,6 +2550,23 @@ static int fits_old(const old_map *o, const float b[6])
            (!meets_stood(o->p, b) || within_old(b, o->b, o->n, exact, o->thin, o->parts, o->idx));
 }
 
+/* Where the flag of pair {a, b} (a != b) is: the smaller index's row. */
+static size_t pair_at(uint32_t a, uint32_t b, uint32_t stride)
+{
+    return a < b ? (size_t)a * stride + b : (size_t)b * stride + a;
+}
+
+/* The item at index from (the last of n + 1) moved to index to: its pair
+ * flags go with it. */
+static void move_flags(uint8_t *flags, uint32_t stride, uint32_t n, uint32_t to, uint32_t from)
+{
+    if (to == from)
+        return;
+    for (uint32_t x = 0; x < n; x++)
+        if (x != to)
+            flags[pair_at(x, to, stride)] = flags[pair_at(x, from, stride)];
+}
+
 /* Most parts rejoin() joins again (it tests pairs, each against the old
  * map): a box over more problem boxes than that stays in its parts. */
 #define REJOIN_MAX 64u
@@ -2566,26 +2575,25 @@ static int fits_old(const old_map *o, const float b[6])
  * The k parts of a box taken apart (step 6) join again, two at a time,
  * while their hull lies in the old map (the n boxes pb, give or take tol:
  * within_old), the pair with the smallest hull first; each join tightened.
- * ok: room for k * k flags (pair i < j at i * k + j), k <= REJOIN_MAX.
+ * ok: room for k * k flags (pair_at), k <= REJOIN_MAX.
  * Returns the parts left, first in c.
  */
 static uint32_t rejoin(tight *tt, float (*c)[6], uint32_t k, const old_map *o, uint8_t *ok)
 {
     const uint32_t stride = k;
-#define PAIR(i, j) ok[((i) < (j) ? (i) : (j)) * stride + ((i) < (j) ? (j) : (i))]
     for (uint32_t i = 0; i < k; i++)
         for (uint32_t j = i + 1; j < k; j++) {
             float h[6];
             memcpy(h, c[i], sizeof h);
             widen(h, c[j]);
-            PAIR(i, j) = (uint8_t)fits_old(o, h);
+            ok[pair_at(i, j, stride)] = (uint8_t)fits_old(o, h);
         }
     for (;;) {
         uint32_t bi = 0, bj = 0;
         double best = INFINITY;
         for (uint32_t i = 0; i < k; i++)
             for (uint32_t j = i + 1; j < k; j++)
-                if (PAIR(i, j)) {
+                if (ok[pair_at(i, j, stride)]) {
                     float h[6];
                     memcpy(h, c[i], sizeof h);
                     widen(h, c[j]);
@@ -2600,25 +2608,28 @@ static uint32_t rejoin(tight *tt, float (*c)[6], uint32_t k, const old_map *o, u
             return k;
         widen(c[bi], c[bj]);
         tighten(tt, c[bi]);
-        /* The last part takes bj's place, and its flags with it. */
-        k--;
-        if (bj != k) {
+        /* The last part takes bj's place; the joined one's pairs are new. */
+        if (bj != --k)
             memcpy(c[bj], c[k], sizeof c[bj]);
-            for (uint32_t i = 0; i < k; i++)
-                if (i != bj)
-                    PAIR(i, bj) = PAIR(i, k);
-        }
+        move_flags(ok, stride, k, bj, k);
         for (uint32_t i = 0; i < k; i++)
             if (i != bi) {
                 float h[6];
                 memcpy(h, c[i], sizeof h);
                 widen(h, c[bi]);
-                PAIR(i, bi) = (uint8_t)fits_old(o, h);
+                ok[pair_at(i, bi, stride)] = (uint8_t)fits_old(o, h);
             }
     }
-#undef PAIR
 }
 
+/*
+ * One group of clusters (refine_groups): steps 1 to 7 over the boxes they
+ * press (of those allow flags; NULL: any), the other boxes kept; the new
+ * boxes no more than max_boxes in all and step 7 stopping at split_max.
+ * Fills *out (empty on error) as ecm_refine does. Returns 0, 1 when the
+ * problem boxes were only tightened, or a negative errno with the message
+ * in err.
+ */
 static int refine_group(const ecm_params *p, const double objcell[3], uint32_t split_max, const trimesh *m,
                         const float (*boxes)[6], uint32_t nboxes, const uint8_t *allow, const ecm_cluster *clusters,
                         uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
@@ -2850,12 +2861,6 @@ static int by_add(const void *x, const void *y)
                                                                      : (a->j > b->j) - (a->j < b->j);
 }
 
-/* Where the flag of pair {a, b} (a != b) is: the smaller index's row. */
-static size_t pair_at(uint32_t a, uint32_t b, uint32_t stride)
-{
-    return a < b ? (size_t)a * stride + b : (size_t)b * stride + a;
-}
-
 /* Joins the pair of the n boxes b whose hull adds the least volume, of
  * those no collision named (busy) and whose hull, grown by margin (not
  * downwards), meets no avatar where users stood; pairs refused are flagged
@@ -2894,15 +2899,14 @@ static int join_cheapest(const ecm_params *p, float (*b)[6], uint32_t *n, uint8_
         }
         memcpy(b[bi], h, sizeof h);
         uint32_t last = --*n;
-        memcpy(b[bj], b[last], sizeof b[bj]);
+        if (bj != last)
+            memcpy(b[bj], b[last], sizeof b[bj]);
         busy[bj] = busy[last];
-        /* The last box's flags go with it; the hull's pairs are new. */
-        for (uint32_t x = 0; x < *n; x++) {
-            if (x != bj)
-                no[pair_at(x, bj, stride)] = no[pair_at(x, last, stride)];
+        /* The last box takes bj's place; the hull's pairs are new. */
+        move_flags(no, stride, *n, bj, last);
+        for (uint32_t x = 0; x < *n; x++)
             if (x != bi)
                 no[pair_at(x, bi, stride)] = 0;
-        }
         for (uint32_t k = 0; k < nold; k++)
             where[k] = where[k] == bj ? bi : where[k] == last ? bj : where[k];
         return 1;
@@ -2917,13 +2921,13 @@ static int rebalance(const ecm_params *p, const trimesh *m, const double objcell
     memset(out, 0, sizeof *out);
     int rc = -ENOMEM;
     uint32_t *hot = cvre_calloc(nboxes, sizeof *hot), *where = cvre_malloc(nboxes * sizeof *where);
-    uint8_t *busy = cvre_calloc(nboxes, 1), *allow = cvre_calloc(nboxes, 1);
+    uint8_t *busy = cvre_calloc(nboxes, 1), *pick = cvre_calloc(nboxes, 1), *allow = cvre_calloc(nboxes, 1);
     uint8_t *no = cvre_calloc((size_t)nboxes * nboxes, 1);
     float(*cur)[6] = cvre_malloc(nboxes * sizeof *cur);
     ecm_cluster *mine = cvre_malloc((nclusters ? nclusters : 1) * sizeof *mine);
     join *cand = cvre_malloc(((size_t)nboxes * (nboxes - 1) / 2 + 1) * sizeof *cand);
     tribins bins = {0};
-    if (!hot || !where || !busy || !allow || !no || !cur || !mine || !cand)
+    if (!hot || !where || !busy || !pick || !allow || !no || !cur || !mine || !cand)
         goto done;
     const double region[6] = {m->min[0], m->min[1], m->min[2], m->max[0], m->max[1], m->max[2]};
     if ((rc = tribins_build(&bins, region, BUCKETS, (const float(*)[6])m->box, m->ntris, 0, 0)) < 0)
@@ -2936,16 +2940,16 @@ static int rebalance(const ecm_params *p, const trimesh *m, const double objcell
         hot[b] += (uint32_t)phantom_at(&bins, m, p->stood[i].box, objcell);
     }
     /* The HOT_MAX boxes with the most phantoms, HOT_MIN or more each
-     * (allow flags them; the first of equals first). */
+     * (pick flags them; the first of equals first). */
     uint32_t nhot = 0;
     for (; nhot < HOT_MAX; nhot++) {
         uint32_t best = nboxes;
         for (uint32_t b = 0; b < nboxes; b++)
-            if (!allow[b] && hot[b] >= HOT_MIN && (best == nboxes || hot[b] > hot[best]))
+            if (!pick[b] && hot[b] >= HOT_MIN && (best == nboxes || hot[b] > hot[best]))
                 best = b;
         if (best == nboxes)
             break;
-        allow[best] = 1;
+        pick[best] = 1;
     }
     rc = 0;
     if (!nhot)
@@ -2963,13 +2967,10 @@ static int rebalance(const ecm_params *p, const trimesh *m, const double objcell
         ;
     if (ncur == nboxes)
         goto done;
-    /* allow, of the old boxes, becomes allow of cur (the hot boxes never
-     * joined: a collision named them). */
+    /* The hot boxes where they are now (a collision named them: none
+     * joined, some moved). */
     for (uint32_t b = 0; b < nboxes; b++)
-        hot[b] = allow[b];
-    memset(allow, 0, nboxes);
-    for (uint32_t b = 0; b < nboxes; b++)
-        if (hot[b])
+        if (pick[b])
             allow[where[b]] = 1;
     for (uint32_t i = 0; i < nclusters; i++) {
         mine[i] = clusters[i];
@@ -2989,6 +2990,7 @@ done:
     free(hot);
     free(where);
     free(busy);
+    free(pick);
     free(allow);
     free(no);
     free(cur);

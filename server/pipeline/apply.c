@@ -140,7 +140,8 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const proto_
     int rc = sqlite3_prepare_v2(
         s,
         "SELECT c.avatar_x, c.avatar_y, c.avatar_z, c.vel_x, c.vel_y, c.vel_z, c.local_x, c.local_y, c.local_z, "
-        "c.box_index FROM collisions c WHERE c.id >= (SELECT coalesce(min(g.first_id), 1 << 62) FROM collision_segments g "
+        "c.box_index FROM collisions c "
+        "WHERE c.id >= (SELECT coalesce(min(g.first_id), 1 << 62) FROM collision_segments g "
         "WHERE g.bucket >= (SELECT CAST(v.created_at / 10 AS INTEGER) - 1 FROM ecm_versions v "
         "WHERE v.object_id = ?1 AND v.version = ?2)) AND c.object_id = ?1 AND c.ecm_version = ?2 "
         "ORDER BY c.id DESC LIMIT ?3",
