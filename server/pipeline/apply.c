@@ -121,14 +121,16 @@ static int in_a_cluster(const cluster_found *f, uint32_t n, const float p[3])
 }
 
 /* The judge's samples: the newest APPLY_SAMPLES_READ collisions of the
- * clusters' object and version whose contact lies in a cluster, in the
- * object's metric frame (at). Reads from the first collision segment of the
+ * clusters' object and version whose contact lies in a cluster, of the time
+ * window the clusters were found in (run; NULL: all), in the object's
+ * metric frame (at). Reads from the first collision segment of the
  * version's time on (collision ids grow with the time they were written),
  * so a long log is not scanned. *out and *hit (cvre_xmalloc'd) get *n
  * samples and the box each one's collision named. Returns 0, or the
  * store's negative errno with the message in err. */
-static int load_samples(db *d, const cluster_found *f, uint32_t nf, const proto_transform *at, judge_sample **out,
-                        uint32_t **hit, uint32_t *n, char *err, size_t errlen)
+static int load_samples(db *d, const cluster_found *f, uint32_t nf, const cluster_run *run,
+                        const proto_transform *at, judge_sample **out, uint32_t **hit, uint32_t *n, char *err,
+                        size_t errlen)
 {
     sqlite3 *s = db_sqlite(d);
     sqlite3_stmt *st = NULL;
@@ -144,12 +146,14 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const proto_
         "WHERE c.id >= (SELECT coalesce(min(g.first_id), 1 << 62) FROM collision_segments g "
         "WHERE g.bucket >= (SELECT CAST(v.created_at / 10 AS INTEGER) - 1 FROM ecm_versions v "
         "WHERE v.object_id = ?1 AND v.version = ?2)) AND c.object_id = ?1 AND c.ecm_version = ?2 "
-        "ORDER BY c.id DESC LIMIT ?3",
+        "AND c.at >= ?4 AND c.at <= ?5 ORDER BY c.id DESC LIMIT ?3",
         -1, &st, NULL);
     if (rc == SQLITE_OK) {
         sqlite3_bind_int64(st, 1, f[0].object_id);
         sqlite3_bind_int64(st, 2, f[0].ecm_version);
         sqlite3_bind_int64(st, 3, APPLY_SAMPLES_READ);
+        sqlite3_bind_double(st, 4, run && run->has_since ? run->since : -1e300);
+        sqlite3_bind_double(st, 5, run && run->has_until ? run->until : 1e300);
         const proto_transform turn = {.yaw = at->yaw, .scale = 1};
         while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
             float w[3], v[3], local[3];
@@ -178,8 +182,8 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const proto_
     return rc;
 }
 
-int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f, uint32_t n, ecm_applied *out,
-              char *err, size_t errlen)
+int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id, const cluster_found *f,
+              uint32_t n, ecm_applied *out, char *err, size_t errlen)
 {
     int64_t object_id = f[0].object_id;
     uint32_t version = f[0].ecm_version;
@@ -227,7 +231,7 @@ int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f
     lp.step = (float)(p->step / scale);
     lp.floor = (float)(-at.pos[1] / scale); /* the world's floor, y = 0 */
     char why[256];
-    if ((rc = load_samples(d, f, n, &at, &samples, &hit, &nsamples, err, errlen)) < 0)
+    if ((rc = load_samples(d, f, n, run, &at, &samples, &hit, &nsamples, err, errlen)) < 0)
         goto done;
     /* The avatars at the samples, in local units, and the boxes they met
      * (refine.h, steps 6 and 8). */
@@ -314,7 +318,7 @@ int ecm_apply_round(db *d, const ecm_params *p, const cluster_run *run, const cl
             k++;
         ecm_applied a;
         char why[512] = "";
-        int arc = ecm_apply(d, p, *run_id, found + first, (uint32_t)(k - first), &a, why, sizeof why);
+        int arc = ecm_apply(d, p, run, *run_id, found + first, (uint32_t)(k - first), &a, why, sizeof why);
         rc = fn(ctx, found + first, (uint32_t)(k - first), arc, &a, why);
     }
     return rc;

@@ -55,9 +55,10 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len);
 
 /*
  * Refines the object the n clusters f were found on (all of one object and
- * version, of run run_id; 0: none recorded). p's avatar is in metres; it is
- * divided by the object's scale. The judge's samples are the object's
- * collisions with that version (the newest APPLY_SAMPLES_READ) that lie in
+ * version, of run run_id; 0: none recorded) from the collisions of run's
+ * time window (NULL: all). p's avatar is in metres; it is divided by the
+ * object's scale. The judge's samples are the object's collisions with
+ * that version in that window (the newest APPLY_SAMPLES_READ) that lie in
  * a cluster's extent, turned into the object's metric frame; the avatars
  * there are where users stood for the refinement too (refine.h, step 6).
  * Returns:
@@ -75,8 +76,8 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len);
  *   any other negative errno: the store failed (db/db.h), with the
  *             message in err.
  */
-int ecm_apply(db *d, const ecm_params *p, int64_t run_id, const cluster_found *f, uint32_t n, ecm_applied *out,
-              char *err, size_t errlen);
+int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id, const cluster_found *f,
+              uint32_t n, ecm_applied *out, char *err, size_t errlen);
 
 /* What became of one object of a round: its n clusters f, ecm_apply's
  * result rc, what it filled in a, and its message in err when rc < 0.

@@ -197,7 +197,7 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
         sqlite3_exec(db_sqlite(d), reset, NULL, NULL, NULL);
         double t0 = bench_now_ms();
         ecm_applied a;
-        int rc = ecm_apply(d, &p, 0, &cl, 1, &a, err, sizeof err);
+        int rc = ecm_apply(d, &p, NULL, 0, &cl, 1, &a, err, sizeof err);
         if (rc != 0 || (!a.version && !a.candidate)) { /* an error, or nothing refined */
             fprintf(stderr, "%s: refinement: %d %s\n", label, rc, err);
             return -1;

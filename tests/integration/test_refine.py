@@ -292,7 +292,9 @@ def test_offline_apply_is_published_live():
 def insert_collisions(db, at, groups, users=3, each=4, version=1, step=(0, 0, 0.01)):
     """Collisions as the log writer stores them, in one segment: for each
     (object, local contact, feet in world, velocity) of groups, users x each
-    rows `step` apart (a centimetre in z), against the object's version."""
+    rows `step` apart (a centimetre in z), against the object's version; one
+    segment for the rows added."""
+    before = db.execute("SELECT coalesce(max(id), 0) FROM collisions").fetchone()[0]
     rows = []
     for oid, local, feet, vel in groups:
         for u in range(users):
@@ -305,7 +307,8 @@ def insert_collisions(db, at, groups, users=3, each=4, version=1, step=(0, 0, 0.
                    "local_z, normal_x, normal_y, normal_z, vel_x, vel_y, vel_z) "
                    "VALUES (0, ?9, 1, ?2, 1, ?1, ?13, 0, 0, ?6, ?7, ?8, 0, 0, 0, ?3, ?4, ?5, 1, 0, 0, ?10, ?11, ?12)",
                    rows)
-    db.execute("INSERT INTO collision_segments SELECT min(id), max(id), ? FROM collisions", (int(at // 10),))
+    db.execute("INSERT INTO collision_segments SELECT min(id), max(id), ? FROM collisions WHERE id > ?",
+               (int(at // 10), before))
     db.commit()
 
 
@@ -401,6 +404,30 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     db.close()
 
 
+def test_the_judge_walks_from_the_collisions_of_the_window():
+    """Users pushed on the room's solid east wall, and later came back to
+    the same places walking slower. A job over the first window (--until)
+    clusters only the first visit, and its judge walks from those
+    collisions alone: four distinct samples, not the eight of both
+    visits."""
+    srv = Server(A.bin, "--world", ROOM_WORLD)
+    assert srv.stop() == 0
+    room = object_id(srv.db, "openfoam_room_with_doorway.stl")
+    db = sqlite3.connect(srv.db)
+    now = time.time()
+    wall = (0.21757, 0.9, -0.8)
+    insert_collisions(db, now, [(room, wall, (10.519, 0, -0.8), (-3, 0, 0))])
+    insert_collisions(db, now + 100, [(room, wall, (10.519, 0, -0.8), (-2, 0, 0))])
+    copy = srv.db + ".both"
+    db.execute("VACUUM INTO ?", (copy,))
+    db.close()
+    for path, window, samples in ((srv.db, ("--until", f"{now + 50:.3f}"), 4), (copy, (), 8)):
+        rc, out, err = cmd("cvre-cluster", "--db", path, "--min-points", "5", "--apply", "--json", *window)
+        assert rc == 0, (rc, out, err)
+        got = json.loads(out)["refined"]
+        assert len(got) == 1 and got[0]["judge"]["samples"] == samples, (window, got)
+
+
 def test_the_same_boxes_in_another_order_are_unchanged():
     """Two flat plates, each a box of its own (version 2, the pressed one
     first); users press on the first, which is all geometry. Refinement
@@ -456,4 +483,5 @@ if __name__ == "__main__":
     run([test_doorway_opens_live_and_walls_stay, test_archway_opens_and_stays_solid_at_its_sides,
          test_moved_object_keeps_its_boxes_and_rollback_reaches_clients, test_offline_apply_is_published_live,
          test_bad_parameters_and_an_object_without_triangles,
-         test_a_map_no_better_is_kept_as_a_rejected_candidate, test_the_same_boxes_in_another_order_are_unchanged])
+         test_a_map_no_better_is_kept_as_a_rejected_candidate, test_the_judge_walks_from_the_collisions_of_the_window,
+         test_the_same_boxes_in_another_order_are_unchanged])
