@@ -2238,16 +2238,19 @@ static int cmp_group(const void *a, const void *b)
     return x->first < y->first ? -1 : x->first > y->first;
 }
 
-/* Whether the n boxes a are the m boxes b, in any order. */
-static int same_set(const float (*a)[6], uint32_t n, const float (*b)[6], uint32_t m)
+int ecm_same_boxes(const float (*a)[6], uint32_t na, const float (*b)[6], uint32_t nb)
 {
-    if (n != m)
+    if (na != nb)
         return 0;
-    for (uint32_t i = 0; i < n; i++) {
-        uint32_t j = 0;
-        while (j < m && memcmp(a[i], b[j], sizeof a[i]) != 0)
-            j++;
-        if (j == m)
+    /* Each box as many times in a as in b: no allocation, and at most
+     * ECM_MAX_BOXES_LIMIT^2 comparisons, a few ms. */
+    for (uint32_t i = 0; i < na; i++) {
+        uint32_t in_a = 0, in_b = 0;
+        for (uint32_t j = 0; j < na; j++) {
+            in_a += memcmp(a[i], a[j], sizeof a[i]) == 0;
+            in_b += memcmp(a[i], b[j], sizeof a[i]) == 0;
+        }
+        if (in_a != in_b)
             return 0;
     }
     return 1;
@@ -2372,7 +2375,7 @@ static int refine_groups(const ecm_params *p, const trimesh *m, const float (*bo
     }
     /* At the cap, a round whose division did not fit, or changed nothing,
      * may still move boxes to where users were stopped (step 8). */
-    if (at_cap && p->nstood && (whole || same_set(boxes, nboxes, (const float(*)[6])cur, ncur))) {
+    if (at_cap && p->nstood && (whole || ecm_same_boxes(boxes, nboxes, (const float(*)[6])cur, ncur))) {
         if ((rc = rebalance(p, m, objcell, split_max, boxes, nboxes, clusters, nclusters, &part, err, errlen)) < 0)
             goto done;
         if (rc == 1) {

@@ -292,4 +292,9 @@ int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[
                     const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
 void ecm_result_free(ecm_result *r);
 
+/* Whether the na boxes a are the nb boxes b in some order (each as many
+ * times): a refinement that only lists the boxes in force in another
+ * order changes nothing. */
+int ecm_same_boxes(const float (*a)[6], uint32_t na, const float (*b)[6], uint32_t nb);
+
 #endif

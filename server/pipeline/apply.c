@@ -91,25 +91,6 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len)
         snprintf(buf, len, "its clusters press on real geometry only");
 }
 
-static int cmp_box(const void *a, const void *b) { return memcmp(a, b, 6 * sizeof(float)); }
-
-/* Whether two maps hold the same boxes, in any order: a refinement that
- * only lists the boxes in force in another order changes nothing. */
-static int same_boxes(const float (*a)[6], uint32_t na, const float (*b)[6], uint32_t nb)
-{
-    if (na != nb)
-        return 0;
-    float(*sa)[6] = cvre_xmalloc((na ? na : 1) * sizeof *sa), (*sb)[6] = cvre_xmalloc((nb ? nb : 1) * sizeof *sb);
-    memcpy(sa, a, na * sizeof *sa);
-    memcpy(sb, b, nb * sizeof *sb);
-    qsort(sa, na, sizeof *sa, cmp_box);
-    qsort(sb, nb, sizeof *sb, cmp_box);
-    int same = memcmp(sa, sb, na * sizeof *sa) == 0;
-    free(sa);
-    free(sb);
-    return same;
-}
-
 /* Whether local point p lies in one of the clusters' extents. */
 static int in_a_cluster(const cluster_found *f, uint32_t n, const float p[3])
 {
@@ -256,7 +237,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
     out->stats = r;
     out->stats.boxes = NULL;
     out->boxes_after = r.count;
-    if (same_boxes((const float(*)[6])r.boxes, r.count, (const float(*)[6])o.boxes, o.box_count))
+    if (ecm_same_boxes((const float(*)[6])r.boxes, r.count, (const float(*)[6])o.boxes, o.box_count))
         goto done; /* unchanged: rc is 0, out->version 0 */
     judge_params jp;
     judge_params_default(&jp);

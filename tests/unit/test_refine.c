@@ -2271,6 +2271,24 @@ static void expect_einval(const call *c, const char *what)
     assert_result_empty(&r);
 }
 
+/* The same boxes in another order are the same map; a box twice is not
+ * the same as another box twice. */
+static void test_same_boxes(void **state)
+{
+    (void)state;
+    const float x[6] = {0, 0, 0, 1, 1, 1}, y[6] = {1, 0, 0, 2, 1, 1};
+    float xy[2][6], yx[2][6], xx[2][6], yy[2][6];
+    memcpy(xy[0], x, sizeof x), memcpy(xy[1], y, sizeof y);
+    memcpy(yx[0], y, sizeof y), memcpy(yx[1], x, sizeof x);
+    memcpy(xx[0], x, sizeof x), memcpy(xx[1], x, sizeof x);
+    memcpy(yy[0], y, sizeof y), memcpy(yy[1], y, sizeof y);
+    assert_true(ecm_same_boxes(CBOXES(xy), 2, CBOXES(yx), 2));
+    assert_true(ecm_same_boxes(CBOXES(xy), 0, CBOXES(yx), 0));
+    assert_false(ecm_same_boxes(CBOXES(xy), 2, CBOXES(yx), 1));
+    assert_false(ecm_same_boxes(CBOXES(xy), 2, CBOXES(xx), 2));
+    assert_false(ecm_same_boxes(CBOXES(xx), 2, CBOXES(yy), 2));
+}
+
 static void test_bad_input(void **state)
 {
     (void)state;
@@ -2463,6 +2481,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_cap),
         cmocka_unit_test(test_cap_kept_boxes_over_cap),
         cmocka_unit_test(test_deterministic),
+        cmocka_unit_test(test_same_boxes),
         cmocka_unit_test(test_bad_input),
         cmocka_unit_test(test_no_clusters),
         cmocka_unit_test(test_out_of_memory),
