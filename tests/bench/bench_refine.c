@@ -6,7 +6,8 @@
  * clients get. A map the judge turns down is stored as a candidate, not
  * published (the row says so; publish 0).
  *
- * Usage: bench_refine [--repeat N] [--depth D] MODELS_DIR
+ * Usage: bench_refine [--repeat N] [--depth D] [--only TEXT] MODELS_DIR
+ * (--only: the objects whose label contains TEXT, say to profile one.)
  * For each model, a cluster of users stopped at the middle of the MBR's
  * +z face (the side a visitor walks into), at 0.9 m, and 64 logged
  * collisions there for the judge; for Sponza, a building users start in,
@@ -256,11 +257,15 @@ static int bench_model(const char *dir, const char *label, const char *rel, int 
     return 0;
 }
 
+#define USAGE "usage: bench_refine [--repeat N] [--depth D] [--only TEXT] MODELS_DIR\n"
+
 int main(int argc, char **argv)
 {
     int repeat = 7, depth = 7, o;
+    const char *only = NULL;
     static const struct option opts[] = {{"repeat", required_argument, 0, 'r'},
                                          {"depth", required_argument, 0, 'd'},
+                                         {"only", required_argument, 0, 'o'},
                                          {"help", no_argument, 0, 'h'},
                                          {0, 0, 0, 0}};
     while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
@@ -268,13 +273,15 @@ int main(int argc, char **argv)
             repeat = atoi(optarg);
         else if (o == 'd')
             depth = atoi(optarg);
+        else if (o == 'o')
+            only = optarg;
         else {
-            fputs("usage: bench_refine [--repeat N] [--depth D] MODELS_DIR\n", o == 'h' ? stdout : stderr);
+            fputs(USAGE, o == 'h' ? stdout : stderr);
             return o == 'h' ? 0 : 2;
         }
     }
     if (optind + 1 != argc || repeat < 1 || depth < (int)ECM_DEPTH_MIN || depth > (int)ECM_DEPTH_MAX) {
-        fputs("usage: bench_refine [--repeat N] [--depth D] MODELS_DIR\n", stderr);
+        fputs(USAGE, stderr);
         return 2;
     }
     const char *dir = argv[optind];
@@ -296,9 +303,10 @@ int main(int argc, char **argv)
         {"city block", "scenes/openfoam_windAroundBuildings.obj", 1, 0, 0},
     };
     enum { NMODELS = sizeof models / sizeof models[0] };
-    double total[NMODELS];
+    double total[NMODELS] = {0};
     for (size_t i = 0; i < NMODELS; i++)
-        if (bench_model(dir, models[i].label, models[i].rel, models[i].z_up, models[i].limit, models[i].inside, depth,
+        if ((!only || strstr(models[i].label, only)) &&
+            bench_model(dir, models[i].label, models[i].rel, models[i].z_up, models[i].limit, models[i].inside, depth,
                         repeat, &total[i]) < 0)
             return 1;
     int missed = 0;
