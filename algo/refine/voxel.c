@@ -686,9 +686,34 @@ void voxel_table_free(void *t)
     free(block);
 }
 
-/* One pass: each entry is its row's prefix sum plus the entries
- * below it in y and in z, less the one below both (the previous row and
- * plane are still in cache). */
+/* Row r of a table: its own prefix sums (the cells counted: bytes & mask
+ * non-zero, or with mask 0 the bytes' values). */
+static void row_prefix(uint32_t *restrict r, const uint8_t *restrict src, uint32_t n, uint8_t mask)
+{
+    uint32_t acc = 0;
+    r[0] = 0;
+    if (mask) {
+        for (uint32_t x = 1; x <= n; x++)
+            r[x] = acc += (src[x - 1] & mask) != 0;
+    } else {
+        for (uint32_t x = 1; x <= n; x++)
+            r[x] = acc += src[x - 1];
+    }
+}
+
+/* Adds to row r (m entries) the rows below it in y and in z, less the one
+ * below both; apart from the prefix, the rows do not overlap, so this part
+ * runs eight or sixteen entries at a time. */
+static void row_add(uint32_t *restrict r, const uint32_t *restrict by, const uint32_t *restrict bz,
+                    const uint32_t *restrict byz, uint32_t m)
+{
+    for (uint32_t x = 0; x < m; x++)
+        r[x] += by[x] + bz[x] - byz[x];
+}
+
+/* Each entry is its row's prefix sum plus the entries below it in y and
+ * in z, less the one below both (the previous row and plane are still in
+ * cache); the prefix first, then the rest, which vectorizes. */
 void voxel_svt_build(voxel_svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes, uint8_t mask)
 {
     uint32_t m = n + 1;
@@ -702,13 +727,8 @@ void voxel_svt_build(voxel_svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes
         for (uint32_t y = 0; y < n; y++) {
             uint32_t *row = p + (size_t)m * (y + 1), *below_y = row - m, *below_z = row - plane,
                      *below_yz = below_z - m;
-            const uint8_t *src = bytes + (size_t)n * (y + (size_t)n * z);
-            uint32_t acc = 0;
-            row[0] = 0;
-            for (uint32_t x = 1; x <= n; x++) {
-                acc += mask ? (src[x - 1] & mask) != 0 : src[x - 1];
-                row[x] = acc + below_y[x] + below_z[x] - below_yz[x];
-            }
+            row_prefix(row, bytes + (size_t)n * (y + (size_t)n * z), n, mask);
+            row_add(row, below_y, below_z, below_yz, m);
         }
     }
 }
