@@ -111,6 +111,8 @@ typedef struct work {
     int64_t floor_row; /* the rows (y) below this one lie wholly under the floor */
     size_t bw;
     ilist out;         /* boxes so far: no more division for them */
+    ibox *layers;      /* n + 1 each: best_plane's layers of a box, shrunk */
+    ibox *above;       /* and the hull of each layer and those above it */
     double max_empty;
     uint32_t budget;   /* most boxes the problem boxes may become */
     uint32_t slack;    /* DIVIDE_SLACK, or DIVIDE_SLACK_INSIDE when inside */
@@ -224,24 +226,36 @@ static uint32_t outside_in(const work *w, const ibox *b)
     return w->any_outside ? svt_sum(&w->outside, b) : 0;
 }
 
-/* The price of merging a and b: pressure the hull adds, then empty cells
- * it adds (the boxes are disjoint cell sets, or nearly: see merge_all);
- * forbidden when the hull holds a cell outside the problem boxes. */
+/* What a box of w->out holds on its own: its empty cells (not to be
+ * covered) and its pressure, kept by merge_all for each box, so that
+ * pricing a pair sums only over the hull. */
+typedef struct own {
+    uint64_t empty, pressure;
+} own;
+
+static own own_of(const work *w, const ibox *b)
+{
+    return (own){volume(b) - svt_sum(&w->must, b), svt_sum(&w->press, b)};
+}
+
+/* The price of merging a and b (what each holds: oa, ob): pressure the
+ * hull adds, then empty cells it adds (the boxes are disjoint cell sets,
+ * or nearly: see merge_all); forbidden when the hull holds a cell outside
+ * the problem boxes. */
 typedef struct price {
     uint64_t pressure, empty, vol;
     int forbidden;
 } price;
 
-static price price_of(const work *w, const ibox *a, const ibox *b)
+static price price_of(const work *w, const ibox *a, const ibox *b, const own *oa, const own *ob)
 {
     ibox h = hull(a, b);
     price p = {.vol = volume(&h), .forbidden = outside_in(w, &h) > 0};
     if (p.forbidden)
         return p; /* never merged: no need for its other sums (most pairs far apart) */
-    uint64_t empty_h = p.vol - svt_sum(&w->must, &h);
-    uint64_t empty_ab = (volume(a) - svt_sum(&w->must, a)) + (volume(b) - svt_sum(&w->must, b));
+    uint64_t empty_h = p.vol - svt_sum(&w->must, &h), empty_ab = oa->empty + ob->empty;
     p.empty = empty_h > empty_ab ? empty_h - empty_ab : 0;
-    uint64_t press_h = svt_sum(&w->press, &h), press_ab = (uint64_t)svt_sum(&w->press, a) + svt_sum(&w->press, b);
+    uint64_t press_h = svt_sum(&w->press, &h), press_ab = oa->pressure + ob->pressure;
     p.pressure = press_h > press_ab ? press_h - press_ab : 0;
     return p;
 }
@@ -269,13 +283,13 @@ typedef struct partner {
     int has;
 } partner;
 
-static void find_best(const work *w, const ilist *l, uint32_t i, int any, partner *out)
+static void find_best(const work *w, const ilist *l, const own *os, uint32_t i, int any, partner *out)
 {
     out->has = 0;
     for (uint32_t j = 0; j < l->n; j++) {
         if (j == i)
             continue;
-        price p = price_of(w, &l->b[i], &l->b[j]);
+        price p = price_of(w, &l->b[i], &l->b[j], &os[i], &os[j]);
         if (allowed(w, &p, any) && (!out->has || cheaper(&p, &out->p))) {
             out->has = 1;
             out->j = j;
@@ -298,10 +312,16 @@ static int merge_all(work *w, uint32_t keep)
     if (l->n < 2 || (any && l->n <= keep))
         return 0;
     partner *bs = cvre_malloc(l->n * sizeof *bs);
-    if (!bs)
+    own *os = cvre_malloc(l->n * sizeof *os);
+    if (!bs || !os) {
+        free(bs);
+        free(os);
         return -ENOMEM;
+    }
     for (uint32_t i = 0; i < l->n; i++)
-        find_best(w, l, i, any, &bs[i]);
+        os[i] = own_of(w, &l->b[i]);
+    for (uint32_t i = 0; i < l->n; i++)
+        find_best(w, l, os, i, any, &bs[i]);
     while (!any || l->n > keep) {
         uint32_t bi = UINT32_MAX;
         for (uint32_t k = 0; k < l->n; k++)
@@ -311,6 +331,7 @@ static int merge_all(work *w, uint32_t keep)
             break;
         uint32_t i = bi < bs[bi].j ? bi : bs[bi].j, j = bi < bs[bi].j ? bs[bi].j : bi, last = l->n - 1;
         l->b[i] = hull(&l->b[i], &l->b[j]);
+        os[i] = own_of(w, &l->b[i]);
         /* Who pointed at one of the pair must look again (has = 2); j
          * leaves, and the last box takes its place. */
         for (uint32_t k = 0; k < l->n; k++) {
@@ -321,22 +342,24 @@ static int merge_all(work *w, uint32_t keep)
                 bs[k].has = 2;
         }
         l->b[j] = l->b[last];
+        os[j] = os[last];
         bs[j] = bs[last];
         l->n--;
         for (uint32_t k = 0; k < l->n; k++) {
             if (k == i)
                 continue;
             if (bs[k].has == 2) {
-                find_best(w, l, k, any, &bs[k]);
+                find_best(w, l, os, k, any, &bs[k]);
                 continue;
             }
-            price p = price_of(w, &l->b[k], &l->b[i]);
+            price p = price_of(w, &l->b[k], &l->b[i], &os[k], &os[i]);
             if (allowed(w, &p, any) && (!bs[k].has || cheaper(&p, &bs[k].p)))
                 bs[k] = (partner){.j = i, .p = p, .has = 1};
         }
-        find_best(w, l, i, any, &bs[i]);
+        find_best(w, l, os, i, any, &bs[i]);
     }
     free(bs);
+    free(os);
     return 0;
 }
 
@@ -411,51 +434,65 @@ static int file_node(work *w, heap *h, const ibox *b)
     return press ? heap_push(h, b, press) : push(&w->out, b);
 }
 
-/* What cutting b at `at` on axis a leaves wanted: the pressure in the two
- * parts, each shrunk to the cells it must cover, and their volume; once
- * the pressure passes limit, only that it does. */
-static void parts_left(const work *w, const ibox *b, int a, uint16_t at, uint64_t limit, uint64_t *press,
-                       uint64_t *vol)
+/* The hull of a and b, either of them possibly empty (lo past hi). */
+static ibox hull_or(const ibox *a, const ibox *b)
 {
-    *press = 0;
-    *vol = 0;
-    for (int side = 0; side < 2 && *press <= limit; side++) {
-        ibox c = *b;
-        if (side)
-            c.lo[a] = at;
-        else
-            c.hi[a] = at;
-        if (!shrink(&w->must, &c))
-            continue;
-        *press += svt_sum(&w->press, &c);
-        *vol += volume(&c);
-    }
+    if (a->lo[0] >= a->hi[0])
+        return *b;
+    return b->lo[0] >= b->hi[0] ? *a : hull(a, b);
+}
+
+static const ibox NO_CELLS = {{UINT16_MAX, UINT16_MAX, UINT16_MAX}, {0, 0, 0}};
+
+/* The pressure in c, or 0 when c is empty (NO_CELLS, or a hull of them). */
+static uint64_t press_in(const work *w, const ibox *c)
+{
+    return c->lo[0] < c->hi[0] ? svt_sum(&w->press, c) : 0;
 }
 
 /*
- * The plane across b (every cell border) whose parts, shrunk, leave the
- * least pressure (then the least volume): the cut that frees the most of
- * what users want, when they want something at every face of b (the
- * treads of a spiral stair, each a step above the last). 0 when no plane
- * frees any pressure. At most 3 x 2^ECM_DEPTH_MAX planes, each two
- * shrinks (O(depth) table sums).
+ * The plane across b (every cell border) whose parts, each shrunk to the
+ * cells it must cover, leave the least pressure (then the least volume):
+ * the cut that frees the most of what users want, when they want something
+ * at every face of b (the treads of a spiral stair, each a step above the
+ * last). 0 when no plane frees any pressure. On each axis, each layer of b
+ * is shrunk once (w->layers); the part below a plane is the hull of the
+ * layers below it, and the part above, of those above (w->above, built
+ * from the top): a shrink of each part at each plane took a third of a
+ * bunny's refinement.
  */
 static int best_plane(const work *w, const ibox *b, int *axis, uint16_t *at)
 {
     uint64_t press = svt_sum(&w->press, b), best_p = press, best_v = volume(b);
     int found = 0;
-    for (int a = 0; a < 3; a++)
-        for (uint16_t pos = (uint16_t)(b->lo[a] + 1); pos < b->hi[a]; pos++) {
-            uint64_t p, v;
-            parts_left(w, b, a, pos, best_p, &p, &v);
+    for (int a = 0; a < 3; a++) {
+        uint32_t m = (uint32_t)(b->hi[a] - b->lo[a]);
+        for (uint32_t i = 0; i < m; i++) {
+            ibox c = *b;
+            c.lo[a] = (uint16_t)(b->lo[a] + i);
+            c.hi[a] = (uint16_t)(c.lo[a] + 1);
+            w->layers[i] = shrink(&w->must, &c) ? c : NO_CELLS;
+        }
+        w->above[m] = NO_CELLS;
+        for (uint32_t i = m; i-- > 0;)
+            w->above[i] = hull_or(&w->layers[i], &w->above[i + 1]);
+        ibox below = w->layers[0];
+        for (uint32_t i = 1; i < m; below = hull_or(&below, &w->layers[i]), i++) {
+            uint64_t p = press_in(w, &below), v = below.lo[0] < below.hi[0] ? volume(&below) : 0;
+            if (p > best_p)
+                continue;
+            const ibox *up = &w->above[i];
+            p += press_in(w, up);
+            v += up->lo[0] < up->hi[0] ? volume(up) : 0;
             if (p < best_p || (p == best_p && found && v < best_v)) {
                 best_p = p;
                 best_v = v;
                 *axis = a;
-                *at = pos;
+                *at = (uint16_t)(b->lo[a] + i);
                 found = 1;
             }
         }
+    }
     return found;
 }
 
@@ -608,50 +645,75 @@ typedef struct bits3 {
     size_t w;
 } bits3;
 
-/* Line r of b becomes, at each t, r[t] AND r[t + s] (erode: 0 past the
- * line) or r[t] OR r[t - s] (dilate: 0 before it). */
-static void line_step(uint64_t *r, size_t w, uint32_t s, int erode)
+/* Every line (lines of w words) of v becomes, at each bit t, bit t AND
+ * bit t + s (erode: 0 past the line) or bit t OR bit t - s (dilate: 0
+ * before it). Inline, so that the callers below hand it a constant w and
+ * the compiler unrolls each line (a call and a loop a line took a third
+ * of an archway's later round). */
+static inline __attribute__((always_inline)) void lines_step(uint64_t *v, size_t lines, size_t w, uint32_t s,
+                                                             int erode)
 {
     size_t q = s / 64;
     unsigned sh = s % 64;
-    if (erode) {
-        for (size_t i = 0; i < w; i++) {
-            uint64_t lo = i + q < w ? r[i + q] : 0, hi = i + q + 1 < w ? r[i + q + 1] : 0;
-            r[i] &= sh ? (lo >> sh) | (hi << (64 - sh)) : lo;
+    for (size_t l = 0; l < lines; l++) {
+        uint64_t *r = v + l * w;
+        if (erode) {
+            for (size_t i = 0; i < w; i++) {
+                uint64_t lo = i + q < w ? r[i + q] : 0, hi = i + q + 1 < w ? r[i + q + 1] : 0;
+                r[i] &= sh ? (lo >> sh) | (hi << (64 - sh)) : lo;
+            }
+        } else {
+            for (size_t i = w; i-- > 0;) {
+                uint64_t hi = i >= q ? r[i - q] : 0, lo = i >= q + 1 ? r[i - q - 1] : 0;
+                r[i] |= sh ? (hi << sh) | (lo >> (64 - sh)) : hi;
+            }
         }
-    } else {
-        for (size_t i = w; i-- > 0;) {
-            uint64_t hi = i >= q ? r[i - q] : 0, lo = i >= q + 1 ? r[i - q - 1] : 0;
-            r[i] |= sh ? (hi << sh) | (lo >> (64 - sh)) : hi;
-        }
+    }
+}
+
+/* lines_step for lines of one to four words (grids up to 2^7 cells with
+ * the avatar's padding), or any. */
+static void line_steps(uint64_t *v, size_t lines, size_t w, uint32_t s, int erode)
+{
+    switch (w) {
+    case 1:
+        lines_step(v, lines, 1, s, erode);
+        break;
+    case 2:
+        lines_step(v, lines, 2, s, erode);
+        break;
+    case 3:
+        lines_step(v, lines, 3, s, erode);
+        break;
+    case 4:
+        lines_step(v, lines, 4, s, erode);
+        break;
+    default:
+        lines_step(v, lines, w, s, erode);
     }
 }
 
 /* Along y or z: block t (len blocks of bsize words, groups of them gstride
  * words apart) becomes block t AND block t + s (0 past the end), or block
- * t OR block t - s (nothing before the start). */
+ * t OR block t - s (nothing before the start): in each group, one run of
+ * words against the run s blocks further on (or back). */
 static void block_step(uint64_t *v, size_t groups, size_t gstride, uint32_t len, size_t bsize, uint32_t s, int erode)
 {
+    size_t shift = (size_t)s * bsize, total = (size_t)len * bsize;
     for (size_t g = 0; g < groups; g++) {
         uint64_t *base = v + g * gstride;
+        if (s >= len) {
+            if (erode)
+                memset(base, 0, total * sizeof *base);
+            continue;
+        }
         if (erode) {
-            for (uint32_t t = 0; t < len; t++) {
-                uint64_t *d = base + t * bsize;
-                if (t + s < len) {
-                    const uint64_t *o = base + (size_t)(t + s) * bsize;
-                    for (size_t i = 0; i < bsize; i++)
-                        d[i] &= o[i];
-                } else {
-                    memset(d, 0, bsize * sizeof *d);
-                }
-            }
+            for (size_t i = 0; i < total - shift; i++)
+                base[i] &= base[i + shift];
+            memset(base + total - shift, 0, shift * sizeof *base);
         } else {
-            for (uint32_t t = len; t-- > s;) {
-                uint64_t *d = base + t * bsize;
-                const uint64_t *o = base + (size_t)(t - s) * bsize;
-                for (size_t i = 0; i < bsize; i++)
-                    d[i] |= o[i];
-            }
+            for (size_t i = total; i-- > shift;)
+                base[i] |= base[i - shift];
         }
     }
 }
@@ -675,9 +737,7 @@ static void morph(bits3 *b, int a, uint32_t k, int erode)
         steps[ns++] = k - p;
     for (uint32_t i = 0; i < ns; i++) {
         if (a == 0) {
-            size_t lines = (size_t)b->dim[1] * b->dim[2];
-            for (size_t l = 0; l < lines; l++)
-                line_step(b->v + l * b->w, b->w, steps[i], erode);
+            line_steps(b->v, (size_t)b->dim[1] * b->dim[2], b->w, steps[i], erode);
         } else if (a == 1) {
             block_step(b->v, b->dim[2], b->w * b->dim[1], b->dim[1], b->w, steps[i], erode);
         } else {
@@ -2128,6 +2188,8 @@ static void work_free(work *w)
     free(w->pressure);
     free(w->blocked);
     free(w->mapped);
+    free(w->layers);
+    free(w->above);
     free(w->out.b);
     memset(w, 0, sizeof *w);
 }
@@ -2175,7 +2237,9 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     w->pressure = cvre_calloc(cells, 1);
     w->blocked = cvre_calloc((size_t)n * n * w->bw, sizeof *w->blocked);
     w->mapped = cvre_calloc((size_t)n * n * w->bw, sizeof *w->mapped);
-    if (!w->cls || !w->pressure || !w->blocked || !w->mapped)
+    w->layers = cvre_malloc((n + 1) * sizeof *w->layers);
+    w->above = cvre_malloc((n + 1) * sizeof *w->above);
+    if (!w->cls || !w->pressure || !w->blocked || !w->mapped || !w->layers || !w->above)
         return -ENOMEM;
     classify(w, boxes, nboxes, problem);
     /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
