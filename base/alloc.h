@@ -21,5 +21,12 @@ void *cvre_xrealloc(void *p, size_t size);
 /* A copy of the string s, as cvre_xmalloc. */
 char *cvre_xstrdup(const char *s);
 void cvre_alloc_fail_after(long n);
+/* Keeps freed blocks of up to 64 MiB in the process for the next
+ * allocation (glibc: no mmap for them, no trim of the heap), so that a
+ * refinement's grids, tables and bit arrays (tens of MiB, allocated and
+ * freed per cluster and per retry) do not fault their pages in again each
+ * time. For programs that refine (cvre-server, cvre-cluster); call it
+ * first thing in main. The process keeps its largest refinement's memory. */
+void cvre_alloc_keep_freed(void);
 
 #endif

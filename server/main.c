@@ -7,6 +7,7 @@
 #include <string.h>
 #include <sys/resource.h>
 
+#include "alloc.h"
 #include "log.h"
 #include "num.h"
 #include "refine.h"
@@ -181,6 +182,7 @@ int main(int argc, char **argv)
     server_config cfg;
     server_config_defaults(&cfg);
     int o;
+    cvre_alloc_keep_freed(); /* it refines (alloc.h) */
     while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
         switch (o) {
         case O_HOST: cfg.host = optarg; break;

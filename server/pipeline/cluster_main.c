@@ -140,6 +140,7 @@ int main(int argc, char **argv)
     int json = 0, has_since = 0, has_until = 0, o;
     int64_t only[MAX_OBJECT_FLAGS];
     int nonly = 0;
+    cvre_alloc_keep_freed(); /* it refines (alloc.h) */
     while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
         switch (o) {
         case O_DB: path = optarg; break;

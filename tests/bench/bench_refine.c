@@ -32,6 +32,7 @@
 
 #include "../testdb.h"
 #include "bench.h"
+#include "alloc.h"
 #include "apply.h"
 #include "db.h"
 #include "ecm.h"
@@ -268,6 +269,7 @@ int main(int argc, char **argv)
                                          {"only", required_argument, 0, 'o'},
                                          {"help", no_argument, 0, 'h'},
                                          {0, 0, 0, 0}};
+    cvre_alloc_keep_freed(); /* as the server does (alloc.h) */
     while ((o = getopt_long(argc, argv, "", opts, NULL)) != -1) {
         if (o == 'r')
             repeat = atoi(optarg);
