@@ -2233,24 +2233,27 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     w->floor_row = (int64_t)fmin(fmax(below, INT32_MIN), INT32_MAX); /* any float floor, no overflow */
     size_t cells = (size_t)n * n * n, table = (size_t)(n + 1) * (n + 1) * (n + 1);
     w->bw = (n + 63) / 64;
+    /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
+     * were handed back to the system after each round and faulted in
+     * again, page by page, by the next (glibc keeps a freed block for
+     * reuse up to twice the largest one it has seen returned to it); in
+     * huge pages where the system has them (voxel_table_alloc). Room for
+     * the outside table too (its pages are only touched when a cell is
+     * outside, never for one box), and first: the next grid of the round
+     * (another group, a retry) then finds the same block free, where the
+     * smaller arrays allocated first had split it and its tables went to
+     * fresh pages (the staircase's later rounds: a fifth of their time in
+     * page faults). */
+    w->tables = voxel_table_alloc(3 * table * sizeof *w->tables);
     w->cls = cvre_calloc(cells, 1);
     w->pressure = cvre_calloc(cells, 1);
     w->blocked = cvre_calloc((size_t)n * n * w->bw, sizeof *w->blocked);
     w->mapped = cvre_calloc((size_t)n * n * w->bw, sizeof *w->mapped);
     w->layers = cvre_malloc((n + 1) * sizeof *w->layers);
     w->above = cvre_malloc((n + 1) * sizeof *w->above);
-    if (!w->cls || !w->pressure || !w->blocked || !w->mapped || !w->layers || !w->above)
+    if (!w->tables || !w->cls || !w->pressure || !w->blocked || !w->mapped || !w->layers || !w->above)
         return -ENOMEM;
     classify(w, boxes, nboxes, problem);
-    /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
-     * were handed back to the system after each round and faulted in
-     * again, page by page, by the next (glibc keeps a freed block for
-     * reuse up to twice the largest one it has seen returned to it); in
-     * huge pages where the system has them (voxel_table_alloc). The outside
-     * table only when a cell is outside (never for one box). */
-    w->tables = voxel_table_alloc((w->any_outside ? 3 : 2) * table * sizeof *w->tables);
-    if (!w->tables)
-        return -ENOMEM;
     uint32_t wmax = 1;
     for (uint32_t i = 0; i < ncl; i++)
         wmax = cl[i].weight > wmax ? cl[i].weight : wmax;
