@@ -20,8 +20,9 @@ _Static_assert(3 * JUDGE_DEPTH_MAX < 32, "cell counts fit uint32_t");
 _Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes");
 /* Bins per axis of the triangle index the exact test looks in: a triangle
  * of a detailed mesh falls in one or two, a room's wall in a row of them;
- * 32^3 offsets are 128 KiB. */
-#define JUDGE_BINS 32u
+ * 16^3 offsets are 16 KiB. With 32^3 (128 KiB) building and walking the
+ * bins cost more than the candidates they spared (see JUDGE_DEPTH_DEFAULT). */
+#define JUDGE_BINS 16u
 
 /* The geometry, asked "does this box touch a triangle?". Local
  * coordinates: boxes in the metric frame are divided by the scale. Only the

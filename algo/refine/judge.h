@@ -63,7 +63,7 @@
  *
  * Costs: a pass over the triangles for their bounds and one for those near
  * the samples; building the grid is one pass over those (voxel_mark) plus
- * 4 (2^depth + 1)^3 bytes for the table (1.1 MiB at depth 6; 2^(3 depth)
+ * 4 (2^depth + 1)^3 bytes for the table (144 KiB at depth 5; 2^(3 depth)
  * more while it is built), sorting the
  * samples is O(n log n); the bins hold
  * each triangle at most JUDGE_BIN_SPREAD_MAX times. Then at most
@@ -132,10 +132,15 @@
  * count as let in (opened test): a centimetre, as the scenario checks. */
 #define JUDGE_FLOOR_TOLERANCE 0.01f
 #define JUDGE_LEAK_TOLERANCE 0.01f
-/* The occupancy grid: 2^6 cells a side (1.1 MiB of table, built in a few
- * milliseconds); at 2^7 its table and marking were most of the judge's
- * time. A coarser grid only sends more boxes on to the exact test. */
-#define JUDGE_DEPTH_DEFAULT 6u
+/* The occupancy grid: 2^5 cells a side (144 KiB of table). It only spares
+ * the exact test the boxes far from the geometry; near it (an avatar on a
+ * tread) every grid says "maybe", so a finer one bought little for what
+ * marking it cost: the judge's time over the scenario's seven scenes and
+ * two later rounds (cvre-cluster --json, job replays) was 105 ms at 2^6
+ * with 32^3 bins, 65-75 ms at 2^5 with 16^3, and the bunny's in
+ * bench-refine 9.2 -> 5.1 ms; 2^7 took longer still. Its verdicts are
+ * the exact test's at any depth. */
+#define JUDGE_DEPTH_DEFAULT 5u
 
 /* A triangle whose bounding box spans more bins than this is kept on a
  * list every exact test looks at, so that the bins stay within this many
