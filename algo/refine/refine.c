@@ -19,6 +19,7 @@
 #include "alloc.h"
 #include "avatar.h"
 #include "err.h"
+#include "le.h"
 #include "tribins.h"
 #include "trimesh.h"
 
@@ -878,14 +879,22 @@ static void classify(work *w, const float (*boxes)[6], uint32_t nboxes, const ui
                 if ((at & 63) + cnt > 64)
                     occ |= w->g.bits[(at >> 6) + 1] << (64 - (at & 63));
                 occ = spread[occ & 0xff] & keep;
-                for (uint32_t i = 0; i < cnt; i++)
-                    c |= (uint64_t)row[x + i] << (8 * i);
+                if (cnt == 8) {
+                    c = le_get_u64(row + x); /* one load: gcc folds the bytes */
+                } else {
+                    for (uint32_t i = 0; i < cnt; i++)
+                        c |= (uint64_t)row[x + i] << (8 * i);
+                }
                 c |= (occ << occ_at) | ((occ & (c >> problem_at)) << must_at);
                 uint64_t out = ~((c >> must_at) | (c >> problem_at)) & ones & keep;
                 c |= out * CELL_OUT;
                 outside |= out;
-                for (uint32_t i = 0; i < cnt; i++)
-                    row[x + i] = (uint8_t)(c >> (8 * i));
+                if (cnt == 8) {
+                    le_put_u64(row + x, c);
+                } else {
+                    for (uint32_t i = 0; i < cnt; i++)
+                        row[x + i] = (uint8_t)(c >> (8 * i));
+                }
                 /* Each byte's flag to a bit: byte i's bit 0 lands on bit 56 + i. */
                 uint64_t blocked = ((c >> occ_at) | (c >> kept_at)) & ones;
                 uint64_t mapped = blocked | ((c >> problem_at) & ones);
