@@ -919,16 +919,27 @@ static uint64_t blocked_bits(const work *w, const uint64_t *line, int64_t x)
     return v;
 }
 
-/* The padded array's bits, all 1 (the bits past dim[0] 0). */
-static int bits3_init(bits3 *b, const uint32_t dim[3])
+/* The padded array b of dimensions dim: with fill, its bits all 1 (the
+ * bits past dim[0] 0); without, as allocated, for a caller that writes
+ * every word before it reads one. */
+static int bits3_alloc(bits3 *b, const uint32_t dim[3], int fill)
 {
     *b = (bits3){.dim = {dim[0], dim[1], dim[2]}, .w = (dim[0] + 63) / 64};
     size_t lines = (size_t)dim[1] * dim[2];
     b->v = cvre_malloc(lines * b->w * sizeof *b->v);
     if (!b->v)
         return -ENOMEM;
+    if (!fill)
+        return 0;
+    uint64_t line[4]; /* one line's words, at most 4 up to 2^7 cells and padding: copied */
+    for (size_t i = 0; i < b->w && i < 4; i++)
+        line[i] = dim[0] - 64 * i >= 64 ? UINT64_MAX : ((uint64_t)1 << (dim[0] - 64 * i)) - 1;
     for (size_t l = 0; l < lines; l++) {
         uint64_t *r = b->v + l * b->w;
+        if (b->w <= 4) {
+            memcpy(r, line, b->w * sizeof *r);
+            continue;
+        }
         for (size_t i = 0; i < b->w; i++)
             r[i] = dim[0] - 64 * i >= 64 ? UINT64_MAX : ((uint64_t)1 << (dim[0] - 64 * i)) - 1;
     }
@@ -994,7 +1005,7 @@ static int mark_unsupported(const work *w, bits3 *under, const int64_t o[3], uin
     int64_t b0 = o[1] > (int64_t)s ? o[1] - (int64_t)s : 0, top = o[1] + (int64_t)under->dim[1];
     const uint32_t ndim[3] = {under->dim[0], (uint32_t)(top - 1 > b0 ? top - 1 - b0 : 1), 1};
     bits3 near;
-    int rc = bits3_init(&near, ndim);
+    int rc = bits3_alloc(&near, ndim, 0); /* every row written below before it is read */
     if (rc < 0)
         return rc;
     for (uint32_t z = 0; z < under->dim[2]; z++) {
@@ -1247,9 +1258,9 @@ static int keep_reached(const work *w, const ecm_cluster *cl, const ecm_params *
     const voxel_grid *g = &w->g;
     const uint32_t *dim = fit->dim;
     bits3 walk, under = {0}, clear = {0}, seen = {0};
-    int rc = bits3_init(&walk, dim);
-    if (rc < 0 || (rc = bits3_init(&under, dim)) < 0 || (rc = bits3_init(&clear, dim)) < 0 ||
-        (rc = bits3_init(&seen, dim)) < 0)
+    int rc = bits3_alloc(&walk, dim, 0); /* walk: a copy of fit; seen: zeroed below */
+    if (rc < 0 || (rc = bits3_alloc(&under, dim, 1)) < 0 || (rc = bits3_alloc(&clear, dim, 1)) < 0 ||
+        (rc = bits3_alloc(&seen, dim, 0)) < 0)
         goto done;
     size_t lines = (size_t)dim[1] * dim[2], words = lines * fit->w;
     memcpy(walk.v, fit->v, words * sizeof *walk.v);
@@ -1373,10 +1384,10 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     int64_t band_at = (int64_t)top + 1 - lo[1] - trim; /* the row of cell top - k + 1 */
     uint32_t band = face == 1 || top >= hi[1] || band_at >= dim[1] ? dim[1] : band_at <= 0 ? 0 : (uint32_t)band_at;
     bits3 b, u = {0};
-    int rc = bits3_init(&b, dim);
+    int rc = bits3_alloc(&b, dim, 1);
     if (rc < 0)
         return rc;
-    if (band < dim[1] && (rc = bits3_init(&u, dim)) < 0) {
+    if (band < dim[1] && (rc = bits3_alloc(&u, dim, 1)) < 0) {
         free(b.v);
         return rc;
     }
@@ -1463,10 +1474,10 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
     const uint32_t dim[3] = {n, n, n};
     const int64_t o[3] = {0, 0, 0};
     bits3 fit, under, seen;
-    int rc = bits3_init(&fit, dim);
+    int rc = bits3_alloc(&fit, dim, 1);
     if (rc < 0)
         return rc;
-    if ((rc = bits3_init(&under, dim)) < 0 || (rc = bits3_init(&seen, dim)) < 0) {
+    if ((rc = bits3_alloc(&under, dim, 1)) < 0 || (rc = bits3_alloc(&seen, dim, 0)) < 0) { /* seen: zeroed below */
         free(fit.v);
         free(under.v);
         return rc;
