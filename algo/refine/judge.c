@@ -394,8 +394,22 @@ static int finite_box(const float b[6])
     return 1;
 }
 
+/* A map the judge walks: 1 to ECM_MAX_BOXES_LIMIT finite boxes. */
+static int check_map(const char *which, const float (*boxes)[6], uint32_t n, char *err, size_t errlen)
+{
+    if (!boxes || n == 0 || n > ECM_MAX_BOXES_LIMIT)
+        return cvre_fail(err, errlen, -EINVAL, "%s map: %u boxes, 1 to %u wanted", which, n, ECM_MAX_BOXES_LIMIT);
+    for (uint32_t i = 0; i < n; i++)
+        if (!finite_box(boxes[i]))
+            return cvre_fail(err, errlen, -EINVAL, "%s map: box %u is not a finite box", which, i);
+    return 0;
+}
+
+/* The parameters, the mesh, the old map and the samples (the new map:
+ * judge_new). */
 static int check(const judge_params *p, const judge_input *in, char *err, size_t errlen)
 {
+    int rc;
     if (!(p->dt > 0 && p->dt <= MOVE_MAX_DT) || !(p->reach > 0 && p->reach <= 100) ||
         !(p->speed >= JUDGE_SPEED_MIN && p->speed <= 100) || !(p->deflect >= 0 && p->deflect <= 1.5707964f) ||
         p->depth < VOXEL_DEPTH_MIN || p->depth > JUDGE_DEPTH_MAX || p->cell_depth < VOXEL_DEPTH_MIN ||
@@ -406,16 +420,8 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
         return cvre_fail(err, errlen, -EINVAL, "no triangles to judge against");
     if (!(in->scale > 0) || !isfinite(in->scale) || !isfinite(in->pose_y))
         return cvre_fail(err, errlen, -EINVAL, "scale %g or height %g unusable", in->scale, in->pose_y);
-    const float (*maps[2])[6] = {in->old_boxes, in->new_boxes};
-    uint32_t counts[2] = {in->nold, in->nnew};
-    for (int k = 0; k < 2; k++) {
-        if (!maps[k] || counts[k] == 0 || counts[k] > ECM_MAX_BOXES_LIMIT)
-            return cvre_fail(err, errlen, -EINVAL, "%s map: %u boxes, 1 to %u wanted", k ? "new" : "old", counts[k],
-                             ECM_MAX_BOXES_LIMIT);
-        for (uint32_t i = 0; i < counts[k]; i++)
-            if (!finite_box(maps[k][i]))
-                return cvre_fail(err, errlen, -EINVAL, "%s map: box %u is not a finite box", k ? "new" : "old", i);
-    }
+    if ((rc = check_map("old", in->old_boxes, in->nold, err, errlen)) < 0)
+        return rc;
     if (!in->samples || in->nsamples == 0)
         return cvre_fail(err, errlen, -EINVAL, "no samples: nothing to judge by");
     for (uint32_t i = 0; i < in->nsamples; i++)
@@ -434,82 +440,153 @@ int judge_better(const judge_result *r)
            r->opened_new <= r->opened_old;
 }
 
-int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen)
+/* An open judgement (judge.h): the geometry, the samples chosen, the old
+ * map and its figures. */
+struct judge {
+    judge_params p;
+    const judge_input *in;
+    geometry g;
+    map maps[2]; /* old, new */
+    judge_sample *distinct;
+    uint32_t m, n; /* distinct samples, and those judged */
+    double cell[3];
+    judge_result old; /* the old map's figures */
+};
+
+static double cpu_ms_since(const struct timespec *t0)
 {
-    struct timespec t0, t1; /* this thread's CPU time: see judge_result */
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
-    memset(out, 0, sizeof *out);
-    int rc = check(p, in, err, errlen);
-    if (rc < 0)
-        return rc;
-    judge_params jp = *p;
-    jp.move.floor_y = (float)-in->pose_y;
-    geometry g = {0};
-    map maps[2] = {{0}, {0}};
-    /* A user pressing on a box logs the same collision tick after tick:
-     * each distinct sample once, in an order of their own. */
-    judge_sample *distinct = cvre_malloc(in->nsamples * sizeof *distinct);
-    if (!distinct) {
-        rc = cvre_fail(err, errlen, -ENOMEM, "judging: %s", strerror(ENOMEM));
-        goto done;
-    }
-    memcpy(distinct, in->samples, in->nsamples * sizeof *distinct);
-    qsort(distinct, in->nsamples, sizeof *distinct, cmp_sample);
-    uint32_t m = 0;
-    for (uint32_t i = 0; i < in->nsamples; i++)
-        if (m == 0 || cmp_sample(&distinct[m - 1], &distinct[i]) != 0)
-            distinct[m++] = distinct[i];
-    uint32_t n = m < jp.max_samples ? m : jp.max_samples;
-    const float *lo = in->mesh->min, *hi = in->mesh->max;
-    const double cells = (double)(1u << jp.cell_depth);
-    const double cell[3] = {((double)hi[0] - lo[0]) / cells * in->scale, ((double)hi[1] - lo[1]) / cells * in->scale,
-                            ((double)hi[2] - lo[2]) / cells * in->scale};
-    double near[6];
-    trial_region(&jp, distinct, m, n, cell, in->scale, near);
-    if ((rc = geometry_init(&g, &jp, in, near)) < 0 ||
-        (rc = map_init(&maps[0], in->old_boxes, in->nold, in->scale)) < 0 ||
-        (rc = map_init(&maps[1], in->new_boxes, in->nnew, in->scale)) < 0) {
-        /* The input was checked: what is left is memory. */
-        rc = cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
-        goto done;
-    }
-    const float turns[3] = {0, jp.deflect, -jp.deflect};
-    int nturns = jp.deflect > 0 ? 3 : 1;
-    tally t[2] = {{0, 0}, {0, 0}};
-    for (uint32_t i = 0; i < n; i++) {
-        const judge_sample *s = &distinct[(uint64_t)i * m / n];
+    struct timespec t1;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t1);
+    return (double)(t1.tv_sec - t0->tv_sec) * 1e3 + (double)(t1.tv_nsec - t0->tv_nsec) / 1e6;
+}
+
+/* Walks every sample's trials against map k (0: from where it was logged;
+ * 1: as start_new puts it on the new map); adds them to *t, and their
+ * ticks to *moves. */
+static void walk_map(judge *j, int k, tally *t, uint64_t *moves)
+{
+    const judge_params *p = &j->p;
+    const float turns[3] = {0, p->deflect, -p->deflect};
+    int nturns = p->deflect > 0 ? 3 : 1;
+    for (uint32_t i = 0; i < j->n; i++) {
+        const judge_sample *s = &j->distinct[(uint64_t)i * j->m / j->n];
         float h = hypotf(s->vel[0], s->vel[2]), speed;
         uint32_t ticks;
-        if (!(h > 0)) {
-            out->still++;
+        if (!(h > 0))
             continue;
-        }
-        pace(&jp, h, &speed, &ticks);
-        const move_state from[2] = {{.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true},
-                                    start_new(&jp, &maps[0], &maps[1], s)};
+        pace(p, h, &speed, &ticks);
+        const move_state from = k ? start_new(p, &j->maps[0], &j->maps[1], s)
+                                  : (move_state){.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true};
         for (int d = 0; d < nturns; d++) {
             float c = cosf(turns[d]), sn = sinf(turns[d]);
             float dx = (s->vel[0] * c - s->vel[2] * sn) / h, dz = (s->vel[0] * sn + s->vel[2] * c) / h;
-            for (int k = 0; k < 2; k++)
-                trial(&jp, &g, cell, &maps[k], from[k], dx, dz, speed, ticks, &t[k]);
-            out->moves += ticks;
+            trial(p, &j->g, j->cell, &j->maps[k], from, dx, dz, speed, ticks, t);
+            *moves += ticks;
         }
     }
-    out->samples = n;
-    out->phantom_old = t[0].phantom;
-    out->phantom_new = t[1].phantom;
-    out->opened_old = t[0].opened;
-    out->opened_new = t[1].opened;
+}
+
+void judge_close(judge *j)
+{
+    if (!j)
+        return;
+    free(j->distinct);
+    geometry_free(&j->g);
+    map_free(&j->maps[0]);
+    map_free(&j->maps[1]);
+    free(j);
+}
+
+int judge_open(judge **out, const judge_params *p, const judge_input *in, judge_result *old, char *err,
+               size_t errlen)
+{
+    struct timespec t0; /* this thread's CPU time: see judge_result */
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
+    *out = NULL;
+    memset(old, 0, sizeof *old);
+    int rc = check(p, in, err, errlen);
+    if (rc < 0)
+        return rc;
+    judge *j = cvre_calloc(1, sizeof *j);
+    if (!j)
+        return cvre_fail(err, errlen, -ENOMEM, "judging: %s", strerror(ENOMEM));
+    j->p = *p;
+    j->p.move.floor_y = (float)-in->pose_y;
+    j->in = in;
+    /* A user pressing on a box logs the same collision tick after tick:
+     * each distinct sample once, in an order of their own. */
+    j->distinct = cvre_malloc(in->nsamples * sizeof *j->distinct);
+    if (!j->distinct) {
+        rc = -ENOMEM;
+        goto fail;
+    }
+    memcpy(j->distinct, in->samples, in->nsamples * sizeof *j->distinct);
+    qsort(j->distinct, in->nsamples, sizeof *j->distinct, cmp_sample);
+    uint32_t m = 0;
+    for (uint32_t i = 0; i < in->nsamples; i++)
+        if (m == 0 || cmp_sample(&j->distinct[m - 1], &j->distinct[i]) != 0)
+            j->distinct[m++] = j->distinct[i];
+    j->m = m;
+    j->n = m < j->p.max_samples ? m : j->p.max_samples;
+    const float *lo = in->mesh->min, *hi = in->mesh->max;
+    const double cells = (double)(1u << j->p.cell_depth);
+    for (int a = 0; a < 3; a++)
+        j->cell[a] = ((double)hi[a] - lo[a]) / cells * in->scale;
+    double near[6];
+    trial_region(&j->p, j->distinct, m, j->n, j->cell, in->scale, near);
+    if ((rc = geometry_init(&j->g, &j->p, in, near)) < 0 ||
+        (rc = map_init(&j->maps[0], in->old_boxes, in->nold, in->scale)) < 0)
+        goto fail; /* the input was checked: what is left is memory */
+    tally t = {0, 0};
+    walk_map(j, 0, &t, &j->old.moves);
+    j->old.samples = j->n;
+    for (uint32_t i = 0; i < j->n; i++) {
+        const judge_sample *s = &j->distinct[(uint64_t)i * m / j->n];
+        j->old.still += !(hypotf(s->vel[0], s->vel[2]) > 0);
+    }
+    j->old.phantom_old = t.phantom;
+    j->old.opened_old = t.opened;
+    j->old.ms = cpu_ms_since(&t0);
+    *old = j->old;
+    *out = j;
+    return 0;
+fail:
+    judge_close(j);
+    return cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
+}
+
+int judge_can_gain(const judge_result *old) { return old->phantom_old >= JUDGE_GAIN_MIN; }
+
+int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, char *err, size_t errlen)
+{
+    struct timespec t0;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
+    memset(out, 0, sizeof *out);
+    int rc = check_map("new", boxes, n, err, errlen);
+    if (rc < 0)
+        return rc;
+    map_free(&j->maps[1]);
+    if ((rc = map_init(&j->maps[1], boxes, n, j->in->scale)) < 0)
+        return cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
+    tally t = {0, 0};
+    uint64_t moves = 0;
+    walk_map(j, 1, &t, &moves);
+    *out = j->old;
+    out->phantom_new = t.phantom;
+    out->opened_new = t.opened;
     out->better = judge_better(out);
-done:
-    free(distinct);
-    geometry_free(&g);
-    map_free(&maps[0]);
-    map_free(&maps[1]);
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t1);
+    out->ms = j->old.ms + cpu_ms_since(&t0);
+    return 0;
+}
+
+int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen)
+{
+    judge *j;
+    judge_result old;
+    memset(out, 0, sizeof *out);
+    int rc = judge_open(&j, p, in, &old, err, errlen);
     if (rc == 0)
-        out->ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;
-    else
-        memset(out, 0, sizeof *out);
+        rc = judge_new(j, in->new_boxes, in->nnew, out, err, errlen);
+    judge_close(j);
     return rc;
 }

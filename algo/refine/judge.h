@@ -196,13 +196,38 @@ int judge_better(const judge_result *r);
 
 /*
  * Judges in->new_boxes against in->old_boxes (see above) and fills *out,
- * whatever the verdict. Returns 0, or with *out zeroed and a one-line
- * reason in err (room for errlen bytes): -EINVAL for parameters out of
- * range, no mesh, no boxes or more than ECM_MAX_BOXES_LIMIT, a
- * box's coordinate, the scale or pose_y not finite (or a scale not above 0), a
- * box with min > max, no samples, or a sample with a coordinate that is not
- * finite or beyond MOVE_MAX_COORD; -ENOMEM when out of memory.
+ * whatever the verdict: judge_open, judge_new and judge_close in one.
+ * Returns 0, or with *out zeroed and a one-line reason in err (room for
+ * errlen bytes): -EINVAL for parameters out of range, no mesh, no boxes or
+ * more than ECM_MAX_BOXES_LIMIT, a box's coordinate, the scale or pose_y
+ * not finite (or a scale not above 0), a box with min > max, no samples,
+ * or a sample with a coordinate that is not finite or beyond
+ * MOVE_MAX_COORD; -ENOMEM when out of memory.
  */
 int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen);
+
+/*
+ * The same in steps, so that the old map can be walked before there is a
+ * new one (server/pipeline/apply.c: a map that no candidate could beat is
+ * not refined at all). judge_open checks everything but the new map
+ * (in->new_boxes is not read), indexes the geometry, walks the old map and
+ * fills *old with its figures (samples, still, moves, phantom_old,
+ * opened_old, ms; the rest 0); in and what it points to must outlive *j.
+ * judge_new walks a new map and fills *out as judge_maps does (ms: the
+ * old map's walks and these); it may be called again with another map.
+ * Errors as judge_maps's (*j NULL after a failed open; judge_close(NULL)
+ * does nothing).
+ */
+typedef struct judge judge;
+int judge_open(judge **j, const judge_params *p, const judge_input *in, judge_result *old, char *err,
+               size_t errlen);
+int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, char *err, size_t errlen);
+void judge_close(judge *j);
+
+/* Whether any new map could be better than the old one with these
+ * figures (judge_open's): the verdict asks for at least JUDGE_GAIN_MIN
+ * phantom blocks fewer, so an old map with fewer on the trials wins
+ * against every candidate. */
+int judge_can_gain(const judge_result *old);
 
 #endif
