@@ -26,12 +26,15 @@
 
 /* What became of one object: written (version), rejected (candidate),
  * rejected before (candidate, judged_before: the same clusters made a
- * candidate that was turned down; nothing refined again), or unchanged
- * (all zero). */
+ * candidate that was turned down; nothing refined again), nothing to
+ * gain (no_gain: the map in force meets fewer phantom blocks on the
+ * judge's trials than any candidate would have to remove, so nothing was
+ * refined; judge holds the old map's figures), or unchanged (the rest). */
 typedef struct ecm_applied {
     uint32_t version;       /* the version written; 0: none */
     uint32_t candidate;     /* the rejected candidate stored (or found); 0: none */
     int judged_before;      /* 1: candidate was rejected earlier for the same clusters */
+    int no_gain;            /* 1: not refined: judge_can_gain said no */
     uint32_t boxes_before, boxes_after;
     ecm_result stats;       /* counts and times; no boxes */
     judge_result judge;     /* the judge's figures; zero when it did not run */
@@ -66,8 +69,10 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len);
  *             the candidate the judge rejected (stored; not published), or
  *             the one it rejected earlier for the same clusters (then
  *             out->judged_before: nothing refined); or neither when the
- *             refined boxes are the ones in force (unchanged: nothing
- *             written; a success, since there is nothing to do);
+ *             judge's trials on the map in force leave nothing a new map
+ *             could gain (out->no_gain: nothing refined, nothing written),
+ *             or when the refined boxes are the ones in force (unchanged:
+ *             nothing written; a success, since there is nothing to do);
  *   -ESTALE   the object changed version or left meanwhile: nothing written;
  *   -EINVAL   refine.h refused the input (an object without triangles...),
  *             or could not run (out of memory), or the judge had nothing to

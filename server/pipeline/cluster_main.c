@@ -352,6 +352,7 @@ int main(int argc, char **argv)
                    : a->version            ? "written"
                    : a->judged_before      ? "rejected before"
                    : a->candidate          ? "rejected"
+                   : a->no_gain            ? "nothing to gain"
                                            : "unchanged",
                    a->version, a->candidate, a->boxes_before, a->boxes_after, a->stats.capped, a->stats.apart_over,
                    a->stats.voxel_ms,
@@ -388,6 +389,11 @@ int main(int argc, char **argv)
                        "%u (%s)\n",
                        (long long)objs[i].id, objs[i].version, a->boxes_before, a->boxes_after, a->candidate,
                        figures);
+            else if (objs[i].outcome == 0 && a->no_gain)
+                printf("  object %lld: v%u kept, not refined: the judge's trials meet %llu phantom blocks on it, "
+                       "fewer than the %u a new map must remove (%s)\n",
+                       (long long)objs[i].id, objs[i].version, (unsigned long long)a->judge.phantom_old,
+                       JUDGE_GAIN_MIN, figures);
             else if (objs[i].outcome == 0) {
                 char why[160];
                 ecm_unchanged_line(a, why, sizeof why);

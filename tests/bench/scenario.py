@@ -951,7 +951,8 @@ def judge_scene(phantom, stats):
                 phantom=phantom)
 
 
-OUTCOMES = ("written", "rejected", "rejected before", "unchanged", "unchanged, apart", "no cluster")
+OUTCOMES = ("written", "rejected", "rejected before", "nothing to gain", "unchanged", "unchanged, apart",
+            "no cluster")
 
 
 def later_outcomes(reports, name):

@@ -355,18 +355,17 @@ def test_bad_parameters_and_an_object_without_triangles():
 
 
 def test_a_map_no_better_is_kept_as_a_rejected_candidate():
-    """Users pushing on the room's solid east wall (z = -0.8): the MBR's face
-    there is the wall itself, so hardly a move it blocks is a phantom (a
-    deflected trial held back a tick at most); the refined map (the room
-    hollowed out behind the wall) blocks them as much, or a tick less. The
-    judge turns it down: no new version, a candidate with its figures, and
-    the same clusters are not refined again."""
+    """Users walking into the room's doorway, which the MBR blocks, refined
+    on a grid of 2^4 cells a side (--depth 4): cells of two thirds of a
+    metre are too coarse to open a door of 0.9, so the refined map blocks
+    them as much. The judge turns it down: no new version, a candidate with
+    its figures, and the same clusters are not refined again."""
     srv = Server(A.bin, "--world", ROOM_WORLD)
     assert srv.stop() == 0
     room = object_id(srv.db, "openfoam_room_with_doorway.stl")
     db = sqlite3.connect(srv.db)
-    insert_collisions(db, time.time(), [(room, (0.21757, 0.9, -0.8), (10.519, 0, -0.8), (-3, 0, 0))])
-    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json")
+    insert_collisions(db, time.time(), [(room, (0.21757, 0.9, DOOR_Z), (10.519, 0, DOOR_Z), (-3, 0, 0))])
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json", "--depth", "4")
     assert rc == 0, (rc, out, err)
     got = json.loads(out)["refined"]
     assert len(got) == 1 and got[0]["outcome"] == "rejected" and got[0]["version"] == 0, got
@@ -374,8 +373,10 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     j = got[0]["judge"]
     # The three users stood at the same four places: four distinct samples.
     assert not j["better"] and j["samples"] == 4 and j["moves"] > 0, j
-    # It removes fewer phantom blocks than JUDGE_GAIN_MIN (4), if any.
-    assert j["phantom_old"] - j["phantom_new"] < 4 and j["opened_new"] == 0, j
+    # The MBR stopped them (a new map had something to gain), the new map
+    # removes less than a quarter of that (judge.h, the verdict).
+    assert j["phantom_old"] >= 4 and 4 * (j["phantom_old"] - j["phantom_new"]) < j["phantom_old"], j
+    assert j["opened_new"] == 0, j
     assert db.execute("SELECT ecm_version FROM objects WHERE id = ?", (room,)).fetchone() == (1,)
     assert db.execute("SELECT count(*) FROM ecm_events WHERE object_id = ?", (room,)).fetchone() == (0,)
     cand = db.execute("SELECT candidate, version, run_id, box_count, samples, phantom_old, phantom_new "
@@ -386,7 +387,7 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     assert db.execute("SELECT run_id, cluster_id FROM ecm_candidate_clusters WHERE object_id = ?",
                       (room,)).fetchall() == [(1, 0)]
     # The same clusters again (a new run of the same log): not refined.
-    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply")
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--depth", "4")
     assert rc == 0 and "those of candidate 1, rejected before" in out, (rc, out, err)
     assert db.execute("SELECT count(*) FROM ecm_candidates").fetchone() == (1,)
     # cvre-admin versions shows it after the version it was judged against.
@@ -401,6 +402,33 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     assert f"phantom {j['phantom_old']} -> {j['phantom_new']}, opened 0 -> 0" in why, why
     rc, out, err = cmd("cvre-admin", "--db", srv.db, "versions", str(room))
     assert rc == 0 and "rejected" in out and "candidate 1: " in out, (rc, out, err)
+    db.close()
+
+
+def test_a_map_with_nothing_to_gain_is_not_refined():
+    """Users pushing on the room's solid east wall (z = -0.8): the MBR's face
+    there is the wall itself, so hardly a move it blocks is a phantom (a
+    deflected trial held back a tick at most). No new map could remove the
+    JUDGE_GAIN_MIN (4) phantom blocks the verdict asks for, so the job walks
+    the map in force and refines nothing: no version, no candidate."""
+    srv = Server(A.bin, "--world", ROOM_WORLD)
+    assert srv.stop() == 0
+    room = object_id(srv.db, "openfoam_room_with_doorway.stl")
+    db = sqlite3.connect(srv.db)
+    insert_collisions(db, time.time(), [(room, (0.21757, 0.9, -0.8), (10.519, 0, -0.8), (-3, 0, 0))])
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json")
+    assert rc == 0, (rc, out, err)
+    got = json.loads(out)["refined"]
+    assert [(g["outcome"], g["version"], g["candidate"], g["boxes_after"]) for g in got] == [
+        ("nothing to gain", 0, 0, 0)], got
+    assert got[0]["voxel_ms"] == 0 and got[0]["divide_ms"] == 0, got
+    j = got[0]["judge"]
+    assert not j["better"] and j["samples"] == 4 and j["moves"] > 0 and j["phantom_old"] < 4, j
+    assert db.execute("SELECT count(*) FROM ecm_candidates").fetchone() == (0,)
+    assert db.execute("SELECT ecm_version FROM objects WHERE id = ?", (room,)).fetchone() == (1,)
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply")
+    assert rc == 0 and "v1 kept, not refined: the judge's trials meet" in out, (rc, out, err)
+    assert "fewer than the 4 a new map must remove" in out, out
     db.close()
 
 
@@ -483,5 +511,6 @@ if __name__ == "__main__":
     run([test_doorway_opens_live_and_walls_stay, test_archway_opens_and_stays_solid_at_its_sides,
          test_moved_object_keeps_its_boxes_and_rollback_reaches_clients, test_offline_apply_is_published_live,
          test_bad_parameters_and_an_object_without_triangles,
-         test_a_map_no_better_is_kept_as_a_rejected_candidate, test_the_judge_walks_from_the_collisions_of_the_window,
+         test_a_map_no_better_is_kept_as_a_rejected_candidate, test_a_map_with_nothing_to_gain_is_not_refined,
+         test_the_judge_walks_from_the_collisions_of_the_window,
          test_the_same_boxes_in_another_order_are_unchanged])
