@@ -402,6 +402,54 @@ static void test_verdict_needs_a_clear_gain(void **state)
     assert_int_equal(judge_better(&r), 1);
 }
 
+/* The judge in steps: the old map's figures alone first, then any number
+ * of new maps against it, each exactly as judge_maps judges it; a wall
+ * users only meet for real leaves nothing to gain. */
+static void test_in_steps(void **state)
+{
+    (void)state;
+    static mesh m;
+    wall(&m);
+    judge_sample s[16];
+    uint32_t ns = in_front(s, 16, -0.15f, 0.15f);
+    judge_input in = input(&m, wall_mbr, 1, NULL, 0, s, ns);
+    judge_params p;
+    judge_params_default(&p);
+    char err[128] = "";
+    judge *j;
+    judge_result old, a, b;
+    assert_int_equal(judge_open(&j, &p, &in, &old, err, sizeof err), 0);
+    assert_int_equal(old.samples, 16);
+    assert_true(old.moves > 0 && old.phantom_old >= 16 * 3 && old.ms >= 0);
+    assert_true(old.phantom_new == 0 && old.opened_new == 0 && !old.better);
+    assert_true(judge_can_gain(&old)); /* the MBR stops them in the doorway */
+    assert_int_equal(judge_new(j, wall_parts, 3, &a, err, sizeof err), 0);
+    assert_int_equal(judge_new(j, wall_mbr, 1, &b, err, sizeof err), 0);
+    /* A bad map is refused and leaves the judgement usable. */
+    static const float bad[1][6] = {{1, 0, 0, 0, 1, 1}};
+    judge_result c;
+    assert_int_equal(judge_new(j, bad, 1, &c, err, sizeof err), -EINVAL);
+    assert_non_null(strstr(err, "new map"));
+    judge_close(j);
+    judge_close(NULL);
+    for (int k = 0; k < 2; k++) {
+        judge_input both = input(&m, wall_mbr, 1, k ? wall_mbr : wall_parts, k ? 1 : 3, s, ns);
+        judge_result r = judged(&both), *got = k ? &b : &a;
+        assert_int_equal(got->samples, r.samples);
+        assert_true(got->moves == r.moves && got->phantom_old == r.phantom_old && got->phantom_new == r.phantom_new);
+        assert_true(got->opened_old == r.opened_old && got->opened_new == r.opened_new && got->better == r.better);
+    }
+    assert_true(a.better && !b.better);
+    /* Users at the solid wall beside the door: no phantom to remove. */
+    ns = in_front(s, 16, 1.5f, 2.5f);
+    in = input(&m, wall_mbr, 1, NULL, 0, s, ns);
+    assert_int_equal(judge_open(&j, &p, &in, &old, err, sizeof err), 0);
+    assert_true(old.phantom_old < JUDGE_GAIN_MIN);
+    assert_false(judge_can_gain(&old));
+    judge_close(j);
+    trimesh_free(&m.tm);
+}
+
 static void test_bad_input(void **state)
 {
     (void)state;
@@ -509,6 +557,7 @@ int main(void)
         cmocka_unit_test(test_lone_ticks_are_no_phantom),
         cmocka_unit_test(test_deterministic_cap_still_scale),
         cmocka_unit_test(test_verdict_needs_a_clear_gain),
+        cmocka_unit_test(test_in_steps),
         cmocka_unit_test(test_bad_input),
         cmocka_unit_test(test_mesh_boxes),
     };
