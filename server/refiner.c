@@ -260,9 +260,10 @@ static int refined_one(void *ctx, const cluster_found *f, uint32_t k, int rc, co
                      figures);
         settle(t, f, k);
     } else if (rc == 0 && a->no_gain) {
-        log_info("object %lld v%u: %u clusters of run %lld: map kept, not refined: the judge's trials meet %llu "
-                 "phantom blocks on it, fewer than the %u a new map must remove",
-                 (long long)t->id, t->version, k, run_id, (unsigned long long)a->judge.phantom_old, JUDGE_GAIN_MIN);
+        char why[160];
+        ecm_no_gain_line(a, why, sizeof why);
+        log_info("object %lld v%u: %u clusters of run %lld: map kept, not refined: %s", (long long)t->id, t->version,
+                 k, run_id, why);
         settle(t, f, k);
     } else if (rc == 0) { /* unchanged */
         char why[160];

@@ -254,9 +254,10 @@ static bool held_back(const move_result *r, const move_state *st, const float di
     return moved < JUDGE_HELD_BACK * hypot(disp[0], disp[2]);
 }
 
-/* What one trial counted. */
+/* What the trials of one map counted (trial: phantom, opened; walk_map:
+ * the ticks walked and the samples not walked). */
 typedef struct tally {
-    uint64_t phantom, opened;
+    uint64_t phantom, opened, moves, still;
 } tally;
 
 /* Whether the avatar with its feet at f overlaps a box of m (interiors). */
@@ -461,9 +462,8 @@ static double cpu_ms_since(const struct timespec *t0)
 }
 
 /* Walks every sample's trials against map k (0: from where it was logged;
- * 1: as start_new puts it on the new map); adds them to *t, and their
- * ticks to *moves. */
-static void walk_map(judge *j, int k, tally *t, uint64_t *moves)
+ * 1: as start_new puts it on the new map), counting into *t. */
+static void walk_map(judge *j, int k, tally *t)
 {
     const judge_params *p = &j->p;
     const float turns[3] = {0, p->deflect, -p->deflect};
@@ -472,8 +472,10 @@ static void walk_map(judge *j, int k, tally *t, uint64_t *moves)
         const judge_sample *s = &j->distinct[(uint64_t)i * j->m / j->n];
         float h = hypotf(s->vel[0], s->vel[2]), speed;
         uint32_t ticks;
-        if (!(h > 0))
+        if (!(h > 0)) {
+            t->still++;
             continue;
+        }
         pace(p, h, &speed, &ticks);
         const move_state from = k ? start_new(p, &j->maps[0], &j->maps[1], s)
                                   : (move_state){.pos = {s->pos[0], s->pos[1], s->pos[2]}, .vy = 0, .grounded = true};
@@ -481,7 +483,7 @@ static void walk_map(judge *j, int k, tally *t, uint64_t *moves)
             float c = cosf(turns[d]), sn = sinf(turns[d]);
             float dx = (s->vel[0] * c - s->vel[2] * sn) / h, dz = (s->vel[0] * sn + s->vel[2] * c) / h;
             trial(p, &j->g, j->cell, &j->maps[k], from, dx, dz, speed, ticks, t);
-            *moves += ticks;
+            t->moves += ticks;
         }
     }
 }
@@ -537,13 +539,11 @@ int judge_open(judge **out, const judge_params *p, const judge_input *in, judge_
     if ((rc = geometry_init(&j->g, &j->p, in, near)) < 0 ||
         (rc = map_init(&j->maps[0], in->old_boxes, in->nold, in->scale)) < 0)
         goto fail; /* the input was checked: what is left is memory */
-    tally t = {0, 0};
-    walk_map(j, 0, &t, &j->old.moves);
+    tally t = {0};
+    walk_map(j, 0, &t);
     j->old.samples = j->n;
-    for (uint32_t i = 0; i < j->n; i++) {
-        const judge_sample *s = &j->distinct[(uint64_t)i * m / j->n];
-        j->old.still += !(hypotf(s->vel[0], s->vel[2]) > 0);
-    }
+    j->old.still = (uint32_t)t.still;
+    j->old.moves = t.moves;
     j->old.phantom_old = t.phantom;
     j->old.opened_old = t.opened;
     j->old.ms = cpu_ms_since(&t0);
@@ -568,9 +568,8 @@ int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, 
     map_free(&j->maps[1]);
     if ((rc = map_init(&j->maps[1], boxes, n, j->in->scale)) < 0)
         return cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
-    tally t = {0, 0};
-    uint64_t moves = 0;
-    walk_map(j, 1, &t, &moves);
+    tally t = {0}; /* its moves and still are the old map's */
+    walk_map(j, 1, &t);
     *out = j->old;
     out->phantom_new = t.phantom;
     out->opened_new = t.opened;

@@ -135,11 +135,11 @@
 /* The occupancy grid: 2^5 cells a side (144 KiB of table). It only spares
  * the exact test the boxes far from the geometry; near it (an avatar on a
  * tread) every grid says "maybe", so a finer one bought little for what
- * marking it cost: the judge's time over the scenario's seven scenes and
- * two later rounds (cvre-cluster --json, job replays) was 105 ms at 2^6
- * with 32^3 bins, 65-75 ms at 2^5 with 16^3, and the bunny's in
- * bench-refine 9.2 -> 5.1 ms; 2^7 took longer still. Its verdicts are
- * the exact test's at any depth. */
+ * marking it cost: the judge's ms summed over job 1 of the scenario's
+ * seven scenes and job 3 of its archway and staircase (cvre-cluster
+ * --json on copies of the runner's databases) were 102-111 at 2^6 with
+ * 32^3 bins, 60-76 at 2^5 with 16^3 and 146-149 at 2^7; bench-refine's
+ * bunny 9.2 -> 5.1 ms. Its verdicts are the exact test's at any depth. */
 #define JUDGE_DEPTH_DEFAULT 5u
 
 /* A triangle whose bounding box spans more bins than this is kept on a

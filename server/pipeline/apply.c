@@ -91,6 +91,12 @@ void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len)
         snprintf(buf, len, "its clusters press on real geometry only");
 }
 
+void ecm_no_gain_line(const ecm_applied *a, char *buf, size_t len)
+{
+    snprintf(buf, len, "the judge's trials meet %llu phantom blocks on it, fewer than the %u a new map must remove",
+             (unsigned long long)a->judge.phantom_old, JUDGE_GAIN_MIN);
+}
+
 /* Whether local point p lies in one of the clusters' extents. */
 static int in_a_cluster(const cluster_found *f, uint32_t n, const float p[3])
 {

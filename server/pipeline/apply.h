@@ -56,6 +56,11 @@ void ecm_judge_line(const judge_result *j, char *buf, size_t len);
  * only tightened, and that changed nothing). Into buf (room for len). */
 void ecm_unchanged_line(const ecm_applied *a, char *buf, size_t len);
 
+/* Why an object with nothing to gain (no_gain) was not refined, for
+ * people: "the judge's trials meet 2 phantom blocks on it, fewer than the
+ * 4 a new map must remove". Into buf (room for len). */
+void ecm_no_gain_line(const ecm_applied *a, char *buf, size_t len);
+
 /*
  * Refines the object the n clusters f were found on (all of one object and
  * version, of run run_id; 0: none recorded) from the collisions of run's

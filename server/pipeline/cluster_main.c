@@ -389,12 +389,12 @@ int main(int argc, char **argv)
                        "%u (%s)\n",
                        (long long)objs[i].id, objs[i].version, a->boxes_before, a->boxes_after, a->candidate,
                        figures);
-            else if (objs[i].outcome == 0 && a->no_gain)
-                printf("  object %lld: v%u kept, not refined: the judge's trials meet %llu phantom blocks on it, "
-                       "fewer than the %u a new map must remove (%s)\n",
-                       (long long)objs[i].id, objs[i].version, (unsigned long long)a->judge.phantom_old,
-                       JUDGE_GAIN_MIN, figures);
-            else if (objs[i].outcome == 0) {
+            else if (objs[i].outcome == 0 && a->no_gain) {
+                char why[160];
+                ecm_no_gain_line(a, why, sizeof why);
+                printf("  object %lld: v%u kept, not refined: %s (%s)\n", (long long)objs[i].id, objs[i].version, why,
+                       figures);
+            } else if (objs[i].outcome == 0) {
                 char why[160];
                 ecm_unchanged_line(a, why, sizeof why);
                 printf("  object %lld: v%u unchanged: %s\n", (long long)objs[i].id, objs[i].version, why);
