@@ -642,12 +642,15 @@ static int redivide(work *w, uint32_t budget)
 /*
  * The padded array of mark_wanted: dim[0] x dim[1] x dim[2] bits, each line
  * along x in w words (bit t of a line is bit t % 64 of word t / 64), the
- * bits past dim[0] kept 0 until the dilations.
+ * bits past dim[0] kept 0 until the dilations. top_free: the array reaches
+ * the grid's top or above it, where nothing is blocked, so an erosion
+ * along y reads the rows past its last as free (else as nothing).
  */
 typedef struct bits3 {
     uint64_t *v;
     uint32_t dim[3];
     size_t w;
+    int top_free;
 } bits3;
 
 /* Every line (lines of w words) of v becomes, at each bit t, bit t AND
@@ -691,23 +694,26 @@ static void lines_step(uint64_t *v, size_t lines, size_t w, uint32_t s, int erod
 }
 
 /* Along y or z: block t (len blocks of bsize words, groups of them gstride
- * words apart) becomes block t AND block t + s (0 past the end), or block
- * t OR block t - s (nothing before the start): in each group, one run of
- * words against the run s blocks further on (or back). */
-static void block_step(uint64_t *v, size_t groups, size_t gstride, uint32_t len, size_t bsize, uint32_t s, int erode)
+ * words apart) becomes block t AND block t + s (past the end: 1 with
+ * end_free, else 0), or block t OR block t - s (nothing before the start):
+ * in each group, one run of words against the run s blocks further on (or
+ * back). */
+static void block_step(uint64_t *v, size_t groups, size_t gstride, uint32_t len, size_t bsize, uint32_t s, int erode,
+                       int end_free)
 {
     size_t shift = (size_t)s * bsize, total = (size_t)len * bsize;
     for (size_t g = 0; g < groups; g++) {
         uint64_t *base = v + g * gstride;
         if (s >= len) {
-            if (erode)
+            if (erode && !end_free)
                 memset(base, 0, total * sizeof *base);
             continue;
         }
         if (erode) {
             for (size_t i = 0; i < total - shift; i++)
                 base[i] &= base[i + shift];
-            memset(base + total - shift, 0, shift * sizeof *base);
+            if (!end_free)
+                memset(base + total - shift, 0, shift * sizeof *base);
         } else {
             for (size_t i = total; i-- > shift;)
                 base[i] |= base[i - shift];
@@ -717,7 +723,7 @@ static void block_step(uint64_t *v, size_t groups, size_t gstride, uint32_t len,
 
 /*
  * Erodes (a bit stays 1 if the k bits from it on along axis a are all 1,
- * the window inside the array) or dilates (a bit becomes 1 if one of the k
+ * those past the array 0, or 1 above a top_free array's top) or dilates (a bit becomes 1 if one of the k
  * bits up to it is 1) b along axis a, by doubling: windows of 1, 2, 4 ...
  * p bits (p the largest power of two up to k), then two windows of p that
  * overlap to span k.
@@ -736,9 +742,9 @@ static void morph(bits3 *b, int a, uint32_t k, int erode)
         if (a == 0) {
             lines_step(b->v, (size_t)b->dim[1] * b->dim[2], b->w, steps[i], erode);
         } else if (a == 1) {
-            block_step(b->v, b->dim[2], b->w * b->dim[1], b->dim[1], b->w, steps[i], erode);
+            block_step(b->v, b->dim[2], b->w * b->dim[1], b->dim[1], b->w, steps[i], erode, b->top_free);
         } else {
-            block_step(b->v, 1, 0, b->dim[2], b->w * b->dim[1], steps[i], erode);
+            block_step(b->v, 1, 0, b->dim[2], b->w * b->dim[1], steps[i], erode, 0);
         }
     }
 }
@@ -1250,6 +1256,7 @@ static int keep_reached(const work *w, const ecm_cluster *cl, const ecm_params *
     if (rc < 0 || (rc = bits3_alloc(&under, dim, 1)) < 0 || (rc = bits3_alloc(&clear, dim, 1)) < 0 ||
         (rc = bits3_alloc(&seen, dim, 0)) < 0)
         goto done;
+    clear.top_free = fit->top_free;
     size_t lines = (size_t)dim[1] * dim[2], words = lines * fit->w;
     memcpy(walk.v, fit->v, words * sizeof *walk.v);
     if ((rc = mark_unsupported(w, &under, o, step_cells(w, p), k)) < 0)
@@ -1352,14 +1359,24 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
      * dilation (whose rows under the array are nothing). A region on the
      * floor so loses a quarter of its rows. Bounded memory: past
      * WANTED_CELLS_MAX the longest kernel is halved (more space counts as
-     * wanted, never less; only deep grids with a large avatar get there). */
+     * wanted, never less; only deep grids with a large avatar get there).
+     * The padding above ends where no row is needed: at the grid's top
+     * (placements starting above it cover no cell of the region), or a
+     * step above it where users walk (keep_reached: higher placements
+     * stand on nothing); erosions read the free space above it (top_free).
+     * A 1.5 m statue's region so keeps 159 of 256 rows. */
+    int walks = stretched && face != 1;
+    int64_t cut = (int64_t)n + (walks ? step_cells(w, p) : 0);
     uint32_t trim;
     for (;;) {
         int64_t under = w->floor_row - ((int64_t)lo[1] - k[1]);
         trim = under <= 0 ? 0 : under >= k[1] ? k[1] : (uint32_t)under;
+        int64_t end = (int64_t)hi[1] + k[1];
         size_t total = 1;
         for (int a = 0; a < 3; a++) {
-            dim[a] = hi[a] - lo[a] + 2 * k[a] - (a == 1 ? trim : 0); /* index i is cell o + i (below) */
+            dim[a] = hi[a] - lo[a] + 2 * k[a]; /* index i is cell o + i (below) */
+            if (a == 1)
+                dim[1] -= trim + (uint32_t)(end > cut ? end - cut : 0);
             total *= dim[a];
         }
         int longest = k[0] >= k[1] && k[0] >= k[2] ? 0 : k[1] >= k[2] ? 1 : 2;
@@ -1375,6 +1392,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     int rc = bits3_alloc(&b, dim, 1);
     if (rc < 0)
         return rc;
+    b.top_free = (int64_t)lo[1] - k[1] + trim + dim[1] >= n;
     if (band < dim[1] && (rc = bits3_alloc(&u, dim, 1)) < 0) {
         free(b.v);
         return rc;
@@ -1392,7 +1410,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     }
     for (int a = 0; a < 3; a++)
         morph(&b, a, k[a], 1);
-    if (stretched && face != 1 && (rc = keep_reached(w, cl, p, &b, o, k)) < 0) {
+    if (walks && (rc = keep_reached(w, cl, p, &b, o, k)) < 0) {
         free(b.v);
         free(u.v);
         return rc;
@@ -1470,6 +1488,7 @@ static int mark_reachable(work *w, const ecm_cluster *cl, const ecm_params *p, u
         free(under.v);
         return rc;
     }
+    fit.top_free = 1; /* the grid's own rows */
     /* fit: free cells, eroded to the placements that fit, less those that
      * stand on nothing. */
     clear_cells(w, w->blocked, &fit, o);
