@@ -23,6 +23,11 @@ _Static_assert(JUDGE_DEPTH_MAX <= VOXEL_DEPTH_MAX, "depths the voxelizer takes")
  * 16^3 offsets are 16 KiB. With 32^3 (128 KiB) building and walking the
  * bins cost more than the candidates they spared (see JUDGE_DEPTH_DEFAULT). */
 #define JUDGE_BINS 16u
+/* The occupancy grid only says where no triangle is (maybe_touches), so a
+ * triangle whose bounding box spans at most this many cells marks them all
+ * (voxel_mark_boxed's loose marking) without a test of its own: bench-
+ * refine's bunny statue, 30.2 -> 21.1 M instructions. */
+#define JUDGE_LOOSE_CELLS 8u
 
 /* The geometry, asked "does this box touch a triangle?". Local
  * coordinates: boxes in the metric frame are divided by the scale. Only the
@@ -136,7 +141,7 @@ static int geometry_init(geometry *g, const judge_params *p, const judge_input *
     if (rc < 0)
         return rc;
     /* Copies of the mesh's triangles, checked by trimesh_init, and their boxes. */
-    if ((rc = voxel_mark_boxed(&g->g, g->tris, (const float(*)[6])g->tbox, g->ntris)) < 0)
+    if ((rc = voxel_mark_boxed(&g->g, g->tris, (const float(*)[6])g->tbox, g->ntris, JUDGE_LOOSE_CELLS)) < 0)
         return rc;
     if ((rc = build_svt(g)) < 0)
         return rc;

@@ -2282,7 +2282,7 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     struct timespec t0;
     clock_gettime(STAGE_CLOCK, &t0);
     int rc = voxel_grid_init(&w->g, p->depth, hb, hb + 3);
-    if (rc < 0 || (rc = voxel_mark_boxed(&w->g, m->tris, (const float(*)[6])m->box, m->ntris)) < 0)
+    if (rc < 0 || (rc = voxel_mark_boxed(&w->g, m->tris, (const float(*)[6])m->box, m->ntris, 0)) < 0)
         return rc;
     r->voxel_ms += ms_since(&t0);
     clock_gettime(STAGE_CLOCK, &t0);

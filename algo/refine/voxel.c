@@ -501,7 +501,28 @@ int voxel_mark(voxel_grid *g, const float *tris, size_t ntris)
     return 0;
 }
 
-int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris)
+/* Marks the cells of triangle t's bounding box b (the cells its grown
+ * extent meets, as mark_triangle finds them) when there are at most
+ * `loose` of them: 1, or 0 when the triangle needs its exact cells. */
+static int mark_box_cells(marker *m, const voxel_grid *g, const float *b, uint32_t loose)
+{
+    int r[3][2];
+    long cells = 1;
+    for (int a = 0; a < 3; a++) {
+        if (!axis_range(m, a, (double)b[a] - g->min[a], (double)b[3 + a] - g->min[a], r[a]))
+            return 1; /* misses the grid: no cell to mark */
+        cells *= r[a][1] - r[a][0] + 1;
+    }
+    if (cells > (long)loose)
+        return 0;
+    for (int k = r[2][0]; k <= r[2][1]; k++)
+        for (int j = r[1][0]; j <= r[1][1]; j++)
+            for (int i = r[0][0]; i <= r[0][1]; i++)
+                set_cell(m, i, j, k);
+    return 1;
+}
+
+int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris, uint32_t loose)
 {
     if (!g || !g->bits || (ntris && (!tris || !box)))
         return -EINVAL;
@@ -519,7 +540,8 @@ int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], ui
         const float *b = box[t];
         if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
             continue;
-        mark_one(&m, g, tris + 9 * (size_t)t);
+        if (!loose || !mark_box_cells(&m, g, b, loose))
+            mark_one(&m, g, tris + 9 * (size_t)t);
     }
     g->occupied += m.added;
     return 0;

@@ -59,8 +59,12 @@ int voxel_mark(voxel_grid *g, const float *tris, size_t ntris);
  * (trimesh_init), with box[t] triangle t's bounding box: no second pass
  * over the coordinates, and a triangle whose box misses the grid by more
  * than a cell is passed over from its box (a group's grid over part of an
- * object). Sets the same cells. Returns 0, or -EINVAL if g has no bits. */
-int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris);
+ * object). With loose 0 it sets the same cells; with loose > 0, every cell
+ * of a triangle's bounding box where those are at most loose cells (a
+ * superset, for a filter that only needs "no triangle here" to be true;
+ * most triangles of a detailed mesh, with no test of their own). Returns
+ * 0, or -EINVAL if g has no bits. */
+int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris, uint32_t loose);
 
 static inline int voxel_get(const voxel_grid *g, uint32_t x, uint32_t y, uint32_t z)
 {

@@ -435,12 +435,20 @@ static void test_mesh_equals_triangles(void **state)
         grid_init(&tri, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
         grid_init(&mesh, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
         assert_int_equal(voxel_mark(&tri, t, N), 0);
-        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, (const float(*)[6])m.box, m.ntris), 0);
+        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, (const float(*)[6])m.box, m.ntris, 0), 0);
         assert_true(tri.occupied > 0);
         assert_int_equal(mesh.occupied, tri.occupied);
         assert_memory_equal(mesh.bits, tri.bits, ((size_t)tri.n * tri.n * tri.n + 7) / 8);
-        assert_int_equal(voxel_mark_boxed(NULL, m.tris, (const float(*)[6])m.box, m.ntris), -EINVAL);
-        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, NULL, m.ntris), -EINVAL);
+        assert_int_equal(voxel_mark_boxed(NULL, m.tris, (const float(*)[6])m.box, m.ntris, 0), -EINVAL);
+        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, NULL, m.ntris, 0), -EINVAL);
+        /* Loose: every exact cell (test_loose_marks_the_box: and more). */
+        voxel_grid loose;
+        grid_init(&loose, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+        assert_int_equal(voxel_mark_boxed(&loose, m.tris, (const float(*)[6])m.box, m.ntris, 8), 0);
+        for (size_t i = 0; i < ((size_t)tri.n * tri.n * tri.n + 63) / 64; i++)
+            assert_int_equal(loose.bits[i] & tri.bits[i], tri.bits[i]);
+        assert_true(loose.occupied >= tri.occupied);
+        voxel_grid_free(&loose);
         voxel_grid_free(&tri);
         voxel_grid_free(&mesh);
         trimesh_free(&m);
@@ -883,6 +891,35 @@ static float *load_model(const char *rel, import_mesh *m)
 
 /* The summed-volume table against sums cell by cell, for every box of a
  * small grid of random bytes, taken whole and through a mask. */
+/* voxel_mark_boxed's loose marking: a triangle over 2 x 2 x 2 cells that
+ * misses one of them sets all eight loosely, seven exactly; over more cells
+ * than `loose`, its exact cells. */
+static void test_loose_marks_the_box(void **state)
+{
+    (void)state;
+    const float t[9] = {0.5f, 0.5f, 0.5f, 1.5f, 0.6f, 0.5f, 0.5f, 1.5f, 1.5f};
+    char err[128] = "";
+    trimesh m;
+    assert_int_equal(trimesh_init(&m, t, 1, err, sizeof err), 0);
+    voxel_grid exact, loose, wide;
+    grid_init(&exact, 2, 0, 0, 0, 4, 4, 4);
+    grid_init(&loose, 2, 0, 0, 0, 4, 4, 4);
+    grid_init(&wide, 2, 0, 0, 0, 4, 4, 4);
+    assert_int_equal(voxel_mark_boxed(&exact, m.tris, (const float(*)[6])m.box, 1, 0), 0);
+    assert_int_equal(voxel_mark_boxed(&loose, m.tris, (const float(*)[6])m.box, 1, 8), 0);
+    assert_int_equal(voxel_mark_boxed(&wide, m.tris, (const float(*)[6])m.box, 1, 7), 0);
+    assert_int_equal(exact.occupied, 7);
+    assert_false(voxel_get(&exact, 1, 0, 1));
+    assert_int_equal(loose.occupied, 8);
+    assert_true(voxel_get(&loose, 1, 0, 1));
+    assert_int_equal(wide.occupied, 7);
+    assert_memory_equal(wide.bits, exact.bits, 8);
+    voxel_grid_free(&exact);
+    voxel_grid_free(&loose);
+    voxel_grid_free(&wide);
+    trimesh_free(&m);
+}
+
 static void test_svt_against_sums(void **state)
 {
     (void)state;
@@ -996,6 +1033,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_one_call_equals_union),
         cmocka_unit_test(test_threads_equal_one_thread),
         cmocka_unit_test(test_mesh_equals_triangles),
+        cmocka_unit_test(test_loose_marks_the_box),
         cmocka_unit_test(test_svt_against_sums),
         {BUNNY, test_bunny, NULL, NULL, NULL},
     };
