@@ -709,33 +709,43 @@ void voxel_table_free(void *t)
 }
 
 /* Row r of a table: its own prefix sums (the cells counted: bytes & mask
- * non-zero, or with mask 0 the bytes' values). */
-static void row_prefix(uint32_t *restrict r, const uint8_t *restrict src, uint32_t n, uint8_t mask)
+ * non-zero, or with mask 0 the bytes' values) plus the rows below it in y
+ * and in z (by, bz), less the one below both (byz). Eight cells at a time:
+ * the prefix, then the rest, which vectorizes; a group where no cell
+ * counts (most of a row: cells to cover lie on the surface, pressure only
+ * near users) has its prefix at once. Bench-refine's bunny statue, the two
+ * tables: 51.2 -> 36.5 M instructions. */
+static void row_build(uint32_t *restrict r, const uint8_t *restrict src, uint32_t n, uint8_t mask,
+                      const uint32_t *restrict by, const uint32_t *restrict bz, const uint32_t *restrict byz)
 {
-    uint32_t acc = 0;
-    r[0] = 0;
-    if (mask) {
-        for (uint32_t x = 1; x <= n; x++)
-            r[x] = acc += (src[x - 1] & mask) != 0;
-    } else {
-        for (uint32_t x = 1; x <= n; x++)
-            r[x] = acc += src[x - 1];
+    uint64_t m8 = mask ? mask * 0x0101010101010101ull : ~0ull;
+    uint32_t acc = 0, x = 0, pre[8];
+    r[0] = 0; /* and so is every row's first entry */
+    for (; x + 8 <= n; x += 8) {
+        uint64_t u;
+        memcpy(&u, src + x, sizeof u);
+        if (!(u & m8)) {
+            for (uint32_t i = 0; i < 8; i++)
+                pre[i] = acc;
+        } else if (mask) {
+            for (uint32_t i = 0; i < 8; i++)
+                pre[i] = acc += (src[x + i] & mask) != 0;
+        } else {
+            for (uint32_t i = 0; i < 8; i++)
+                pre[i] = acc += src[x + i];
+        }
+        for (uint32_t i = 0; i < 8; i++)
+            r[x + i + 1] = pre[i] + by[x + i + 1] + bz[x + i + 1] - byz[x + i + 1];
     }
-}
-
-/* Adds to row r (m entries) the rows below it in y and in z, less the one
- * below both; apart from the prefix, the rows do not overlap, so this part
- * runs eight or sixteen entries at a time. */
-static void row_add(uint32_t *restrict r, const uint32_t *restrict by, const uint32_t *restrict bz,
-                    const uint32_t *restrict byz, uint32_t m)
-{
-    for (uint32_t x = 0; x < m; x++)
-        r[x] += by[x] + bz[x] - byz[x];
+    for (; x < n; x++) { /* grids under 8 cells a side */
+        acc += mask ? (src[x] & mask) != 0 : src[x];
+        r[x + 1] = acc + by[x + 1] + bz[x + 1] - byz[x + 1];
+    }
 }
 
 /* Each entry is its row's prefix sum plus the entries below it in y and
  * in z, less the one below both (the previous row and plane are still in
- * cache); the prefix first, then the rest, which vectorizes. */
+ * cache). */
 void voxel_svt_build(voxel_svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes, uint8_t mask)
 {
     uint32_t m = n + 1;
@@ -749,8 +759,7 @@ void voxel_svt_build(voxel_svt *s, uint32_t *t, uint32_t n, const uint8_t *bytes
         for (uint32_t y = 0; y < n; y++) {
             uint32_t *row = p + (size_t)m * (y + 1), *below_y = row - m, *below_z = row - plane,
                      *below_yz = below_z - m;
-            row_prefix(row, bytes + (size_t)n * (y + (size_t)n * z), n, mask);
-            row_add(row, below_y, below_z, below_yz, m);
+            row_build(row, bytes + (size_t)n * (y + (size_t)n * z), n, mask, below_y, below_z, below_yz);
         }
     }
 }
