@@ -679,7 +679,9 @@ static inline __attribute__((always_inline)) void line_steps_w(uint64_t *r, size
     }
 }
 
-/* Most words of a line: the padded arrays are at most three grids long. */
+/* Most words of a line with the shortcut of lines_morph_w: the padded
+ * arrays are at most three grids long (the region and a kernel of at most
+ * a grid on each side). */
 #define LINE_WORDS_MAX ((3u << ECM_DEPTH_MAX) / 64 + 1)
 
 /* Every line (lines of w words, dim bits) of v through the steps. A line
@@ -719,7 +721,13 @@ static void lines_morph(uint64_t *v, size_t lines, size_t w, uint32_t dim, const
     case 2: lines_morph_w(v, lines, 2, dim, steps, ns, erode); break;
     case 3: lines_morph_w(v, lines, 3, dim, steps, ns, erode); break;
     case 4: lines_morph_w(v, lines, 4, dim, steps, ns, erode); break;
-    default: lines_morph_w(v, lines, w, dim, steps, ns, erode);
+    default:
+        if (w <= LINE_WORDS_MAX) {
+            lines_morph_w(v, lines, w, dim, steps, ns, erode);
+        } else {
+            for (size_t l = 0; l < lines; l++)
+                line_steps_w(v + l * w, w, steps, ns, erode);
+        }
     }
 }
 
@@ -753,10 +761,10 @@ static void block_step(uint64_t *v, size_t groups, size_t gstride, uint32_t len,
 
 /*
  * Erodes (a bit stays 1 if the k bits from it on along axis a are all 1,
- * those past the array 0, or 1 above a top_free array's top) or dilates (a bit becomes 1 if one of the k
- * bits up to it is 1) b along axis a, by doubling: windows of 1, 2, 4 ...
- * p bits (p the largest power of two up to k), then two windows of p that
- * overlap to span k.
+ * those past the array 0, or 1 above a top_free array's top) or dilates
+ * (a bit becomes 1 if one of the k bits up to it is 1) b along axis a, by
+ * doubling: windows of 1, 2, 4 ... p bits (p the largest power of two up
+ * to k), then two windows of p that overlap to span k.
  */
 static void morph(bits3 *b, int a, uint32_t k, int erode)
 {
