@@ -1432,13 +1432,13 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
     int rc = bits3_alloc(&b, dim, 1);
     if (rc < 0)
         return rc;
-    b.top_free = (int64_t)lo[1] - k[1] + trim + dim[1] >= n;
     if (band < dim[1] && (rc = bits3_alloc(&u, dim, 1)) < 0) {
         free(b.v);
         return rc;
     }
     /* b: 1 = free (empty cells, and every cell outside the grid). */
     const int64_t o[3] = {(int64_t)lo[0] - k[0], (int64_t)lo[1] - k[1] + trim, (int64_t)lo[2] - k[2]};
+    b.top_free = o[1] + dim[1] >= n;
     clear_cells(w, w->blocked, &b, o);
     /* u: 1 where a placement has nothing to stand on in the two cells under
      * its footprint (the kernel is rounded down, so a placement standing on

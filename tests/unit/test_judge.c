@@ -430,6 +430,8 @@ static void test_in_steps(void **state)
     judge_result c;
     assert_int_equal(judge_new(j, bad, 1, &c, err, sizeof err), -EINVAL);
     assert_non_null(strstr(err, "new map"));
+    assert_int_equal(judge_new(j, wall_parts, 3, &c, err, sizeof err), 0);
+    assert_true(c.phantom_new == a.phantom_new && c.opened_new == a.opened_new && c.better == a.better);
     judge_close(j);
     judge_close(NULL);
     for (int k = 0; k < 2; k++) {
