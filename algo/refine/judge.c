@@ -243,27 +243,66 @@ static void avatar_box(const move_params *mp, const float f[3], const double gro
     }
 }
 
-/* Whether the move r (from st, asked for disp) was held back by a box: an
- * inside contact, or a blocking one that left the avatar less than
- * JUDGE_HELD_BACK of its horizontal motion. Sliding along a face it meets
- * at a glance is not held back: a map that opens a corridor is not charged
- * for its walls as if they stopped users. */
-static bool held_back(const move_result *r, const move_state *st, const float disp[3])
+/* The contact of the move r (from st, asked for disp) that held it back,
+ * or NULL: an inside contact, or a blocking one that left the avatar less
+ * than JUDGE_HELD_BACK of its horizontal motion. Sliding along a face it
+ * meets at a glance is not held back: a map that opens a corridor is not
+ * charged for its walls as if they stopped users. */
+static const move_contact *held_back(const move_result *r, const move_state *st, const float disp[3])
 {
     for (uint32_t i = 0; i < r->ncontacts; i++)
         if (r->contacts[i].inside)
-            return true;
+            return &r->contacts[i];
     if (r->ncontacts == 0)
-        return false;
+        return NULL;
     double moved = hypot((double)r->state.pos[0] - st->pos[0], (double)r->state.pos[2] - st->pos[2]);
-    return moved < JUDGE_HELD_BACK * hypot(disp[0], disp[2]);
+    return moved < JUDGE_HELD_BACK * hypot(disp[0], disp[2]) ? &r->contacts[0] : NULL;
 }
 
+/* Where a new map's phantom blocks were (judge_places). */
+typedef struct place_list {
+    judge_place *p;
+    uint32_t n, cap;
+} place_list;
+
 /* What the trials of one map counted (trial: phantom, opened; walk_map:
- * the ticks walked and the samples not walked). */
+ * the ticks walked and the samples not walked), and where its phantom
+ * blocks were (at: NULL for the old map). */
 typedef struct tally {
     uint64_t phantom, opened, moves, still;
+    place_list *at;
 } tally;
+
+/* Adds ticks phantom blocks of the avatar with its feet at f, held back by
+ * contact c, to *at (metric -> local by scale); a stuck avatar adds to its
+ * last place. Out of memory, the place is left out: places only guide. */
+static void add_place(place_list *at, const move_params *mp, const float f[3], const move_contact *c, double scale,
+                      uint64_t ticks)
+{
+    static const double none[3] = {0, 0, 0};
+    double lo[3], hi[3];
+    avatar_box(mp, f, none, none, lo, hi);
+    judge_place q = {.hit = c->box_index, .ticks = ticks > UINT32_MAX ? UINT32_MAX : (uint32_t)ticks};
+    for (int a = 0; a < 3; a++) {
+        q.box[a] = (float)(lo[a] / scale);
+        q.box[3 + a] = (float)(hi[a] / scale);
+        q.point[a] = (float)(c->point[a] / scale);
+    }
+    if (at->n && memcmp(at->p[at->n - 1].box, q.box, sizeof q.box) == 0 && at->p[at->n - 1].hit == q.hit) {
+        uint64_t sum = (uint64_t)at->p[at->n - 1].ticks + q.ticks;
+        at->p[at->n - 1].ticks = sum > UINT32_MAX ? UINT32_MAX : (uint32_t)sum;
+        return;
+    }
+    if (at->n == at->cap) {
+        uint32_t cap = at->cap ? 2 * at->cap : 64;
+        judge_place *np = cvre_realloc(at->p, cap * sizeof *np);
+        if (!np)
+            return;
+        at->p = np;
+        at->cap = cap;
+    }
+    at->p[at->n++] = q;
+}
 
 /* Whether the avatar with its feet at f overlaps a box of m (interiors). */
 static int encloses(const move_params *mp, const map *m, const float f[3])
@@ -300,7 +339,9 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
     const double grow_lo[3] = {cell[0], -JUDGE_FLOOR_TOLERANCE, cell[2]};
     const double shrink[3] = {-JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE, -JUDGE_LEAK_TOLERANCE};
     const float disp[3] = {dx * speed * p->dt, 0, dz * speed * p->dt};
-    uint64_t run = 0; /* phantom ticks in a row so far */
+    uint64_t run = 0;        /* phantom ticks in a row so far */
+    move_contact last = {0}; /* what held the last of them back, */
+    float at[3] = {0, 0, 0}; /* and where */
     for (uint32_t k = 0; k < ticks; k++) {
         float lo[3], hi[3];
         move_bounds(&p->move, &st, disp, p->dt, lo, hi);
@@ -316,7 +357,8 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
             return; /* out of the controller's range: the trial ends there */
         double blo[3], bhi[3];
         int phantom = 0, opened;
-        if (held_back(&r, &st, disp)) {
+        const move_contact *held = held_back(&r, &st, disp);
+        if (held) {
             avatar_box(&p->move, r.state.pos, grow_lo, cell, blo, bhi);
             phantom = !touches_exactly(g, blo, bhi);
         }
@@ -329,8 +371,12 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
         if (phantom) {
             /* A run counts once it is JUDGE_HELD_TICKS long, from its first tick. */
             run += times;
-            if (run >= JUDGE_HELD_TICKS)
-                t->phantom += run - times >= JUDGE_HELD_TICKS ? times : run;
+            uint64_t counted = run < JUDGE_HELD_TICKS ? 0 : run - times >= JUDGE_HELD_TICKS ? times : run;
+            t->phantom += counted;
+            last = *held;
+            memcpy(at, r.state.pos, sizeof at);
+            if (counted && t->at)
+                add_place(t->at, &p->move, at, &last, g->scale, counted);
         } else {
             run = 0;
         }
@@ -340,8 +386,11 @@ static void trial(const judge_params *p, geometry *g, const double cell[3], map 
         st = r.state;
     }
     /* A run the reach cut short: the next tick would have held it too. */
-    if (run > 0 && run < JUDGE_HELD_TICKS)
+    if (run > 0 && run < JUDGE_HELD_TICKS) {
         t->phantom += run;
+        if (t->at)
+            add_place(t->at, &p->move, at, &last, g->scale, run);
+    }
 }
 
 /* The pace of a sample walking at horizontal speed h (> 0): its speed
@@ -457,6 +506,7 @@ struct judge {
     uint32_t m, n; /* distinct samples, and those judged */
     double cell[3];
     judge_result old; /* the old map's figures */
+    place_list at;    /* the last new map's phantom blocks */
 };
 
 static double cpu_ms_since(const struct timespec *t0)
@@ -498,6 +548,7 @@ void judge_close(judge *j)
     if (!j)
         return;
     free(j->distinct);
+    free(j->at.p);
     geometry_free(&j->g);
     map_free(&j->maps[0]);
     map_free(&j->maps[1]);
@@ -573,7 +624,8 @@ int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, 
     map_free(&j->maps[1]);
     if ((rc = map_init(&j->maps[1], boxes, n, j->in->scale)) < 0)
         return cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
-    tally t = {0}; /* its moves and still are the old map's */
+    j->at.n = 0;
+    tally t = {.at = &j->at}; /* its moves and still are the old map's */
     walk_map(j, 1, &t);
     *out = j->old;
     out->phantom_new = t.phantom;
@@ -581,6 +633,12 @@ int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, 
     out->better = judge_better(out);
     out->ms = j->old.ms + cpu_ms_since(&t0);
     return 0;
+}
+
+void judge_places(const judge *j, const judge_place **places, uint32_t *n)
+{
+    *places = j->at.p;
+    *n = j->at.n;
 }
 
 int judge_maps(const judge_params *p, const judge_input *in, judge_result *out, char *err, size_t errlen)

@@ -224,6 +224,22 @@ int judge_open(judge **j, const judge_params *p, const judge_input *in, judge_re
 int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, char *err, size_t errlen);
 void judge_close(judge *j);
 
+/* Where the trials of the last map judge_new walked met its phantom blocks:
+ * at each place, the avatar's box (local: feet to head, as refine.h's
+ * ecm_stood), the point where it met the box that held it back (local), that
+ * box's index in the map and the phantom ticks counted there (a stuck
+ * avatar's ticks at one place). Their ticks sum to phantom_new, but for a
+ * place out of memory left out: they guide a second candidate
+ * (server/pipeline/apply.c), they are no figure. Valid until the next
+ * judge_new or judge_close; none before a judge_new. */
+typedef struct judge_place {
+    float box[6];
+    float point[3];
+    uint32_t hit;
+    uint32_t ticks;
+} judge_place;
+void judge_places(const judge *j, const judge_place **places, uint32_t *n);
+
 /* Whether any new map could be better than the old one with these
  * figures (judge_open's): the verdict asks for at least JUDGE_GAIN_MIN
  * phantom blocks fewer, so an old map with fewer on the trials wins

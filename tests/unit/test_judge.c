@@ -1,6 +1,7 @@
 /* The judge: a doorway opened is better, a garage's base opened under a
  * coarse roof box is not, a map that uncovers a wall is not, the same input
- * gives the same figures, a marginal gain is no gain, and bad input gets a
+ * gives the same figures, a marginal gain is no gain, the places of its
+ * phantom blocks name the boxes that held the trials, and bad input gets a
  * clear refusal. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -405,20 +406,32 @@ static void test_verdict_needs_a_clear_gain(void **state)
 /* The judge in steps: the old map's figures alone first, then any number
  * of new maps against it, each exactly as judge_maps judges it; a wall
  * users only meet for real leaves nothing to gain. */
+/* Opens a judgement of 16 users stopped by the wall's bounding box in its
+ * doorway (*in, s and m must outlive it), with the default parameters. */
+static judge *open_at_doorway(mesh *m, judge_sample s[16], judge_input *in, judge_params *p, judge_result *old)
+{
+    wall(m);
+    uint32_t ns = in_front(s, 16, -0.15f, 0.15f);
+    *in = input(m, wall_mbr, 1, NULL, 0, s, ns);
+    judge_params_default(p);
+    char err[128] = "";
+    judge *j;
+    if (judge_open(&j, p, in, old, err, sizeof err) != 0)
+        fail_msg("judge_open: %s", err);
+    return j;
+}
+
 static void test_in_steps(void **state)
 {
     (void)state;
     static mesh m;
-    wall(&m);
     judge_sample s[16];
-    uint32_t ns = in_front(s, 16, -0.15f, 0.15f);
-    judge_input in = input(&m, wall_mbr, 1, NULL, 0, s, ns);
+    judge_input in;
     judge_params p;
-    judge_params_default(&p);
-    char err[128] = "";
-    judge *j;
     judge_result old, a, b;
-    assert_int_equal(judge_open(&j, &p, &in, &old, err, sizeof err), 0);
+    judge *j = open_at_doorway(&m, s, &in, &p, &old);
+    char err[128] = "";
+    uint32_t ns = in.nsamples;
     assert_int_equal(old.samples, 16);
     assert_true(old.moves > 0 && old.phantom_old >= 16 * 3 && old.ms >= 0);
     assert_true(old.phantom_new == 0 && old.opened_new == 0 && !old.better);
@@ -448,6 +461,56 @@ static void test_in_steps(void **state)
     assert_int_equal(judge_open(&j, &p, &in, &old, err, sizeof err), 0);
     assert_true(old.phantom_old < JUDGE_GAIN_MIN);
     assert_false(judge_can_gain(&old));
+    judge_close(j);
+    trimesh_free(&m.tm);
+}
+
+/* Where the trials met a new map's phantom blocks: every tick at a place
+ * that names the box that held it back (a box closing the doorway, second
+ * in the map), the ticks summing to the figure, the avatar's box in front
+ * of the wall and the contact on the box's face; none once the doorway is
+ * open, and the places go with the next map. */
+static void test_places_name_the_box_that_held(void **state)
+{
+    (void)state;
+    static mesh m;
+    judge_sample s[16];
+    judge_input in;
+    judge_params p;
+    judge_result old, r;
+    judge *j = open_at_doorway(&m, s, &in, &p, &old);
+    char err[128] = "";
+    const judge_place *at;
+    uint32_t n = 1;
+    judge_places(j, &at, &n);
+    assert_int_equal(n, 0); /* none before a new map */
+    const float closed[4][6] = {{-3, 0, 0, -0.5f, 3, 0.2f},
+                                {-0.5f, 0, 0, 0.5f, 2.2f, 0.2f},
+                                {0.5f, 0, 0, 3, 3, 0.2f},
+                                {-0.5f, 2.2f, 0, 0.5f, 3, 0.2f}};
+    assert_int_equal(judge_new(j, closed, 4, &r, err, sizeof err), 0);
+    assert_true(r.phantom_new >= 16 * 3);
+    judge_places(j, &at, &n);
+    assert_true(n >= 16);
+    uint64_t ticks = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        assert_int_equal(at[i].hit, 1);
+        assert_true(at[i].ticks >= 1);
+        ticks += at[i].ticks;
+        /* The avatar (0.6 x 1.8 x 0.6) on the floor, its front at the door. */
+        assert_float_equal(at[i].box[3] - at[i].box[0], p.move.size[0], 1e-4);
+        assert_float_equal(at[i].box[4] - at[i].box[1], p.move.size[1], 1e-4);
+        assert_float_equal(at[i].box[1], 0, 1e-3);
+        assert_true(at[i].box[5] <= 0.001f && at[i].box[5] >= -0.01f);
+        assert_true(at[i].box[0] >= -0.5f && at[i].box[3] <= 0.5f);
+        assert_float_equal(at[i].point[2], 0, 0.01f);
+        assert_true(at[i].point[0] >= -0.5f && at[i].point[0] <= 0.5f);
+    }
+    assert_int_equal(ticks, r.phantom_new);
+    assert_int_equal(judge_new(j, wall_parts, 3, &r, err, sizeof err), 0);
+    assert_int_equal(r.phantom_new, 0);
+    judge_places(j, &at, &n);
+    assert_int_equal(n, 0);
     judge_close(j);
     trimesh_free(&m.tm);
 }
@@ -560,6 +623,7 @@ int main(void)
         cmocka_unit_test(test_deterministic_cap_still_scale),
         cmocka_unit_test(test_verdict_needs_a_clear_gain),
         cmocka_unit_test(test_in_steps),
+        cmocka_unit_test(test_places_name_the_box_that_held),
         cmocka_unit_test(test_bad_input),
         cmocka_unit_test(test_mesh_boxes),
     };
