@@ -1228,6 +1228,12 @@ static void kernel_cells(const voxel_grid *g, const double size[3], uint32_t k[3
     }
 }
 
+/* Whether cluster cl's region (region_of) spans its boxes on axis a. */
+static int stretched_on(const ecm_cluster *cl, int stretched, int face, int a)
+{
+    return stretched && (a == face || (a == side_axis(face) && !cl->held));
+}
+
 /*
  * Cluster cl's region (step 3), local: across the span of the boxes it
  * presses on along the face users cross and that face's horizontal axis;
@@ -1235,19 +1241,21 @@ static void kernel_cells(const voxel_grid *g, const double size[3], uint32_t k[3
  * upwards by up and the step height. named: the box it names. Users who
  * stood inside it cross no face: their region is their points' reach on
  * every axis (mark_reachable adds where they walk on); *stretched says
- * which. Returns the face's axis.
+ * which. A held cluster's (refine.h) is stretched across the span along
+ * the face alone: the trials held there would walk on into the box, not
+ * sideways. Returns the face's axis.
  */
 static int region_of(const ecm_cluster *cl, const float named[6], const float span[6], const ecm_params *p,
                      double up, double lo[3], double hi[3], int *stretched)
 {
-    int face = crossed_face(cl, named), side = side_axis(face);
+    int face = crossed_face(cl, named);
     *stretched = !inside_named(cl, named, p);
     double size[3];
     region_size(p, size);
     for (int a = 0; a < 3; a++) {
         lo[a] = span[a];
         hi[a] = span[3 + a];
-        if (!*stretched || (a != face && a != side)) {
+        if (!stretched_on(cl, *stretched, face, a)) {
             lo[a] = (double)cl->min[a] - size[a] / 2;
             hi[a] = (double)cl->max[a] + size[a] / 2 + (a == 1 ? up + p->step : 0);
         }
@@ -1263,9 +1271,9 @@ static int meets_region(const ecm_cluster *cl, const float named[6], const float
                         const ecm_params *p, const double cell[3])
 {
     double lo[3], hi[3];
-    int stretched, face = region_of(cl, named, span, p, 2 * cell[1], lo, hi, &stretched), side = side_axis(face);
+    int stretched, face = region_of(cl, named, span, p, 2 * cell[1], lo, hi, &stretched);
     for (int a = 0; a < 3; a++) {
-        double grow = !stretched || (a != face && a != side) ? cell[a] : 0;
+        double grow = stretched_on(cl, stretched, face, a) ? 0 : cell[a];
         if (b[a] > hi[a] + grow || b[3 + a] < lo[a] - grow)
             return 0;
     }
@@ -1405,7 +1413,7 @@ static int mark_wanted(work *w, const ecm_cluster *cl, const float named[6], con
      * step above it where users walk (keep_reached: higher placements
      * stand on nothing); erosions read the free space above it (top_free).
      * A 1.5 m statue's region so keeps 159 of 256 rows. */
-    int walks = stretched && face != 1;
+    int walks = stretched && face != 1 && !cl->held;
     int64_t cut = (int64_t)n + (walks ? step_cells(w, p) : 0);
     uint32_t trim;
     for (;;) {
@@ -2406,8 +2414,19 @@ static void take_part(ecm_result *out, ecm_result *part, float (**cur)[6], uint3
     part->boxes = NULL;
 }
 
+/* The object's cell: its bounding box over 2^depth. */
+static void object_cell(const ecm_params *p, const trimesh *m, double objcell[3])
+{
+    for (int a = 0; a < 3; a++)
+        objcell[a] = ((double)m->max[a] - m->min[a]) / (double)(1u << p->depth);
+}
+
+/* Most boxes step 7 splits up to (SPLIT_RESERVE). */
+static uint32_t split_limit(const ecm_params *p) { return p->max_boxes - p->max_boxes / SPLIT_RESERVE; }
+
 /* Step 8 (see refine.h): 1 with out filled, 0 when it has nothing to
- * offer (out empty), or a negative errno with the message in err. */
+ * offer (out empty but for the times spent), or a negative errno with the
+ * message in err. */
 static int rebalance(const ecm_params *p, const trimesh *m, const double objcell[3], uint32_t split_max,
                      const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
                      ecm_result *out, char *err, size_t errlen);
@@ -2425,10 +2444,9 @@ static int rebalance(const ecm_params *p, const trimesh *m, const double objcell
 static int refine_groups(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
                          const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
 {
-    const uint32_t split_max = p->max_boxes - p->max_boxes / SPLIT_RESERVE;
+    const uint32_t split_max = split_limit(p);
     double objcell[3];
-    for (int a = 0; a < 3; a++)
-        objcell[a] = ((double)m->max[a] - m->min[a]) / (double)(1u << p->depth);
+    object_cell(p, m, objcell);
     uint32_t *up = cvre_malloc((nclusters ? nclusters : 1) * sizeof *up);
     group *g = cvre_malloc((nclusters ? nclusters : 1) * sizeof *g);
     ecm_cluster *mine = cvre_malloc((nclusters ? nclusters : 1) * sizeof *mine);
@@ -2516,6 +2534,9 @@ static int refine_groups(const ecm_params *p, const trimesh *m, const float (*bo
             out->problem_boxes = part.problem_boxes;
             out->capped = out->apart_over = 0;
             take_part(out, &part, &cur, &ncur);
+        } else {
+            out->voxel_ms += part.voxel_ms;
+            out->divide_ms += part.divide_ms;
         }
     }
     out->boxes = cur;
@@ -2538,11 +2559,10 @@ done:
 
 static int check_rest(const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
                       char *err, size_t errlen);
-
-int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
-                    const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+/* Every check of ecm_refine_mesh's (refine.h). */
+static int check_input(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                       const ecm_cluster *clusters, uint32_t nclusters, char *err, size_t errlen)
 {
-    memset(out, 0, sizeof *out);
     if (p->depth < ECM_DEPTH_MIN || p->depth > ECM_DEPTH_MAX)
         return cvre_fail(err, errlen, -EINVAL, "grid depth %u is outside %u..%u", p->depth, ECM_DEPTH_MIN, ECM_DEPTH_MAX);
     if (p->max_boxes < 1 || p->max_boxes > ECM_MAX_BOXES_LIMIT)
@@ -2560,8 +2580,27 @@ int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[
         return cvre_fail(err, errlen, -EINVAL, "%u places where users stood, and none given", p->nstood);
     if (!m || !m->box || m->ntris == 0)
         return cvre_fail(err, errlen, -EINVAL, "the object has no triangles");
-    int rc = check_rest(boxes, nboxes, clusters, nclusters, err, errlen);
+    return check_rest(boxes, nboxes, clusters, nclusters, err, errlen);
+}
+
+int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                    const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    int rc = check_input(p, m, boxes, nboxes, clusters, nclusters, err, errlen);
     return rc < 0 ? rc : refine_groups(p, m, boxes, nboxes, clusters, nclusters, out, err, errlen);
+}
+
+int ecm_move_boxes(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                   const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    int rc = check_input(p, m, boxes, nboxes, clusters, nclusters, err, errlen);
+    if (rc < 0 || nboxes < p->max_boxes || !p->nstood)
+        return rc;
+    double objcell[3];
+    object_cell(p, m, objcell);
+    return rebalance(p, m, objcell, split_limit(p), boxes, nboxes, clusters, nclusters, out, err, errlen);
 }
 
 int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const float (*boxes)[6], uint32_t nboxes,
@@ -3118,7 +3157,10 @@ static int rebalance(const ecm_params *p, const trimesh *m, const double objcell
     }
     rc = refine_group(p, objcell, split_max, m, (const float(*)[6])cur, ncur, allow, mine, nclusters, out, err, errlen);
     if (rc != 0) {
+        double voxel_ms = out->voxel_ms, divide_ms = out->divide_ms; /* spent all the same */
         ecm_result_free(out);
+        out->voxel_ms = voxel_ms;
+        out->divide_ms = divide_ms;
         rc = rc < 0 ? rc : 0;
         goto done;
     }

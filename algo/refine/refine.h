@@ -175,7 +175,11 @@
  *      space where no user was seen, the one place a refinement closes
  *      space: the judge decides, as for any candidate (the scenario's
  *      staircase at seeds 1 to 5: 4 of its 10 later jobs write a map, where
- *      none did).
+ *      none did). ecm_move_boxes runs step 8 alone on a candidate at the
+ *      cap, by the places where the judge's trials were held back on it
+ *      (server/pipeline/apply.c): held clusters, whose region is their
+ *      points' reach, stretched through the boxes along the face alone,
+ *      and no walk (step 3): the trials stood there.
  *
  * `capped` counts the new boxes left holding pressure (wanted cells), or
  * every problem box when they were only tightened: the opening may stay
@@ -247,6 +251,9 @@ typedef struct ecm_cluster {
     float min[3], max[3];  /* bounding box of its points */
     float centroid[3];
     uint32_t weight;       /* how hard it presses: its collisions (0 counts as 1) */
+    uint32_t held;         /* 1: its points are where trials were held back, not users
+                            * stopped at a face they would cross (apply.c's second
+                            * candidate): its region is their reach alone (step 3) */
 } ecm_cluster;
 
 /* What one refinement produced. */
@@ -290,6 +297,14 @@ int ecm_refine(const ecm_params *p, const float *tris, uint32_t ntris, const flo
  * checked there), so that the judge can use it too. */
 int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
                     const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
+/* Step 8 alone (see above) on a map at the cap, by the places in p->stood
+ * and the clusters: a second candidate where a first left users stopped
+ * (server/pipeline/apply.c: the judge's own trials). Returns 1 with *out
+ * filled, 0 with *out empty but for the times spent when it has nothing
+ * to offer (fewer than max_boxes boxes, no place, no hot box, no pair to
+ * join or no division that fits), or an error as ecm_refine_mesh's. */
+int ecm_move_boxes(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
+                   const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
 void ecm_result_free(ecm_result *r);
 
 /* Whether the na boxes a are the nb boxes b in some order (each as many

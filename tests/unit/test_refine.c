@@ -821,6 +821,29 @@ static void test_cap_moves_boxes_to_where_users_were_stopped(void **state)
     size_t bad = uncovered(tris, 60, CBOXES(r.boxes), r.count, 16);
     CHECK(bad == 0, "%zu triangle samples outside every box", bad);
     ecm_result_free(&r);
+
+    /* Step 8 alone (a second candidate's), the users held where they
+     * stood: the same opening; nothing below the cap or without places. */
+    trimesh tm;
+    assert_int_equal(trimesh_init(&tm, tris, 60, err, sizeof err), 0);
+    ecm_cluster held = cl;
+    held.held = 1;
+    assert_int_equal(ecm_move_boxes(&p, &tm, CBOXES(old), 4, &held, 1, &r, err, sizeof err), 1);
+    CHECK(r.count <= p.max_boxes, "step 8 alone: %u boxes", r.count);
+    CHECK(!blocked(CBOXES(r.boxes), r.count, gap_lo, gap_hi), "step 8 alone: the gap is still blocked");
+    bad = uncovered(tris, 60, CBOXES(r.boxes), r.count, 16);
+    CHECK(bad == 0, "step 8 alone: %zu triangle samples outside every box", bad);
+    ecm_result_free(&r);
+    p.max_boxes = 5;
+    assert_int_equal(ecm_move_boxes(&p, &tm, CBOXES(old), 4, &held, 1, &r, err, sizeof err), 0);
+    assert_null(r.boxes);
+    p.max_boxes = 4;
+    p.nstood = 0;
+    assert_int_equal(ecm_move_boxes(&p, &tm, CBOXES(old), 4, &held, 1, &r, err, sizeof err), 0);
+    held.box = 4;
+    assert_int_equal(ecm_move_boxes(&p, &tm, CBOXES(old), 4, &held, 1, &r, err, sizeof err), -EINVAL);
+    assert_non_null(strstr(err, "names box 4"));
+    trimesh_free(&tm);
 }
 
 /* A round of the gazebo replayed: the map in force (nold boxes) and the
