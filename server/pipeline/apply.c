@@ -173,6 +173,19 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const cluste
  * ticks or more become clusters of the second candidate (refine.h's
  * HOT_MIN for collisions). */
 #define PLAYED_HOT_MIN 3u
+/* Most places a second candidate goes by, those with the most ticks: step 8
+ * tests joins and new boxes against each (JOIN_TRIES pairs), as against
+ * the job's own samples, some hundreds to a few thousand. */
+#define PLAYED_PLACES_MAX 1024u
+
+/* Places by ticks, most first; equal ones in the trials' order. */
+static int by_ticks(const void *x, const void *y)
+{
+    const judge_place *a = *(const judge_place *const *)x, *b = *(const judge_place *const *)y;
+    if (a->ticks != b->ticks)
+        return a->ticks < b->ticks ? 1 : -1;
+    return a < b ? -1 : a > b;
+}
 
 /*
  * The second candidate of a job whose first (*r, judged in *j) has the
@@ -191,11 +204,22 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const cluste
 static int second_candidate(const ecm_params *lp, const trimesh *mesh, judge *jg, double walk_ms, ecm_result *r,
                             judge_result *j, char *first, size_t firstlen, char *err, size_t errlen)
 {
-    const judge_place *at;
+    const judge_place *all;
     uint32_t nat;
-    judge_places(jg, &at, &nat);
+    judge_places(jg, &all, &nat);
     if (!j->better || r->count < lp->max_boxes || nat == 0)
         return 0;
+    const judge_place **by = cvre_xmalloc(nat * sizeof *by);
+    for (uint32_t i = 0; i < nat; i++)
+        by[i] = &all[i];
+    if (nat > PLAYED_PLACES_MAX) {
+        qsort(by, nat, sizeof *by, by_ticks);
+        nat = PLAYED_PLACES_MAX;
+    }
+    judge_place *at = cvre_xmalloc(nat * sizeof *at);
+    for (uint32_t i = 0; i < nat; i++)
+        at[i] = *by[i];
+    free(by);
     ecm_stood *stood = cvre_xmalloc(nat * sizeof *stood);
     uint64_t *ticks = cvre_xcalloc(r->count, sizeof *ticks);
     ecm_cluster *cl = cvre_xcalloc(r->count, sizeof *cl);
@@ -259,6 +283,7 @@ static int second_candidate(const ecm_params *lp, const trimesh *mesh, judge *jg
         r->divide_ms = divide_ms;
     }
     ecm_result_free(&r2);
+    free(at);
     free(stood);
     free(ticks);
     free(cl);
