@@ -245,9 +245,11 @@ static void avatar_box(const move_params *mp, const float f[3], const double gro
 
 /* The contact of the move r (from st, asked for disp) that held it back,
  * or NULL: an inside contact, or a blocking one that left the avatar less
- * than JUDGE_HELD_BACK of its horizontal motion. Sliding along a face it
- * meets at a glance is not held back: a map that opens a corridor is not
- * charged for its walls as if they stopped users. */
+ * than JUDGE_HELD_BACK of its horizontal motion, the one whose face most
+ * opposes the motion (a trial sliding along one box is stopped by the
+ * next). Sliding along a face it meets at a glance is not held back: a map
+ * that opens a corridor is not charged for its walls as if they stopped
+ * users. */
 static const move_contact *held_back(const move_result *r, const move_state *st, const float disp[3])
 {
     for (uint32_t i = 0; i < r->ncontacts; i++)
@@ -256,7 +258,15 @@ static const move_contact *held_back(const move_result *r, const move_state *st,
     if (r->ncontacts == 0)
         return NULL;
     double moved = hypot((double)r->state.pos[0] - st->pos[0], (double)r->state.pos[2] - st->pos[2]);
-    return moved < JUDGE_HELD_BACK * hypot(disp[0], disp[2]) ? &r->contacts[0] : NULL;
+    if (!(moved < JUDGE_HELD_BACK * hypot(disp[0], disp[2])))
+        return NULL;
+    const move_contact *most = &r->contacts[0];
+    for (uint32_t i = 1; i < r->ncontacts; i++) {
+        const float *a = r->contacts[i].normal, *b = most->normal;
+        if (a[0] * disp[0] + a[2] * disp[2] < b[0] * disp[0] + b[2] * disp[2])
+            most = &r->contacts[i];
+    }
+    return most;
 }
 
 /* Where a new map's phantom blocks were (judge_places). */
@@ -618,13 +628,13 @@ int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, 
     struct timespec t0;
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
     memset(out, 0, sizeof *out);
+    j->at.n = 0;
     int rc = check_map("new", boxes, n, err, errlen);
     if (rc < 0)
         return rc;
     map_free(&j->maps[1]);
     if ((rc = map_init(&j->maps[1], boxes, n, j->in->scale)) < 0)
         return cvre_fail(err, errlen, rc, "judging: %s", strerror(-rc));
-    j->at.n = 0;
     tally t = {.at = &j->at}; /* its moves and still are the old map's */
     walk_map(j, 1, &t);
     *out = j->old;
