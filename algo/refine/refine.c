@@ -2340,7 +2340,8 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
             PRESSURE_NEAR_MIN + (uint32_t)((uint64_t)(PRESSURE_MAX - PRESSURE_NEAR_MIN) * weight / wmax);
         if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0)
             return rc;
-        if (inside_named(&cl[i], boxes[cl[i].box], p) && (rc = mark_reachable(w, &cl[i], p, near / 16 ? near / 16 : 1)) < 0)
+        if (!cl[i].held && inside_named(&cl[i], boxes[cl[i].box], p) &&
+            (rc = mark_reachable(w, &cl[i], p, near / 16 ? near / 16 : 1)) < 0)
             return rc;
     }
     r->wanted += w->wanted;
@@ -2559,6 +2560,7 @@ done:
 
 static int check_rest(const float (*boxes)[6], uint32_t nboxes, const ecm_cluster *clusters, uint32_t nclusters,
                       char *err, size_t errlen);
+
 /* Every check of ecm_refine_mesh's (refine.h). */
 static int check_input(const ecm_params *p, const trimesh *m, const float (*boxes)[6], uint32_t nboxes,
                        const ecm_cluster *clusters, uint32_t nclusters, char *err, size_t errlen)
@@ -2847,7 +2849,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
         for (uint32_t i = 0; i < nclusters; i++)
-            w.inside |= inside_named(&clusters[i], boxes[clusters[i].box], p);
+            w.inside |= !clusters[i].held && inside_named(&clusters[i], boxes[clusters[i].box], p);
         w.slack = w.inside ? DIVIDE_SLACK_INSIDE : DIVIDE_SLACK;
         /* Users inside leave a quarter of what the object may still add
          * to later rounds (refine.h, step 5). */
@@ -3116,7 +3118,9 @@ static int rebalance(const ecm_params *p, const trimesh *m, const double objcell
         if (b >= nboxes)
             continue;
         busy[b] = 1;
-        hot[b] += (uint32_t)phantom_at(&bins, m, p->stood[i].box, objcell);
+        uint32_t w = p->stood[i].weight ? p->stood[i].weight : 1;
+        if (phantom_at(&bins, m, p->stood[i].box, objcell))
+            hot[b] = hot[b] > UINT32_MAX - w ? UINT32_MAX : hot[b] + w;
     }
     /* The HOT_MAX boxes with the most phantoms, HOT_MIN or more each
      * (pick flags them; the first of equals first). */

@@ -164,7 +164,7 @@
  *      the old map takes 40 boxes and more before any is taken apart), the
  *      places where users stood (stood) tell which boxes stopped them where
  *      nothing real was. A box is hot when HOT_MIN (3) collisions or more
- *      named it while the avatar's box, grown by a cell of the object
+ *      (each place counts by its weight) named it while the avatar's box, grown by a cell of the object
  *      sideways and upwards, touched no triangle (a phantom, as the judge
  *      counts it); the HOT_MAX (8) with the most count. For each hot box,
  *      up to FREED_PER_HOT (3) pairs of boxes
@@ -177,9 +177,11 @@
  *      staircase at seeds 1 to 5: 4 of its 10 later jobs write a map, where
  *      none did). ecm_move_boxes runs step 8 alone on a candidate at the
  *      cap, by the places where the judge's trials were held back on it
- *      (server/pipeline/apply.c): held clusters, whose region is their
- *      points' reach, stretched through the boxes along the face alone,
- *      and no walk (step 3): the trials stood there.
+ *      (server/pipeline/apply.c), each weighted by its ticks, the job's
+ *      own places unnamed (no box of the candidate) so that no join covers
+ *      them: held clusters, whose region is their points' reach, stretched
+ *      through the boxes along the face alone, and no walk (step 3): the
+ *      trials stood there.
  *
  * `capped` counts the new boxes left holding pressure (wanted cells), or
  * every problem box when they were only tightened: the opening may stay
@@ -199,6 +201,7 @@
 #ifndef CVRE_ECM_REFINE_H
 #define CVRE_ECM_REFINE_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -233,11 +236,14 @@ typedef struct ecm_params {
     uint32_t nstood;
 } ecm_params;
 
-/* Where a user stood when it collided: its avatar's box, local, and the box
- * its collision named (an index among the object's boxes; past them: none). */
+/* Where a user stood when it collided: its avatar's box, local, the box
+ * its collision named (an index among the object's boxes; past them: none)
+ * and how many collisions it stands for (a trial held there tick after
+ * tick: judge.h's places; 0 counts as 1). */
 typedef struct ecm_stood {
     float box[6];
     uint32_t hit;
+    uint32_t weight;
 } ecm_stood;
 
 /* Fills p with the defaults above and the default avatar's size and step
@@ -251,9 +257,10 @@ typedef struct ecm_cluster {
     float min[3], max[3];  /* bounding box of its points */
     float centroid[3];
     uint32_t weight;       /* how hard it presses: its collisions (0 counts as 1) */
-    uint32_t held;         /* 1: its points are where trials were held back, not users
+    bool held;             /* its points are where trials were held back, not users
                             * stopped at a face they would cross (apply.c's second
-                            * candidate): its region is their reach alone (step 3) */
+                            * candidate): its region is stretched along the face
+                            * alone, and no walk (step 3) */
 } ecm_cluster;
 
 /* What one refinement produced. */

@@ -226,6 +226,7 @@ static int second_candidate(const ecm_params *lp, const trimesh *mesh, judge *jg
     for (uint32_t i = 0; i < nat; i++) {
         memcpy(stood[i].box, at[i].box, sizeof stood[i].box);
         stood[i].hit = at[i].hit;
+        stood[i].weight = at[i].ticks;
         if (at[i].hit < r->count)
             ticks[at[i].hit] += at[i].ticks;
     }
@@ -234,7 +235,7 @@ static int second_candidate(const ecm_params *lp, const trimesh *mesh, judge *jg
         if (ticks[b] < PLAYED_HOT_MIN)
             continue;
         ecm_cluster *c = &cl[ncl++];
-        *c = (ecm_cluster){.box = b, .weight = ticks[b] > UINT32_MAX ? UINT32_MAX : (uint32_t)ticks[b], .held = 1};
+        *c = (ecm_cluster){.box = b, .weight = ticks[b] > UINT32_MAX ? UINT32_MAX : (uint32_t)ticks[b], .held = true};
         double sum[3] = {0, 0, 0};
         int seen = 0;
         for (uint32_t i = 0; i < nat; i++) {
@@ -353,6 +354,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
             stood[i].box[3 + a] = (float)((samples[i].pos[a] + (a == 1 ? p->avatar[1] : half)) / scale);
         }
         stood[i].hit = hit[i];
+        stood[i].weight = 1;
     }
     lp.stood = stood;
     lp.nstood = nsamples;

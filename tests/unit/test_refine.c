@@ -24,6 +24,7 @@
 
 #include "../models.h"
 #include "alloc.h"
+#include "boxes.h"
 #include "refine.h"
 #include "import.h"
 
@@ -95,19 +96,6 @@ static size_t uncovered(const float *tris, uint32_t ntris, const float (*boxes)[
     }
     free(cand);
     return bad;
-}
-
-/* Whether the box [min, max] overlaps the interior of any box. */
-static int blocked(const float (*boxes)[6], uint32_t n, const float min[3], const float max[3])
-{
-    for (uint32_t b = 0; b < n; b++) {
-        int o = 1;
-        for (int a = 0; a < 3; a++)
-            o &= min[a] < boxes[b][3 + a] && max[a] > boxes[b][a];
-        if (o)
-            return 1;
-    }
-    return 0;
 }
 
 /* Whether box b is want, each side at most one float step further out
@@ -212,23 +200,6 @@ static void face_clusters(const float b[6], uint32_t idx, ecm_cluster cl[7])
         cl[f] = cluster_at(idx, c, point);
     }
     cl[6] = cluster_at(idx, b, point);
-}
-
-/* The 12 triangles of the surface of the box [lo, hi], into t[108]. */
-static void box_surface(const float lo[3], const float hi[3], float *t)
-{
-    size_t k = 0;
-    for (int a = 0; a < 3; a++)
-        for (int side = 0; side < 2; side++) {
-            int u = (a + 1) % 3, w = (a + 2) % 3;
-            static const int corner[6][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 0}, {1, 1}, {0, 1}};
-            for (int c = 0; c < 6; c++) {
-                float *v = t + 3 * k++;
-                v[a] = side ? hi[a] : lo[a];
-                v[u] = corner[c][0] ? hi[u] : lo[u];
-                v[w] = corner[c][1] ? hi[w] : lo[w];
-            }
-        }
 }
 
 /* *r as ecm_refine leaves it on failure: all zero. */
@@ -1463,6 +1434,43 @@ static void refine_doorway(const float (*boxes)[6], uint32_t nboxes, const ecm_c
     check_result(&p, tris, 36, boxes, nboxes, cl, 1, r, 16);
 }
 
+/*
+ * A held cluster (trials held back there, refine.h) wants its points' reach
+ * alone: a wall 8 m wide with two doorways 4 m apart (x 1.5..2.5, 2.2 m
+ * high, and 5.5..6.5, 2 m high: no cut made for the first frees the
+ * second), users stopped at the bounding box's face in front of the first.
+ * Users who cross a face roam sideways, so the second doorway opens too;
+ * trials held at the first do not, and it stays shut.
+ */
+static void test_held_cluster_wants_its_reach(void **state)
+{
+    (void)state;
+    snprintf(check_ctx, sizeof check_ctx, "two doorways, a held cluster");
+    float tris[60 * 9];
+    const float lo[5][3] = {{0, 0, 1.9f}, {2.5f, 0, 1.9f}, {6.5f, 0, 1.9f}, {1.5f, 2.2f, 1.9f}, {5.5f, 2.0f, 1.9f}};
+    const float hi[5][3] = {{1.5f, 3, 2.1f}, {5.5f, 3, 2.1f}, {8, 3, 2.1f}, {2.5f, 3, 2.1f}, {6.5f, 3, 2.1f}};
+    for (int i = 0; i < 5; i++)
+        box_surface(lo[i], hi[i], tris + 12 * 9 * i);
+    const float mbr[1][6] = {{0, 0, 1.9f, 8, 3, 2.1f}};
+    ecm_cluster cl = {.box = 0, .min = {1.9f, 0.9f, 1.9f}, .max = {2.1f, 0.9f, 1.9f}, .centroid = {2, 0.9f, 1.9f},
+                      .weight = 50};
+    ecm_params p;
+    ecm_params_default(&p);
+    char err[256];
+    const float door2_lo[3] = {5.7f, 0, 1.7f}, door2_hi[3] = {6.3f, 1.8f, 2.3f};
+    for (int held = 0; held < 2; held++) {
+        cl.held = held;
+        ecm_result r;
+        int rc = ecm_refine(&p, tris, 60, mbr, 1, &cl, 1, &r, err, sizeof err);
+        CHECK(rc == 0, "%s", err);
+        check_result(&p, tris, 60, mbr, 1, &cl, 1, &r, 16);
+        CHECK(doorway_free(&r), "held %d: the first doorway is still blocked", held);
+        int shut = blocked(CBOXES(r.boxes), r.count, door2_lo, door2_hi);
+        CHECK(shut == held, "held %d: the second doorway is %s", held, shut ? "shut" : "open");
+        ecm_result_free(&r);
+    }
+}
+
 /* Step 3's cuts: users stopped in front of the doorway (on the MBR's face)
  * want the space in it; three cuts along the faces of that space leave the
  * wall on either side and the lintel above: three boxes, nothing capped,
@@ -2491,6 +2499,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_thick_wall_stays_whole),
         cmocka_unit_test(test_only_places_users_reach),
         cmocka_unit_test(test_doorway_three_cuts),
+        cmocka_unit_test(test_held_cluster_wants_its_reach),
         cmocka_unit_test(test_cluster_over_two_boxes),
         cmocka_unit_test(test_neighbour_uses_the_named_face),
         cmocka_unit_test(test_pressure_shares_budget),
