@@ -10,6 +10,7 @@
 #include "ecm.h"
 #include "err.h"
 #include "scene.h"
+#include "second.h"
 
 /* Where the object stands: *at gets its position and yaw with scale 1 (the
  * transform from world to its metric frame), *scale its scale. 0, or a
@@ -169,128 +170,6 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const cluste
     return rc;
 }
 
-/* Boxes of a capped candidate that held the judge's trials back this many
- * ticks or more become clusters of the second candidate (refine.h's
- * HOT_MIN for collisions). */
-#define PLAYED_HOT_MIN 3u
-/* Most places a second candidate goes by, those with the most ticks: step 8
- * tests joins and new boxes against each (JOIN_TRIES pairs), as against
- * the job's own samples, some hundreds to a few thousand. */
-#define PLAYED_PLACES_MAX 1024u
-
-/* Places by ticks, most first; equal ones in the trials' order. */
-static int by_ticks(const void *x, const void *y)
-{
-    const judge_place *a = *(const judge_place *const *)x, *b = *(const judge_place *const *)y;
-    if (a->ticks != b->ticks)
-        return a->ticks < b->ticks ? 1 : -1;
-    return a < b ? -1 : a > b;
-}
-
-/*
- * The second candidate of a job whose first (*r, judged in *j) has the
- * boxes of the cap: the judge's trials on it tell where it still stops
- * users where nothing real is (judge_places), places the clusters never
- * showed (a staircase's first map is made from users stopped at its one
- * box's faces; its trials walk on to the treads behind). Step 8 alone
- * (ecm_move_boxes) moves boxes there: each place is an avatar where a user
- * stood, each box that held trials back PLAYED_HOT_MIN ticks or more a
- * cluster of their contact points. The second replaces the first, its
- * figures in *j, when the same trials meet at least JUDGE_GAIN_MIN phantom
- * blocks fewer on it and it opens no more, and first says what the first
- * was. Whichever is kept carries the times of both (walk_ms: the judge's
- * walks of the first). 0, or < 0 with err filled.
- */
-static int second_candidate(const ecm_params *lp, const trimesh *mesh, judge *jg, double walk_ms, ecm_result *r,
-                            judge_result *j, char *first, size_t firstlen, char *err, size_t errlen)
-{
-    const judge_place *all;
-    uint32_t nat;
-    judge_places(jg, &all, &nat);
-    if (!j->better || r->count < lp->max_boxes || nat == 0)
-        return 0;
-    const judge_place **by = cvre_xmalloc(nat * sizeof *by);
-    for (uint32_t i = 0; i < nat; i++)
-        by[i] = &all[i];
-    if (nat > PLAYED_PLACES_MAX) {
-        qsort(by, nat, sizeof *by, by_ticks);
-        nat = PLAYED_PLACES_MAX;
-    }
-    judge_place *at = cvre_xmalloc(nat * sizeof *at);
-    for (uint32_t i = 0; i < nat; i++)
-        at[i] = *by[i];
-    free(by);
-    ecm_stood *stood = cvre_xmalloc(nat * sizeof *stood);
-    uint64_t *ticks = cvre_xcalloc(r->count, sizeof *ticks);
-    ecm_cluster *cl = cvre_xcalloc(r->count, sizeof *cl);
-    for (uint32_t i = 0; i < nat; i++) {
-        memcpy(stood[i].box, at[i].box, sizeof stood[i].box);
-        stood[i].hit = at[i].hit;
-        stood[i].weight = at[i].ticks;
-        if (at[i].hit < r->count)
-            ticks[at[i].hit] += at[i].ticks;
-    }
-    uint32_t ncl = 0;
-    for (uint32_t b = 0; b < r->count; b++) {
-        if (ticks[b] < PLAYED_HOT_MIN)
-            continue;
-        ecm_cluster *c = &cl[ncl++];
-        *c = (ecm_cluster){.box = b, .weight = ticks[b] > UINT32_MAX ? UINT32_MAX : (uint32_t)ticks[b], .held = true};
-        double sum[3] = {0, 0, 0};
-        int seen = 0;
-        for (uint32_t i = 0; i < nat; i++) {
-            if (at[i].hit != b)
-                continue;
-            for (int a = 0; a < 3; a++) {
-                float v = at[i].point[a];
-                c->min[a] = seen && c->min[a] < v ? c->min[a] : v;
-                c->max[a] = seen && c->max[a] > v ? c->max[a] : v;
-                sum[a] += (double)v * at[i].ticks;
-            }
-            seen = 1;
-        }
-        for (int a = 0; a < 3; a++)
-            c->centroid[a] = (float)(sum[a] / (double)ticks[b]);
-    }
-    ecm_params sp = *lp;
-    sp.stood = stood;
-    sp.nstood = nat;
-    ecm_result r2 = {0};
-    judge_result j2;
-    char why[256];
-    int rc = 0;
-    if (ncl) {
-        rc = ecm_move_boxes(&sp, mesh, (const float(*)[6])r->boxes, r->count, cl, ncl, &r2, why, sizeof why);
-        if (rc == 1 && judge_new(jg, (const float(*)[6])r2.boxes, r2.count, &j2, why, sizeof why) < 0)
-            rc = -EINVAL;
-        /* Whichever is kept, it carries both candidates' times. */
-        double voxel_ms = r->voxel_ms + r2.voxel_ms, divide_ms = r->divide_ms + r2.divide_ms;
-        if (rc < 0) {
-            cvre_fail(err, errlen, rc, "%s", why);
-        } else if (rc == 1 && j2.phantom_new + JUDGE_GAIN_MIN <= j->phantom_new && j2.opened_new <= j->opened_new) {
-            snprintf(first, firstlen, "; the division's %u boxes: phantom %llu -> %llu, then step 8 on the trials' "
-                     "%u places", r->count, (unsigned long long)j->phantom_old, (unsigned long long)j->phantom_new,
-                     nat);
-            ecm_result_free(r);
-            *r = r2;
-            r2 = (ecm_result){0};
-            *j = j2;
-        } else if (rc == 1) {
-            j->ms = j2.ms; /* the old map's walks and the second's, */
-        }
-        if (rc == 1)
-            j->ms += walk_ms; /* and the first's */
-        r->voxel_ms = voxel_ms;
-        r->divide_ms = divide_ms;
-    }
-    ecm_result_free(&r2);
-    free(at);
-    free(stood);
-    free(ticks);
-    free(cl);
-    return rc < 0 ? rc : 0;
-}
-
 int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id, const cluster_found *f,
               uint32_t n, ecm_applied *out, char *err, size_t errlen)
 {
@@ -400,11 +279,18 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
         goto done;
     }
     char figures[160], detail[640], first[160] = "";
-    if ((rc = second_candidate(&lp, &mesh, jg, out->judge.ms - open_ms, &r, &out->judge, first, sizeof first, why,
-                               sizeof why)) < 0) {
+    /* A better map at the cap: a second try where its trials were still
+     * held back (second.h). */
+    ecm_second sc;
+    if ((rc = ecm_second_candidate(&lp, &mesh, jg, out->judge.ms - open_ms, &r, &out->judge, &sc, why,
+                                   sizeof why)) < 0) {
         cvre_fail(err, errlen, rc, "object %lld: %s", (long long)object_id, why);
         goto done;
     }
+    if (sc.kept)
+        snprintf(first, sizeof first, "; the division's %u boxes: phantom %llu -> %llu, then step 8 on the trials' "
+                 "%u places", sc.first_count, (unsigned long long)out->judge.phantom_old,
+                 (unsigned long long)sc.first_phantom, sc.places);
     out->stats = r;
     out->stats.boxes = NULL;
     out->boxes_after = r.count;

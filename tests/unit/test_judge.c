@@ -403,9 +403,6 @@ static void test_verdict_needs_a_clear_gain(void **state)
     assert_int_equal(judge_better(&r), 1);
 }
 
-/* The judge in steps: the old map's figures alone first, then any number
- * of new maps against it, each exactly as judge_maps judges it; a wall
- * users only meet for real leaves nothing to gain. */
 /* Opens a judgement of 16 users stopped by the wall's bounding box in its
  * doorway (*in, s and m must outlive it), with the default parameters. */
 static judge *open_at_doorway(mesh *m, judge_sample s[16], judge_input *in, judge_params *p, judge_result *old)
@@ -421,6 +418,9 @@ static judge *open_at_doorway(mesh *m, judge_sample s[16], judge_input *in, judg
     return j;
 }
 
+/* The judge in steps: the old map's figures alone first, then any number
+ * of new maps against it, each exactly as judge_maps judges it; a wall
+ * users only meet for real leaves nothing to gain. */
 static void test_in_steps(void **state)
 {
     (void)state;
