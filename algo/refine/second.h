@@ -13,8 +13,9 @@
  * SECOND_HOT_MIN ticks or more a held cluster of their contact points, and
  * where the job's users stood (p->stood) stays out of every join. The
  * second replaces the first in *r, its figures in *j, when the same trials
- * meet at least JUDGE_GAIN_MIN phantom blocks fewer on it and it opens no
- * more (server/pipeline/apply.c publishes it as any better map).
+ * meet at least half fewer phantom blocks on it (SECOND_GAIN_NUM /
+ * SECOND_GAIN_DEN, and JUDGE_GAIN_MIN) and it opens no more
+ * (server/pipeline/apply.c publishes it as any better map).
  *
  * Whichever is kept carries the times and cells of both refinements, and
  * the judge's time of all walks (walk_ms: those of the first). Returns 0
