@@ -498,10 +498,14 @@ static int check(const judge_params *p, const judge_input *in, char *err, size_t
     return 0;
 }
 
+int judge_gain(uint64_t before, uint64_t after, uint32_t num, uint32_t den)
+{
+    return after + JUDGE_GAIN_MIN <= before && (before - after) * den >= before * num;
+}
+
 int judge_better(const judge_result *r)
 {
-    return r->phantom_new + JUDGE_GAIN_MIN <= r->phantom_old &&
-           (r->phantom_old - r->phantom_new) * JUDGE_GAIN_DEN >= r->phantom_old * JUDGE_GAIN_NUM &&
+    return judge_gain(r->phantom_old, r->phantom_new, JUDGE_GAIN_NUM, JUDGE_GAIN_DEN) &&
            r->opened_new <= r->opened_old;
 }
 

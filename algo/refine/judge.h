@@ -193,6 +193,10 @@ typedef struct judge_result {
 
 /* The verdict on r's figures (see above): 1 when the new map is better. */
 int judge_better(const judge_result *r);
+/* Whether after phantom blocks remove at least num / den of before's, and
+ * at least JUDGE_GAIN_MIN (judge_better's gain; algo/refine/second.c asks
+ * a second candidate for more). */
+int judge_gain(uint64_t before, uint64_t after, uint32_t num, uint32_t den);
 
 /*
  * Judges in->new_boxes against in->old_boxes (see above) and fills *out,
@@ -230,7 +234,7 @@ void judge_close(judge *j);
  * box's index in the map and the phantom ticks counted there (a stuck
  * avatar's ticks at one place). Their ticks sum to phantom_new, but for a
  * place out of memory left out: they guide a second candidate
- * (server/pipeline/apply.c), they are no figure. Valid until the next
+ * (algo/refine/second.c), they are no figure. Valid until the next
  * judge_new or judge_close; none before a judge_new. */
 typedef struct judge_place {
     float box[6];

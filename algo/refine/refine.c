@@ -1228,6 +1228,14 @@ static void kernel_cells(const voxel_grid *g, const double size[3], uint32_t k[3
     }
 }
 
+/* Whether cluster cl's users stood inside the box it names (named): an
+ * object placed around them (inside_named), never a held cluster's trials
+ * (refine.h). */
+static int users_inside(const ecm_cluster *cl, const float named[6], const ecm_params *p)
+{
+    return !cl->held && inside_named(cl, named, p);
+}
+
 /* Whether cluster cl's region (region_of) spans its boxes on axis a. */
 static int stretched_on(const ecm_cluster *cl, int stretched, int face, int a)
 {
@@ -2340,7 +2348,7 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
             PRESSURE_NEAR_MIN + (uint32_t)((uint64_t)(PRESSURE_MAX - PRESSURE_NEAR_MIN) * weight / wmax);
         if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0)
             return rc;
-        if (!cl[i].held && inside_named(&cl[i], boxes[cl[i].box], p) &&
+        if (users_inside(&cl[i], boxes[cl[i].box], p) &&
             (rc = mark_reachable(w, &cl[i], p, near / 16 ? near / 16 : 1)) < 0)
             return rc;
     }
@@ -2849,7 +2857,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         w.max_empty = p->max_empty;
         w.budget = p->max_boxes > kept + ntighten ? p->max_boxes - kept - ntighten : 0;
         for (uint32_t i = 0; i < nclusters; i++)
-            w.inside |= !clusters[i].held && inside_named(&clusters[i], boxes[clusters[i].box], p);
+            w.inside |= users_inside(&clusters[i], boxes[clusters[i].box], p);
         w.slack = w.inside ? DIVIDE_SLACK_INSIDE : DIVIDE_SLACK;
         /* Users inside leave a quarter of what the object may still add
          * to later rounds (refine.h, step 5). */

@@ -164,11 +164,11 @@
  *      the old map takes 40 boxes and more before any is taken apart), the
  *      places where users stood (stood) tell which boxes stopped them where
  *      nothing real was. A box is hot when HOT_MIN (3) collisions or more
- *      (each place counts by its weight) named it while the avatar's box, grown by a cell of the object
- *      sideways and upwards, touched no triangle (a phantom, as the judge
- *      counts it); the HOT_MAX (8) with the most count. For each hot box,
- *      up to FREED_PER_HOT (3) pairs of boxes
- *      that no collision named join into their hull, the pair adding the
+ *      (each place counts by its weight) named it while the avatar's box,
+ *      grown by a cell of the object sideways and upwards, touched no
+ *      triangle (a phantom, as the judge counts it); the HOT_MAX (8) with
+ *      the most count. For each hot box, up to FREED_PER_HOT (3) pairs of
+ *      boxes that no collision named join into their hull, the pair adding the
  *      least volume first, if the hull, grown by a quarter of the avatar's
  *      narrower width, meets no avatar where users stood; then steps 1 to
  *      7 divide the hot boxes alone, with the boxes freed. Joins close
@@ -177,7 +177,7 @@
  *      staircase at seeds 1 to 5: 4 of its 10 later jobs write a map, where
  *      none did). ecm_move_boxes runs step 8 alone on a candidate at the
  *      cap, by the places where the judge's trials were held back on it
- *      (server/pipeline/apply.c), each weighted by its ticks, the job's
+ *      (algo/refine/second.c), each weighted by its ticks, the job's
  *      own places unnamed (no box of the candidate) so that no join covers
  *      them: held clusters, whose region is their points' reach, stretched
  *      through the boxes along the face alone, and no walk (step 3): the
@@ -258,9 +258,9 @@ typedef struct ecm_cluster {
     float centroid[3];
     uint32_t weight;       /* how hard it presses: its collisions (0 counts as 1) */
     bool held;             /* its points are where trials were held back, not users
-                            * stopped at a face they would cross (apply.c's second
-                            * candidate): its region is stretched along the face
-                            * alone, and no walk (step 3) */
+                            * stopped at a face they would cross (second.h): its
+                            * region is stretched along the face alone, and no
+                            * walk (step 3) */
 } ecm_cluster;
 
 /* What one refinement produced. */
@@ -306,7 +306,7 @@ int ecm_refine_mesh(const ecm_params *p, const trimesh *m, const float (*boxes)[
                     const ecm_cluster *clusters, uint32_t nclusters, ecm_result *out, char *err, size_t errlen);
 /* Step 8 alone (see above) on a map at the cap, by the places in p->stood
  * and the clusters: a second candidate where a first left users stopped
- * (server/pipeline/apply.c: the judge's own trials). Returns 1 with *out
+ * (second.h: the judge's own trials). Returns 1 with *out
  * filled, 0 with *out empty but for the times spent when it has nothing
  * to offer (fewer than max_boxes boxes, no place, no hot box, no pair to
  * join or no division that fits), or an error as ecm_refine_mesh's. */

@@ -25,6 +25,16 @@
 #define SECOND_GAIN_NUM 1u
 #define SECOND_GAIN_DEN 2u
 
+/* Adds what refinement from did (cells and times) to to. */
+static void add_work(ecm_result *to, const ecm_result *from)
+{
+    to->cells += from->cells;
+    to->occupied += from->occupied;
+    to->wanted += from->wanted;
+    to->voxel_ms += from->voxel_ms;
+    to->divide_ms += from->divide_ms;
+}
+
 /* Places by ticks, most first; equal ones in the trials' order. */
 static int by_ticks(const void *x, const void *y)
 {
@@ -124,27 +134,20 @@ int ecm_second_candidate(const ecm_params *p, const trimesh *mesh, judge *jg, do
         rc = 1;
     if (rc < 0)
         goto done;
-    /* Whichever is kept carries both candidates' times and cells. */
-    double voxel_ms = r->voxel_ms + r2.voxel_ms, divide_ms = r->divide_ms + r2.divide_ms;
-    uint64_t cells = r->cells + r2.cells, occupied = r->occupied + r2.occupied, wanted = r->wanted + r2.wanted;
-    if (rc == 1) {
-        double ms = j2.ms + walk_ms; /* the old map's walks and both maps' */
-        if (j2.phantom_new + JUDGE_GAIN_MIN <= j->phantom_new &&
-            (j->phantom_new - j2.phantom_new) * SECOND_GAIN_DEN >= j->phantom_new * SECOND_GAIN_NUM &&
-            j2.opened_new <= j->opened_new) {
-            *out = (ecm_second){.kept = 1, .places = n, .first_count = r->count, .first_phantom = j->phantom_new};
-            ecm_result_free(r);
-            *r = r2;
-            r2 = (ecm_result){0};
-            *j = j2;
-        }
-        j->ms = ms;
+    /* Whichever is kept carries both candidates' cells and times. */
+    if (rc == 1 && judge_gain(j->phantom_new, j2.phantom_new, SECOND_GAIN_NUM, SECOND_GAIN_DEN) &&
+        j2.opened_new <= j->opened_new) {
+        *out = (ecm_second){.kept = 1, .places = n, .first_count = r->count, .first_phantom = j->phantom_new};
+        add_work(&r2, r);
+        ecm_result_free(r);
+        *r = r2;
+        r2 = (ecm_result){0};
+        *j = j2;
+    } else {
+        add_work(r, &r2);
     }
-    r->voxel_ms = voxel_ms;
-    r->divide_ms = divide_ms;
-    r->cells = cells;
-    r->occupied = occupied;
-    r->wanted = wanted;
+    if (rc == 1)
+        j->ms = j2.ms + walk_ms; /* the old map's walks and both maps' */
     rc = 0;
 done:
     if (rc < 0)

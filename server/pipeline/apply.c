@@ -183,7 +183,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
         memcpy(clusters[i].max, f[i].c.max, sizeof clusters[i].max);
         memcpy(clusters[i].centroid, f[i].c.centroid, sizeof clusters[i].centroid);
         clusters[i].weight = f[i].c.points;
-        clusters[i].held = 0;
+        clusters[i].held = false;
         cluster_ids[i] = f[i].cluster_id;
     }
     struct timespec t0, t1;
