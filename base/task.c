@@ -1,0 +1,51 @@
+/*
+ * task.c: see task.h.
+ */
+#include "task.h"
+
+#include <time.h>
+#include <unistd.h>
+
+static double cpu_now_ms(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+    return (double)t.tv_sec * 1e3 + (double)t.tv_nsec / 1e6;
+}
+
+static void *task_main(void *arg)
+{
+    task *t = arg;
+    double t0 = cpu_now_ms();
+    t->fn(t->arg);
+    t->cpu_ms = cpu_now_ms() - t0;
+    return NULL;
+}
+
+void task_start(task *t, void (*fn)(void *arg), void *arg, int on_thread)
+{
+    *t = (task){.fn = fn, .arg = arg};
+    t->started = on_thread && pthread_create(&t->thread, NULL, task_main, t) == 0;
+}
+
+double task_wait(task *t)
+{
+    if (t->waited)
+        return 0;
+    t->waited = 1;
+    if (!t->started) {
+        t->fn(t->arg);
+        return 0;
+    }
+    pthread_join(t->thread, NULL);
+    return t->cpu_ms;
+}
+
+int task_spare(unsigned threads)
+{
+    if (threads == 0) {
+        long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+        return cpus > 1;
+    }
+    return threads > 1;
+}
