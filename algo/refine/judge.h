@@ -156,6 +156,8 @@ typedef struct judge_params {
     uint32_t depth;        /* the occupancy grid's depth, VOXEL_DEPTH_MIN..8 */
     uint32_t cell_depth;   /* the grid whose cell is the phantom tolerance, VOXEL_DEPTH_MIN..VOXEL_DEPTH_MAX */
     uint32_t max_samples;  /* 1..JUDGE_SAMPLES_LIMIT */
+    unsigned threads;      /* 1: this thread alone; else the triangles' index is built on a second
+                            * (0: when the machine has more than one CPU) */
 } judge_params;
 
 /* Fills p with the defaults above, the default avatar (move.h), an

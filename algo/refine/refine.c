@@ -20,6 +20,7 @@
 #include "avatar.h"
 #include "err.h"
 #include "le.h"
+#include "task.h"
 #include "tribins.h"
 #include "trimesh.h"
 
@@ -1677,6 +1678,20 @@ typedef struct tight {
  * the triangles, enough that a box of the map meets a fraction of them. */
 #define BUCKETS 16u
 
+/* Builds tight's index over hull (a task: tribins_build's return in rc). */
+typedef struct index_job {
+    tight *tt;
+    uint32_t ntris;
+    double hull[6];
+    int rc;
+} index_job;
+
+static void build_index(void *arg)
+{
+    index_job *j = arg;
+    j->rc = tribins_build(&j->tt->bins, j->hull, BUCKETS, j->tt->tb, j->ntris, j->tt->eps, 0);
+}
+
 static int misses(const float t[6], const double c[6])
 {
     for (int a = 0; a < 3; a++)
@@ -2297,6 +2312,17 @@ static void press_span(const ecm_cluster *c, const float (*boxes)[6], uint32_t n
             widen(span, boxes[b]);
 }
 
+/* The tables of cells to cover and of cells outside the problem boxes:
+ * classify settles both, so they are built beside step 3 (build_grid). */
+static void build_must_tables(void *arg)
+{
+    work *w = arg;
+    size_t table = (size_t)(w->n + 1) * (w->n + 1) * (w->n + 1);
+    voxel_svt_build(&w->must, w->tables, w->n, w->cls, CELL_MUST);
+    if (w->any_outside)
+        voxel_svt_build(&w->outside, w->tables + 2 * table, w->n, w->cls, CELL_OUT);
+}
+
 /* Steps 1 to 3: the grid over the hull of the problem boxes, its cells'
  * classes and pressures, the three tables. */
 static int build_grid(work *w, const ecm_params *p, const trimesh *m, const float (*boxes)[6],
@@ -2306,9 +2332,9 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     struct timespec t0;
     clock_gettime(STAGE_CLOCK, &t0);
     int rc = voxel_grid_init(&w->g, p->depth, hb, hb + 3);
-    if (rc < 0 || (rc = voxel_mark_boxed(&w->g, m->tris, (const float(*)[6])m->box, m->ntris, 0)) < 0)
+    if (rc < 0 || (rc = voxel_mark_boxed(&w->g, m->tris, (const float(*)[6])m->box, m->ntris, 0, p->threads)) < 0)
         return rc;
-    r->voxel_ms += ms_since(&t0);
+    r->voxel_ms += ms_since(&t0) + w->g.helper_ms;
     clock_gettime(STAGE_CLOCK, &t0);
     uint32_t n = w->n = w->g.n;
     /* The ground: rows whose top is at or under the floor. */
@@ -2337,6 +2363,8 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     if (!w->tables || !w->cls || !w->pressure || !w->blocked || !w->mapped || !w->layers || !w->above)
         return -ENOMEM;
     classify(w, boxes, nboxes, problem);
+    task must;
+    task_start(&must, build_must_tables, w, task_spare(p->threads));
     uint32_t wmax = 1;
     for (uint32_t i = 0; i < ncl; i++)
         wmax = cl[i].weight > wmax ? cl[i].weight : wmax;
@@ -2346,20 +2374,20 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
         uint32_t weight = cl[i].weight ? cl[i].weight : 1;
         uint32_t near =
             PRESSURE_NEAR_MIN + (uint32_t)((uint64_t)(PRESSURE_MAX - PRESSURE_NEAR_MIN) * weight / wmax);
-        if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0)
-            return rc;
-        if (users_inside(&cl[i], boxes[cl[i].box], p) &&
-            (rc = mark_reachable(w, &cl[i], p, near / 16 ? near / 16 : 1)) < 0)
-            return rc;
+        if ((rc = mark_wanted(w, &cl[i], boxes[cl[i].box], span, p, near)) < 0 ||
+            (users_inside(&cl[i], boxes[cl[i].box], p) &&
+             (rc = mark_reachable(w, &cl[i], p, near / 16 ? near / 16 : 1)) < 0))
+            break;
     }
+    if (rc >= 0)
+        voxel_svt_build(&w->press, w->tables + table, n, w->pressure, 0);
+    double beside = task_wait(&must); /* before returning: it reads w */
+    if (rc < 0)
+        return rc;
     r->wanted += w->wanted;
-    voxel_svt_build(&w->must, w->tables, n, w->cls, CELL_MUST);
-    voxel_svt_build(&w->press, w->tables + table, n, w->pressure, 0);
-    if (w->any_outside)
-        voxel_svt_build(&w->outside, w->tables + 2 * table, n, w->cls, CELL_OUT);
     r->cells += cells;
     r->occupied += w->g.occupied;
-    r->divide_ms += ms_since(&t0);
+    r->divide_ms += ms_since(&t0) + beside;
     return 0;
 }
 
@@ -2869,9 +2897,20 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
             goto done;
         struct timespec t0;
         clock_gettime(STAGE_CLOCK, &t0);
-        if ((rc = divide(&w)) < 0)
+        double scale = 0;
+        for (int a = 0; a < 6; a++)
+            scale = fmax(scale, fabs((double)hall[a]));
+        for (int a = 0; a < 3; a++)
+            scale = fmax(scale, (double)hall[3 + a] - hall[a]);
+        tt = (tight){.tris = m->tris, .tb = (const float(*)[6])m->box, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
+        /* Step 6's index of the triangles, built beside the division. */
+        index_job ij = {.tt = &tt, .ntris = m->ntris, .hull = {hall[0], hall[1], hall[2], hall[3], hall[4], hall[5]}};
+        task index;
+        task_start(&index, build_index, &ij, task_spare(p->threads));
+        whole = divide(&w);
+        out->divide_ms += task_wait(&index);
+        if ((rc = whole) < 0 || (rc = ij.rc) < 0)
             goto done;
-        whole = rc;
         pb = cvre_malloc(nproblem * sizeof *pb);
         clip = cvre_malloc(nproblem * sizeof *clip);
         parts = cvre_malloc(nboxes * sizeof *parts);
@@ -2886,22 +2925,15 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         rc = -ENOMEM;
         if (!pb || !clip || !parts || !idx || !pc || !ok || !out->boxes || !state)
             goto done;
-        double scale = 0;
-        for (int a = 0; a < 6; a++)
-            scale = fmax(scale, fabs((double)hall[a]));
-        for (int a = 0; a < 3; a++)
-            scale = fmax(scale, (double)hall[3 + a] - hall[a]);
         /* pb: the divided problem boxes, then those only tightened. */
         uint32_t np = 0;
         for (int pass = PROBLEM_DIVIDE; pass <= PROBLEM_TIGHTEN; pass++)
             for (uint32_t i = 0; i < nboxes; i++)
                 if (problem[i] == pass)
                     memcpy(pb[np++], boxes[i], sizeof pb[0]);
-        tt = (tight){.tris = m->tris, .tb = (const float(*)[6])m->box, .problem = (const float(*)[6])pb,
-                     .nproblem = nproblem, .clip = clip, .eps = VOXEL_EPS_REL * (scale > 0 ? scale : 1)};
-        const double hull[6] = {hall[0], hall[1], hall[2], hall[3], hall[4], hall[5]};
-        if ((rc = tribins_build(&tt.bins, hull, BUCKETS, tt.tb, m->ntris, tt.eps, 0)) < 0)
-            goto done;
+        tt.problem = (const float(*)[6])pb;
+        tt.nproblem = nproblem;
+        tt.clip = clip;
         for (uint32_t i = 0; i < nboxes; i++)
             if (!problem[i])
                 memcpy(out->boxes[out->count++], boxes[i], sizeof boxes[i]);

@@ -234,6 +234,10 @@ typedef struct ecm_params {
     const struct ecm_stood *stood; /* nstood places where users stood when they collided
                                     * (steps 6 and 8; the default: none) */
     uint32_t nstood;
+    unsigned threads; /* most threads a refinement runs on: the digitizing in slabs
+                       * (voxel_mark_threads), two tables and the triangles' index
+                       * built beside other steps; 1: this thread alone; the
+                       * default 0: one per CPU */
 } ecm_params;
 
 /* Where a user stood when it collided: its avatar's box, local, the box

@@ -52,7 +52,6 @@
 
 #include <errno.h>
 #include <math.h>
-#include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -60,6 +59,7 @@
 #include <unistd.h>
 
 #include "alloc.h"
+#include "task.h"
 
 /* Regions of at most this many cells are tested cell by cell; larger ones
  * are split in octants, each tested as one block first. Most cells of a
@@ -531,41 +531,19 @@ static void mark_one(marker *m, const voxel_grid *g, const float *p)
     mark_triangle(m, v);
 }
 
-static void mark_all(marker *m, const voxel_grid *g, const float *tris, size_t ntris)
-{
-    /* A thread's slab, grown by a cell: triangles wholly outside it are
-     * skipped before any other work (axis_range decides exactly). */
-    int slab = m->zlo > 0 || m->zhi < (int)m->n - 1;
-    double zlo = g->min[2] + (m->zlo - 1) * m->c[2], zhi = g->min[2] + (m->zhi + 2) * m->c[2];
-    for (size_t t = 0; t < ntris; t++) {
-        const float *p = tris + 9 * t;
-        if (slab && ((p[2] < zlo && p[5] < zlo && p[8] < zlo) || (p[2] > zhi && p[5] > zhi && p[8] > zhi)))
-            continue;
-        mark_one(m, g, p);
-    }
-}
-
-int voxel_finite(const float *p, size_t n) { return all_finite(p, n); }
-
-static int args_ok(const voxel_grid *g, const float *tris, size_t ntris)
-{
-    return g && g->bits && (!ntris || tris) && ntris <= SIZE_MAX / 9 && all_finite(tris, 9 * ntris);
-}
-
-int voxel_mark(voxel_grid *g, const float *tris, size_t ntris)
-{
-    if (!args_ok(g, tris, ntris))
-        return -EINVAL;
-    marker m;
-    marker_init(&m, g, 0, (int)g->n - 1);
-    mark_all(&m, g, tris, ntris);
-    g->occupied += m.added;
-    return 0;
-}
+/* What one call marks: the triangles and, for voxel_mark_boxed, their
+ * bounding boxes (box NULL for voxel_mark) and its loose bound. */
+typedef struct pass {
+    const float *tris;
+    const float (*box)[6];
+    size_t ntris;
+    uint32_t loose;
+} pass;
 
 /* Marks the cells of triangle t's bounding box b (the cells its grown
- * extent meets, as mark_triangle finds them) when there are at most
- * `loose` of them: 1, or 0 when the triangle needs its exact cells. */
+ * extent meets, as mark_triangle finds them, in this marker's slab) when
+ * there are at most `loose` of them: 1, or 0 when the triangle needs its
+ * exact cells. */
 static int mark_box_cells(marker *m, const voxel_grid *g, const float *b, uint32_t loose)
 {
     int r[3][2];
@@ -577,69 +555,91 @@ static int mark_box_cells(marker *m, const voxel_grid *g, const float *b, uint32
     }
     if (cells > (long)loose)
         return 0;
-    for (int k = r[2][0]; k <= r[2][1]; k++)
+    for (int k = r[2][0] < m->zlo ? m->zlo : r[2][0]; k <= r[2][1] && k <= m->zhi; k++)
         for (int j = r[1][0]; j <= r[1][1]; j++)
             for (int i = r[0][0]; i <= r[0][1]; i++)
                 set_cell(m, i, j, k);
     return 1;
 }
 
-int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris, uint32_t loose)
+static void mark_pass(marker *m, const voxel_grid *g, const pass *p)
 {
-    if (!g || !g->bits || (ntris && (!tris || !box)))
-        return -EINVAL;
-    marker m;
-    marker_init(&m, g, 0, (int)g->n - 1);
-    /* A triangle whose box misses the grid grown by a cell sets nothing
-     * (axis_range's rounding reaches eps, far under a cell); a flat axis
-     * passes none over. */
+    /* The grid, or a thread's slab of it, grown by a cell: triangles
+     * wholly outside are passed over before any other work (axis_range's
+     * rounding reaches eps, far under a cell, and decides exactly); a flat
+     * axis passes none over. */
     double lo[3], hi[3];
     for (int a = 0; a < 3; a++) {
-        lo[a] = m.c[a] > 0.0 ? g->min[a] - m.c[a] : -INFINITY;
-        hi[a] = m.c[a] > 0.0 ? g->max[a] + m.c[a] : INFINITY;
+        lo[a] = m->c[a] > 0.0 ? g->min[a] - m->c[a] : -INFINITY;
+        hi[a] = m->c[a] > 0.0 ? g->max[a] + m->c[a] : INFINITY;
     }
-    for (uint32_t t = 0; t < ntris; t++) {
-        const float *b = box[t];
+    if (m->zlo > 0 || m->zhi < (int)m->n - 1) {
+        lo[2] = g->min[2] + (m->zlo - 1) * m->c[2];
+        hi[2] = g->min[2] + (m->zhi + 2) * m->c[2];
+    }
+    for (size_t t = 0; t < p->ntris; t++) {
+        const float *v = p->tris + 9 * t;
+        if (!p->box) {
+            if ((v[2] < lo[2] && v[5] < lo[2] && v[8] < lo[2]) || (v[2] > hi[2] && v[5] > hi[2] && v[8] > hi[2]))
+                continue;
+            mark_one(m, g, v);
+            continue;
+        }
+        const float *b = p->box[t];
         if (b[0] > hi[0] || b[3] < lo[0] || b[1] > hi[1] || b[4] < lo[1] || b[2] > hi[2] || b[5] < lo[2])
             continue;
-        if (!loose || !mark_box_cells(&m, g, b, loose))
-            mark_one(&m, g, tris + 9 * (size_t)t);
+        if (!p->loose || !mark_box_cells(m, g, b, p->loose))
+            mark_one(m, g, v);
     }
-    g->occupied += m.added;
-    return 0;
 }
+
+int voxel_finite(const float *p, size_t n) { return all_finite(p, n); }
 
 typedef struct slab_job {
     marker m;
     const voxel_grid *g;
-    const float *tris;
-    size_t ntris;
-    pthread_t thread;
-    int started;
+    const pass *p;
+    task t;
 } slab_job;
 
-static void *slab_main(void *arg)
+static void mark_slab(void *arg)
 {
     slab_job *j = arg;
-    mark_all(&j->m, j->g, j->tris, j->ntris);
-    return NULL;
+    mark_pass(&j->m, j->g, j->p);
+}
+
+/* The z layer of triangle t's middle (of its box, where it has one), or -1
+ * for a triangle whose box misses the grid. */
+static int layer_of(const voxel_grid *g, const pass *p, size_t t, double inv)
+{
+    double z;
+    if (p->box) {
+        const float *b = p->box[t];
+        if ((double)b[5] < g->min[2] || (double)b[2] > g->max[2])
+            return -1;
+        z = ((double)b[2] + b[5]) / 2.0;
+    } else {
+        const float *v = p->tris + 9 * t;
+        z = ((double)v[2] + v[5] + v[8]) / 3.0;
+    }
+    z = (z - g->min[2]) * inv;
+    return z <= 0.0 ? 0 : z >= g->n - 1 ? (int)g->n - 1 : (int)z;
 }
 
 /* Splits the z layers into `threads` slabs holding about as many triangles
- * each (by a sample of their centroids): first[s] is slab s's first layer,
+ * each (by a sample of their middles): first[s] is slab s's first layer,
  * first[threads] = n. Returns the number of non-empty slabs. */
-static unsigned split_slabs(const voxel_grid *g, const float *tris, size_t ntris, unsigned threads,
-                            int first[VOXEL_MAX_THREADS + 1])
+static unsigned split_slabs(const voxel_grid *g, const pass *p, unsigned threads, int first[VOXEL_MAX_THREADS + 1])
 {
     uint32_t count[1u << VOXEL_DEPTH_MAX] = {0};
-    size_t step = ntris / 4096 + 1, total = 0;
+    size_t step = p->ntris / 4096 + 1, total = 0;
     double inv = g->n / (g->max[2] - g->min[2]);
-    for (size_t t = 0; t < ntris; t += step) {
-        const float *p = tris + 9 * t;
-        double z = (((double)p[2] + p[5] + p[8]) / 3.0 - g->min[2]) * inv;
-        int layer = z <= 0.0 ? 0 : z >= g->n - 1 ? (int)g->n - 1 : (int)z;
-        count[layer]++;
-        total++;
+    for (size_t t = 0; t < p->ntris; t += step) {
+        int layer = layer_of(g, p, t, inv);
+        if (layer >= 0) {
+            count[layer]++;
+            total++;
+        }
     }
     unsigned s = 0;
     size_t seen = 0;
@@ -655,42 +655,64 @@ static unsigned split_slabs(const voxel_grid *g, const float *tris, size_t ntris
     return s;
 }
 
-int voxel_mark_threads(voxel_grid *g, const float *tris, size_t ntris, unsigned threads)
+/* Marks p on up to `threads` threads (0: one per online CPU), each setting
+ * the cells of its own slab of z layers, or on this thread alone. */
+static void mark_slabs(voxel_grid *g, const pass *p, unsigned threads)
 {
-    if (!args_ok(g, tris, ntris))
-        return -EINVAL;
     if (threads == 0) {
         long cpus = sysconf(_SC_NPROCESSORS_ONLN);
         threads = cpus > 0 ? (unsigned)cpus : 1u;
     }
     if (threads > VOXEL_MAX_THREADS)
         threads = VOXEL_MAX_THREADS;
+    if (p->ntris / VOXEL_MIN_TRIS_PER_THREAD < threads)
+        threads = (unsigned)(p->ntris / VOXEL_MIN_TRIS_PER_THREAD);
     /* Slabs are whole z layers of n^2 bits, so threads never share a word
      * when n >= 8; a flat z axis has one layer that all cells copy. */
-    if (threads < 2 || g->n < 8 || g->cell[2] == 0.0 || ntris < VOXEL_MIN_TRIS_PER_THREAD * 2)
-        return voxel_mark(g, tris, ntris);
-    if (ntris / VOXEL_MIN_TRIS_PER_THREAD < threads)
-        threads = (unsigned)(ntris / VOXEL_MIN_TRIS_PER_THREAD);
-
+    if (threads < 2 || g->n < 8 || g->cell[2] == 0.0) {
+        marker m;
+        marker_init(&m, g, 0, (int)g->n - 1);
+        mark_pass(&m, g, p);
+        g->occupied += m.added;
+        return;
+    }
     int first[VOXEL_MAX_THREADS + 1];
     slab_job job[VOXEL_MAX_THREADS];
-    unsigned slabs = split_slabs(g, tris, ntris, threads, first);
+    unsigned slabs = split_slabs(g, p, threads, first);
     for (unsigned s = 0; s < slabs; s++) {
         marker_init(&job[s].m, g, first[s], first[s + 1] - 1);
         job[s].g = g;
-        job[s].tris = tris;
-        job[s].ntris = ntris;
+        job[s].p = p;
         /* Slab 0 runs here; a thread that cannot start runs here too. */
-        job[s].started = s > 0 && pthread_create(&job[s].thread, NULL, slab_main, &job[s]) == 0;
+        task_start(&job[s].t, mark_slab, &job[s], s > 0);
     }
-    for (unsigned s = 0; s < slabs; s++)
-        if (!job[s].started)
-            slab_main(&job[s]);
     for (unsigned s = 0; s < slabs; s++) {
-        if (job[s].started)
-            pthread_join(job[s].thread, NULL);
+        g->helper_ms += task_wait(&job[s].t);
         g->occupied += job[s].m.added;
     }
+}
+
+int voxel_mark(voxel_grid *g, const float *tris, size_t ntris)
+{
+    return voxel_mark_threads(g, tris, ntris, 1);
+}
+
+int voxel_mark_threads(voxel_grid *g, const float *tris, size_t ntris, unsigned threads)
+{
+    if (!g || !g->bits || (ntris && !tris) || ntris > SIZE_MAX / 9 || !all_finite(tris, 9 * ntris))
+        return -EINVAL;
+    pass p = {.tris = tris, .ntris = ntris};
+    mark_slabs(g, &p, threads);
+    return 0;
+}
+
+int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris, uint32_t loose,
+                     unsigned threads)
+{
+    if (!g || !g->bits || (ntris && (!tris || !box)))
+        return -EINVAL;
+    pass p = {.tris = tris, .box = box, .ntris = ntris, .loose = loose};
+    mark_slabs(g, &p, threads);
     return 0;
 }
 

@@ -39,6 +39,7 @@ typedef struct voxel_grid {
     double cell[3];       /* cell size per axis: (max - min) / n, may be 0 */
     uint64_t *bits;       /* n^3 bits; cell (x, y, z) is bit x + n (y + n z) */
     uint64_t occupied;    /* cells set */
+    double helper_ms;     /* CPU time of the threads its marking started (voxel_mark_threads) */
 } voxel_grid;
 
 /* Prepares an empty grid over [min, max] (each min <= max, all finite); the
@@ -62,9 +63,11 @@ int voxel_mark(voxel_grid *g, const float *tris, size_t ntris);
  * object). With loose 0 it sets the same cells; with loose > 0, every cell
  * of a triangle's bounding box where those are at most loose cells (a
  * superset, for a filter that only needs "no triangle here" to be true;
- * most triangles of a detailed mesh, with no test of their own). Returns
- * 0, or -EINVAL if g has no bits. */
-int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris, uint32_t loose);
+ * most triangles of a detailed mesh, with no test of their own). Runs on
+ * up to `threads` threads as voxel_mark_threads does (1: this thread
+ * only). Returns 0, or -EINVAL if g has no bits. */
+int voxel_mark_boxed(voxel_grid *g, const float *tris, const float (*box)[6], uint32_t ntris, uint32_t loose,
+                     unsigned threads);
 
 static inline int voxel_get(const voxel_grid *g, uint32_t x, uint32_t y, uint32_t z)
 {
@@ -123,9 +126,9 @@ static inline uint32_t voxel_svt_sum(const voxel_svt *s, const uint32_t lo[3], c
  * setting the cells of its own slab of z layers; it sets exactly the cells
  * voxel_mark sets. Falls back to voxel_mark (this thread only) for a grid
  * under 8 cells per axis or flat in z, or for few triangles; a thread that
- * cannot be started leaves its slab to the calling thread. voxel_mark
- * itself never starts threads: the server calls it on its own background
- * thread. Same returns as voxel_mark. */
+ * cannot be started leaves its slab to the calling thread; the CPU time of
+ * the threads it started is added to g->helper_ms. voxel_mark itself never
+ * starts threads. Same returns as voxel_mark. */
 int voxel_mark_threads(voxel_grid *g, const float *tris, size_t ntris, unsigned threads);
 
 /* 1 if none of the n floats at p is an infinity or a NaN (bit operations:

@@ -170,6 +170,13 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const cluste
     return rc;
 }
 
+static double wall_ms_since(const struct timespec *t0)
+{
+    struct timespec t1;
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    return (double)(t1.tv_sec - t0->tv_sec) * 1e3 + (double)(t1.tv_nsec - t0->tv_nsec) / 1e6;
+}
+
 int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id, const cluster_found *f,
               uint32_t n, ecm_applied *out, char *err, size_t errlen)
 {
@@ -186,7 +193,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
         clusters[i].held = false;
         cluster_ids[i] = f[i].cluster_id;
     }
-    struct timespec t0, t1;
+    struct timespec t0, ts;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     memset(out, 0, sizeof *out);
     db_ecm_object o = {0};
@@ -223,6 +230,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
     char why[256];
     if ((rc = load_samples(d, f, n, run, &at, &samples, &hit, &nsamples, err, errlen)) < 0)
         goto done;
+    out->store_ms = wall_ms_since(&t0);
     /* The avatars at the samples, in local units, and the boxes they met
      * (refine.h, steps 6 and 8). */
     stood = cvre_xmalloc((nsamples ? nsamples : 1) * sizeof *stood);
@@ -249,6 +257,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
     judge_params jp;
     judge_params_default(&jp);
     memcpy(jp.move.size, p->avatar, sizeof jp.move.size);
+    jp.threads = p->threads;
     judge_input in = {.mesh = &mesh, .scale = scale, .pose_y = at.pos[1],
                       .old_boxes = (const float(*)[6])o.boxes, .nold = o.box_count, .samples = samples,
                       .nsamples = nsamples};
@@ -300,6 +309,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
              "the cap%s; %s%s",
              p->depth, p->max_boxes, p->max_empty, o.box_count, r.count, r.problem_boxes, r.capped, first, figures,
              out->judge.better ? "" : ": not better, not published");
+    clock_gettime(CLOCK_MONOTONIC, &ts);
     if (out->judge.better) {
         db_ecm_change c = {.object_id = object_id, .parent_version = version, .reason = "refine", .run_id = run_id,
                            .ncluster_ids = run_id ? n : 0, .cluster_ids = cluster_ids, .detail = detail,
@@ -315,12 +325,12 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
                               .opened_new = j->opened_new};
         rc = db_ecm_reject(d, &c, db_now(), &out->candidate);
     }
+    out->store_ms += wall_ms_since(&ts);
     if (rc < 0 && rc != -ESTALE)
         cvre_fail(err, errlen, rc, "object %lld: writing the new %s: %s", (long long)object_id,
                   out->judge.better ? "version" : "candidate", db_error(d));
 done:
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    out->total_ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) / 1e6;
+    out->total_ms = wall_ms_since(&t0);
     judge_close(jg);
     ecm_result_free(&r);
     trimesh_free(&mesh);

@@ -38,7 +38,8 @@ typedef struct ecm_applied {
     uint32_t boxes_before, boxes_after;
     ecm_result stats;       /* counts and times; no boxes */
     judge_result judge;     /* the judge's figures; zero when it did not run */
-    double total_ms;        /* load, refine, judge, write */
+    double store_ms;        /* of which the store's reads and its write, wall clock */
+    double total_ms;        /* load, refine, judge, write, wall clock */
 } ecm_applied;
 
 /* A hash of the n clusters f (each one's box, extent and centroid), the

@@ -408,12 +408,13 @@ static void test_one_call_equals_union(void **state)
 
 /* Marking a checked mesh sets exactly the cells marking its triangles
  * does: triangles in the grid, grazing it, near it and far from it (passed
- * over from their boxes), on flat grids too. */
+ * over from their boxes), on flat grids too, on one thread or several
+ * (whose slabs count only the triangles meeting the grid). */
 static void test_mesh_equals_triangles(void **state)
 {
     (void)state;
     rng_state = 777;
-    enum { N = 3000 };
+    enum { N = 3 * VOXEL_MIN_TRIS_PER_THREAD };
     float *t = malloc(9 * sizeof *t * N);
     assert_non_null(t);
     struct {
@@ -433,21 +434,34 @@ static void test_mesh_equals_triangles(void **state)
         assert_int_equal(trimesh_init(&m, t, N, err, sizeof err), 0);
         voxel_grid tri, mesh;
         grid_init(&tri, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
-        grid_init(&mesh, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
         assert_int_equal(voxel_mark(&tri, t, N), 0);
-        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, (const float(*)[6])m.box, m.ntris, 0), 0);
         assert_true(tri.occupied > 0);
-        assert_int_equal(mesh.occupied, tri.occupied);
-        assert_memory_equal(mesh.bits, tri.bits, ((size_t)tri.n * tri.n * tri.n + 7) / 8);
-        assert_int_equal(voxel_mark_boxed(NULL, m.tris, (const float(*)[6])m.box, m.ntris, 0), -EINVAL);
-        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, NULL, m.ntris, 0), -EINVAL);
+        static const unsigned thread_counts[] = {1, 2, 3};
+        for (size_t tc = 0; tc < sizeof thread_counts / sizeof thread_counts[0]; tc++) {
+            grid_init(&mesh, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+            assert_int_equal(
+                voxel_mark_boxed(&mesh, m.tris, (const float(*)[6])m.box, m.ntris, 0, thread_counts[tc]), 0);
+            assert_int_equal(mesh.occupied, tri.occupied);
+            assert_memory_equal(mesh.bits, tri.bits, ((size_t)tri.n * tri.n * tri.n + 7) / 8);
+            assert_true(thread_counts[tc] > 1 || mesh.helper_ms == 0.0);
+            voxel_grid_free(&mesh);
+        }
+        grid_init(&mesh, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+        assert_int_equal(voxel_mark_boxed(NULL, m.tris, (const float(*)[6])m.box, m.ntris, 0, 1), -EINVAL);
+        assert_int_equal(voxel_mark_boxed(&mesh, m.tris, NULL, m.ntris, 0, 1), -EINVAL);
         /* Loose: every exact cell (test_loose_marks_the_box: and more). */
         voxel_grid loose;
         grid_init(&loose, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
-        assert_int_equal(voxel_mark_boxed(&loose, m.tris, (const float(*)[6])m.box, m.ntris, 8), 0);
+        assert_int_equal(voxel_mark_boxed(&loose, m.tris, (const float(*)[6])m.box, m.ntris, 8, 1), 0);
         for (size_t i = 0; i < ((size_t)tri.n * tri.n * tri.n + 63) / 64; i++)
             assert_int_equal(loose.bits[i] & tri.bits[i], tri.bits[i]);
         assert_true(loose.occupied >= tri.occupied);
+        voxel_grid loose3; /* the same cells on three threads */
+        grid_init(&loose3, cases[c].depth, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+        assert_int_equal(voxel_mark_boxed(&loose3, m.tris, (const float(*)[6])m.box, m.ntris, 8, 3), 0);
+        assert_int_equal(loose3.occupied, loose.occupied);
+        assert_memory_equal(loose3.bits, loose.bits, ((size_t)tri.n * tri.n * tri.n + 7) / 8);
+        voxel_grid_free(&loose3);
         voxel_grid_free(&loose);
         voxel_grid_free(&tri);
         voxel_grid_free(&mesh);
@@ -905,9 +919,9 @@ static void test_loose_marks_the_box(void **state)
     grid_init(&exact, 2, 0, 0, 0, 4, 4, 4);
     grid_init(&loose, 2, 0, 0, 0, 4, 4, 4);
     grid_init(&wide, 2, 0, 0, 0, 4, 4, 4);
-    assert_int_equal(voxel_mark_boxed(&exact, m.tris, (const float(*)[6])m.box, 1, 0), 0);
-    assert_int_equal(voxel_mark_boxed(&loose, m.tris, (const float(*)[6])m.box, 1, 8), 0);
-    assert_int_equal(voxel_mark_boxed(&wide, m.tris, (const float(*)[6])m.box, 1, 7), 0);
+    assert_int_equal(voxel_mark_boxed(&exact, m.tris, (const float(*)[6])m.box, 1, 0, 1), 0);
+    assert_int_equal(voxel_mark_boxed(&loose, m.tris, (const float(*)[6])m.box, 1, 8, 1), 0);
+    assert_int_equal(voxel_mark_boxed(&wide, m.tris, (const float(*)[6])m.box, 1, 7, 1), 0);
     assert_int_equal(exact.occupied, 7);
     assert_false(voxel_get(&exact, 1, 0, 1));
     assert_int_equal(loose.occupied, 8);
