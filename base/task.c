@@ -1,8 +1,10 @@
 /*
  * task.c: see task.h.
  */
+#define _GNU_SOURCE /* sched_getaffinity, CPU_COUNT */
 #include "task.h"
 
+#include <sched.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -41,11 +43,15 @@ double task_wait(task *t)
     return t->cpu_ms;
 }
 
-int task_spare(unsigned threads)
+unsigned task_threads(unsigned threads)
 {
-    if (threads == 0) {
-        long cpus = sysconf(_SC_NPROCESSORS_ONLN);
-        return cpus > 1;
-    }
-    return threads > 1;
+    if (threads > 0)
+        return threads;
+    cpu_set_t set;
+    if (sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0)
+        return (unsigned)CPU_COUNT(&set);
+    long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+    return cpus > 0 ? (unsigned)cpus : 1u;
 }
+
+int task_spare(unsigned threads) { return task_threads(threads) > 1; }

@@ -31,8 +31,11 @@ void task_start(task *t, void (*fn)(void *arg), void *arg, int on_thread);
  * it took on a thread of its own, ms, or 0 when it ran on this one (or was
  * waited for already). */
 double task_wait(task *t);
-/* 1 when a second thread can run beside this one: `threads` (0: one per
- * online CPU) is 2 or more. */
+/* How many threads `threads` stands for: itself, or for 0 the CPUs this
+ * thread may run on (its affinity: a container's or taskset's limit), at
+ * least 1. */
+unsigned task_threads(unsigned threads);
+/* 1 when a second thread can run beside this one: task_threads is 2 or more. */
 int task_spare(unsigned threads);
 
 #endif

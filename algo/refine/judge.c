@@ -59,14 +59,14 @@ typedef struct map {
 
 void judge_params_default(judge_params *p)
 {
+    *p = (judge_params){.dt = JUDGE_DT_DEFAULT,
+                        .reach = JUDGE_REACH_DEFAULT,
+                        .speed = JUDGE_SPEED_DEFAULT,
+                        .deflect = JUDGE_DEFLECT_DEFAULT,
+                        .depth = JUDGE_DEPTH_DEFAULT,
+                        .cell_depth = ECM_DEPTH_DEFAULT,
+                        .max_samples = JUDGE_SAMPLES_DEFAULT};
     move_params_default(&p->move);
-    p->dt = JUDGE_DT_DEFAULT;
-    p->reach = JUDGE_REACH_DEFAULT;
-    p->speed = JUDGE_SPEED_DEFAULT;
-    p->deflect = JUDGE_DEFLECT_DEFAULT;
-    p->depth = JUDGE_DEPTH_DEFAULT;
-    p->cell_depth = ECM_DEPTH_DEFAULT;
-    p->max_samples = JUDGE_SAMPLES_DEFAULT;
 }
 
 static void geometry_free(geometry *g)
@@ -110,8 +110,7 @@ static int meets(const float b[6], const double r[6])
     return 1;
 }
 
-/* Indexes the triangles whose bounding box meets near (local): copies them,
- * digitizes them over their bounding box and bins them. */
+/* The bins of the indexed triangles over their grid's box (a task). */
 static void build_bins(void *arg)
 {
     geometry *g = arg;
@@ -120,6 +119,8 @@ static void build_bins(void *arg)
                                JUDGE_BIN_SPREAD_MAX);
 }
 
+/* Indexes the triangles whose bounding box meets near (local): copies them,
+ * digitizes them over their bounding box and bins them. */
 static int geometry_init(geometry *g, const judge_params *p, const judge_input *in, const double near[6])
 {
     memcpy(g->near, near, sizeof g->near);

@@ -3,8 +3,9 @@
  * found by walking the avatar controller (algo/scene/move.h) through both
  * maps from the collisions that asked for the refinement. A map is never
  * published unless it is better (server/pipeline/apply.c). Pure module: no
- * I/O, no global state, no threads; the same input always gives the same
- * output (times aside).
+ * I/O, no global state; the index of the triangles may be built on a second
+ * thread (threads below); the same input always gives the same output
+ * (times aside).
  *
  * Everything is simulated in the object's metric frame: local coordinates
  * times the object's scale (so that the avatar's size, gravity and step
@@ -190,7 +191,7 @@ typedef struct judge_result {
     uint64_t moves;       /* ticks per map */
     uint64_t phantom_old, phantom_new;
     uint64_t opened_old, opened_new;
-    double ms;            /* the calling thread's CPU time (CLOCK_THREAD_CPUTIME_ID) */
+    double ms;            /* CPU time: the calling thread's (CLOCK_THREAD_CPUTIME_ID) and a task's */
 } judge_result;
 
 /* The verdict on r's figures (see above): 1 when the new map is better. */

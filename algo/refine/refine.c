@@ -141,8 +141,8 @@ void ecm_result_free(ecm_result *r)
 }
 
 /* Stage times are the refining thread's CPU time (its page faults
- * included): what the work costs, not how long a loaded machine made it
- * wait. */
+ * included), and that of the threads it starts (task.h, voxel_mark_threads):
+ * what the work costs, not how long a loaded machine made it wait. */
 #define STAGE_CLOCK CLOCK_THREAD_CPUTIME_ID
 
 static double ms_since(const struct timespec *t0)

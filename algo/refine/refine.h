@@ -235,9 +235,9 @@ typedef struct ecm_params {
                                     * (steps 6 and 8; the default: none) */
     uint32_t nstood;
     unsigned threads; /* most threads a refinement runs on: the digitizing in slabs
-                       * (voxel_mark_threads), two tables and the triangles' index
-                       * built beside other steps; 1: this thread alone; the
-                       * default 0: one per CPU */
+                       * (voxel_mark_boxed), two tables and the triangles' index
+                       * built beside other steps (task.h); 1: this thread
+                       * alone; the default 0: one per CPU it may run on */
 } ecm_params;
 
 /* Where a user stood when it collided: its avatar's box, local, the box
@@ -282,9 +282,10 @@ typedef struct ecm_result {
     uint64_t occupied;      /* of which occupied */
     uint64_t wanted;        /* of which wanted (step 3) */
     double voxel_ms;        /* ms in digitization, and */
-    double divide_ms;       /* in steps 2 to 6: the calling thread's CPU time
-                             * (CLOCK_THREAD_CPUTIME_ID, page faults included),
-                             * what the work costs on a loaded machine too */
+    double divide_ms;       /* in steps 2 to 6: CPU time, the calling thread's
+                             * (CLOCK_THREAD_CPUTIME_ID, page faults included) and
+                             * that of the threads it started (threads), what the
+                             * work costs on a loaded machine too */
 } ecm_result;
 
 /*

@@ -42,7 +42,8 @@
  * A flat axis (min == max) has cells of size 0: all n cells along it are the
  * same set, so the range is collapsed to index 0 and marking a cell marks
  * its n copies (the invariant: copies are always set together). *
- * voxel_mark_threads gives each thread a slab of whole z layers (n^2 bits,
+ * voxel_mark_threads and voxel_mark_boxed give each thread a slab of whole
+ * z layers (n^2 bits,
  * a multiple of 64 from n = 8 up, so no word is shared) holding about as
  * many triangles as the others; every thread reads every triangle, skips
  * those outside its slab, and clips the others' ranges to it. No locks, no
@@ -56,7 +57,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
-#include <unistd.h>
 
 #include "alloc.h"
 #include "task.h"
@@ -564,18 +564,18 @@ static int mark_box_cells(marker *m, const voxel_grid *g, const float *b, uint32
 
 static void mark_pass(marker *m, const voxel_grid *g, const pass *p)
 {
-    /* The grid, or a thread's slab of it, grown by a cell: triangles
-     * wholly outside are passed over before any other work (axis_range's
-     * rounding reaches eps, far under a cell, and decides exactly); a flat
-     * axis passes none over. */
-    double lo[3], hi[3];
+    /* The grid, or a thread's slab of it, grown by a cell and twice eps
+     * (on a nearly flat axis, eps may pass a cell): triangles wholly outside
+     * are passed over before any other work, and axis_range decides the
+     * others exactly; a flat axis passes none over. */
+    double lo[3], hi[3], grow = 2 * m->eps;
     for (int a = 0; a < 3; a++) {
-        lo[a] = m->c[a] > 0.0 ? g->min[a] - m->c[a] : -INFINITY;
-        hi[a] = m->c[a] > 0.0 ? g->max[a] + m->c[a] : INFINITY;
+        lo[a] = m->c[a] > 0.0 ? g->min[a] - m->c[a] - grow : -INFINITY;
+        hi[a] = m->c[a] > 0.0 ? g->max[a] + m->c[a] + grow : INFINITY;
     }
     if (m->zlo > 0 || m->zhi < (int)m->n - 1) {
-        lo[2] = g->min[2] + (m->zlo - 1) * m->c[2];
-        hi[2] = g->min[2] + (m->zhi + 2) * m->c[2];
+        lo[2] = g->min[2] + (m->zlo - 1) * m->c[2] - grow;
+        hi[2] = g->min[2] + (m->zhi + 2) * m->c[2] + grow;
     }
     for (size_t t = 0; t < p->ntris; t++) {
         const float *v = p->tris + 9 * t;
@@ -609,7 +609,7 @@ static void mark_slab(void *arg)
 }
 
 /* The z layer of triangle t's middle (of its box, where it has one), or -1
- * for a triangle whose box misses the grid. */
+ * for a triangle whose box misses the grid's z range (no slab's work). */
 static int layer_of(const voxel_grid *g, const pass *p, size_t t, double inv)
 {
     double z;
@@ -655,14 +655,11 @@ static unsigned split_slabs(const voxel_grid *g, const pass *p, unsigned threads
     return s;
 }
 
-/* Marks p on up to `threads` threads (0: one per online CPU), each setting
- * the cells of its own slab of z layers, or on this thread alone. */
+/* Marks p on up to `threads` threads (0: one per CPU, task_threads), each
+ * setting the cells of its own slab of z layers, or on this thread alone. */
 static void mark_slabs(voxel_grid *g, const pass *p, unsigned threads)
 {
-    if (threads == 0) {
-        long cpus = sysconf(_SC_NPROCESSORS_ONLN);
-        threads = cpus > 0 ? (unsigned)cpus : 1u;
-    }
+    threads = task_threads(threads);
     if (threads > VOXEL_MAX_THREADS)
         threads = VOXEL_MAX_THREADS;
     if (p->ntris / VOXEL_MIN_TRIS_PER_THREAD < threads)

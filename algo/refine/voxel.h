@@ -39,7 +39,7 @@ typedef struct voxel_grid {
     double cell[3];       /* cell size per axis: (max - min) / n, may be 0 */
     uint64_t *bits;       /* n^3 bits; cell (x, y, z) is bit x + n (y + n z) */
     uint64_t occupied;    /* cells set */
-    double helper_ms;     /* CPU time of the threads its marking started (voxel_mark_threads) */
+    double helper_ms;     /* CPU time of the threads its marking started (slabs, voxel_mark_threads) */
 } voxel_grid;
 
 /* Prepares an empty grid over [min, max] (each min <= max, all finite); the
@@ -122,7 +122,7 @@ static inline uint32_t voxel_svt_sum(const voxel_svt *s, const uint32_t lo[3], c
 #define VOXEL_MIN_TRIS_PER_THREAD 4096u
 #endif
 
-/* voxel_mark on up to `threads` threads (0: one per online CPU), each
+/* voxel_mark on up to `threads` threads (0: one per CPU it may run on), each
  * setting the cells of its own slab of z layers; it sets exactly the cells
  * voxel_mark sets. Falls back to voxel_mark (this thread only) for a grid
  * under 8 cells per axis or flat in z, or for few triangles; a thread that

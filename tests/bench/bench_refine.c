@@ -8,8 +8,9 @@
  *
  * Usage: bench_refine [--repeat N] [--depth D] [--threads T] [--only TEXT] MODELS_DIR
  * (--only: the objects whose label contains TEXT, say to profile one;
- * --threads: most threads digitizing a mesh, the default 0 one per CPU as
- * in the server, 1 to compare with this thread alone.)
+ * --threads: ecm_params.threads, the most threads a refinement runs on,
+ * the default 0 one per CPU as in the server, 1 to compare with this
+ * thread alone.)
  * For each model, a cluster of users stopped at the middle of the MBR's
  * +z face (the side a visitor walks into), at 0.9 m, and 64 logged
  * collisions there for the judge; for Sponza, a building users start in,
@@ -20,8 +21,8 @@
  * at 0.15 m users step over it, and a map no user is stopped by is not
  * refined. Then the median over N runs of each stage, in
  * ms: digitize and divide (ecm_result), judge (judge_result), in CPU
- * time (the refining thread's, and that of the threads digitizing the mesh
- * beside it: their sum can pass the total); load+write, the store's read of
+ * time (the refining thread's, and that of the threads it starts: their
+ * sum can pass the total); load+write, the store's read of
  * the object and its samples and the write of the version or candidate
  * (ecm_applied's store_ms); publish and the total, wall clock (run it on an
  * idle machine). The issue's target: every object under 50 ms in total; exits 1,

@@ -2468,10 +2468,13 @@ static void test_out_of_memory(void **state)
     /* Each case redoes the whole refinement once per allocation, so both
      * run on 16^3 grids: they make the same allocations, from every site
      * in refine.c and voxel.c, as at the default depth (checked with gcov:
-     * every -ENOMEM return is reached), in a small share of the time. */
+     * every -ENOMEM return is reached), in a small share of the time. On
+     * one thread: the k-th allocation is then the same one every run (and
+     * the failure countdown is not shared between threads). */
     ecm_params p;
     ecm_params_default(&p);
     p.depth = 4;
+    p.threads = 1;
     oom_case("the room", &p, m.tris, m.ntris, CBOXES(box), 1, &room_door, 1);
 
     /* Two problem boxes and a kept one (the room cut in three along x),

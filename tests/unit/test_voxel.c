@@ -470,6 +470,49 @@ static void test_mesh_equals_triangles(void **state)
     free(t);
 }
 
+/* A grid nearly flat in z (its cells far thinner than eps): a triangle a
+ * few cells under it is within eps and marks cells, and slabs, whose
+ * filter passes triangles over only beyond a cell and twice eps, mark what
+ * one thread marks. */
+static void test_nearly_flat_slabs(void **state)
+{
+    (void)state;
+    rng_state = 99;
+    enum { N = 3 * VOXEL_MIN_TRIS_PER_THREAD };
+    const double zext = 1e-8, c = zext / 128;
+    float *t = malloc(9 * sizeof *t * (N + 1));
+    assert_non_null(t);
+    for (int i = 0; i < N; i++) {
+        float x = (float)(0.9 * rndu()), y = (float)(0.9 * rndu()), z = (float)(zext * rndu());
+        const float tri[9] = {x, y, z, x + 0.01f, y, z, x, y + 0.01f, z};
+        memcpy(t + 9 * i, tri, sizeof tri);
+    }
+    const float below = (float)(-5 * c), under[9] = {0.95f, 0.95f, below, 0.96f, 0.95f, below, 0.95f, 0.96f, below};
+    memcpy(t + 9 * N, under, sizeof under);
+    voxel_grid one;
+    grid_init(&one, 7, 0, 0, 0, 1, 1, zext);
+    assert_int_equal(voxel_mark(&one, t + 9 * N, 1), 0);
+    assert_true(one.occupied > 0);
+    voxel_grid_free(&one);
+    char err[128] = "";
+    trimesh m;
+    assert_int_equal(trimesh_init(&m, t, N + 1, err, sizeof err), 0);
+    grid_init(&one, 7, 0, 0, 0, 1, 1, zext);
+    assert_int_equal(voxel_mark_boxed(&one, m.tris, (const float(*)[6])m.box, m.ntris, 0, 1), 0);
+    static const unsigned thread_counts[] = {2, 3};
+    for (size_t tc = 0; tc < sizeof thread_counts / sizeof thread_counts[0]; tc++) {
+        voxel_grid many;
+        grid_init(&many, 7, 0, 0, 0, 1, 1, zext);
+        assert_int_equal(voxel_mark_boxed(&many, m.tris, (const float(*)[6])m.box, m.ntris, 0, thread_counts[tc]), 0);
+        assert_int_equal(many.occupied, one.occupied);
+        assert_memory_equal(many.bits, one.bits, (size_t)128 * 128 * 128 / 8);
+        voxel_grid_free(&many);
+    }
+    voxel_grid_free(&one);
+    trimesh_free(&m);
+    free(t);
+}
+
 /* Threads mark exactly what one thread marks, whatever the split, on
  * grids where triangles cross slab boundaries; and fall back to one thread
  * where slabs would share words or copies (n < 8, flat z). */
@@ -1046,6 +1089,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_large_triangles_against_reference),
         cmocka_unit_test(test_one_call_equals_union),
         cmocka_unit_test(test_threads_equal_one_thread),
+        cmocka_unit_test(test_nearly_flat_slabs),
         cmocka_unit_test(test_mesh_equals_triangles),
         cmocka_unit_test(test_loose_marks_the_box),
         cmocka_unit_test(test_svt_against_sums),
