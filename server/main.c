@@ -63,6 +63,8 @@ static const char usage[] =
     "  --refine-depth D          refinement grid: 2^D cells per axis of a box, 2..8 (default 7)\n"
     "  --refine-max-boxes N      most boxes per object, 1..1024 (default 64)\n"
     "  --refine-max-empty F      share of a merged box that may be empty space, 0..1 (default 0.25)\n"
+    "  --refine-threads N        most threads a refinement runs on, 0..16; 0: one per\n"
+    "                            CPU (default 0); 1 leaves the other cores to the tick\n"
     "  --stats-file FILE         append per-interval figures as JSON lines\n"
     "  --stats-interval S        seconds between stats lines (default 10)\n"
     "  --metrics HOST:PORT       serve Prometheus metrics at http://HOST:PORT/metrics\n"
@@ -155,7 +157,7 @@ int main(int argc, char **argv)
 {
     enum { O_HOST = 256, O_PORT, O_DB, O_TICK, O_MAXC, O_AOI, O_SPEED, O_WORLD, O_SPAWN, O_HS, O_IDLE, O_SEED,
            O_STATS, O_STATS_INT, O_LOG, O_HELP, O_VERSION, O_WORLD_FILE, O_MAX_UPLOAD, O_MAX_TRIS, O_R_INT,
-           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS, O_WEB, O_WEB_ROOT, O_WEB_ORIGIN };
+           O_R_EPS, O_R_MINP, O_R_MINU, O_R_DEPTH, O_R_BOXES, O_R_EMPTY, O_R_THREADS, O_IMPORTER, O_IMP_MEM, O_IMP_CPU, O_AUTH, O_LOGIN_BURST, O_PER_ADDR, O_JOINS, O_Q_OBJ, O_Q_MB, O_METRICS, O_WEB, O_WEB_ROOT, O_WEB_ORIGIN };
     static const struct option opts[] = {
         {"host", required_argument, 0, O_HOST}, {"port", required_argument, 0, O_PORT},
         {"db", required_argument, 0, O_DB}, {"tick-hz", required_argument, 0, O_TICK},
@@ -170,7 +172,8 @@ int main(int argc, char **argv)
         {"refine-interval", required_argument, 0, O_R_INT}, {"refine-eps", required_argument, 0, O_R_EPS},
         {"refine-min-points", required_argument, 0, O_R_MINP}, {"refine-min-users", required_argument, 0, O_R_MINU},
         {"refine-depth", required_argument, 0, O_R_DEPTH}, {"refine-max-boxes", required_argument, 0, O_R_BOXES},
-        {"refine-max-empty", required_argument, 0, O_R_EMPTY}, {"importer", required_argument, 0, O_IMPORTER},
+        {"refine-max-empty", required_argument, 0, O_R_EMPTY}, {"refine-threads", required_argument, 0, O_R_THREADS},
+        {"importer", required_argument, 0, O_IMPORTER},
         {"import-memory", required_argument, 0, O_IMP_MEM}, {"import-cpu", required_argument, 0, O_IMP_CPU},
         {"auth", required_argument, 0, O_AUTH}, {"login-burst", required_argument, 0, O_LOGIN_BURST},
         {"max-per-address", required_argument, 0, O_PER_ADDR}, {"joins-per-second", required_argument, 0, O_JOINS},
@@ -233,6 +236,9 @@ int main(int argc, char **argv)
             cfg.refine_max_boxes = (uint32_t)integer("refine-max-boxes", optarg, 1, ECM_MAX_BOXES_LIMIT);
             break;
         case O_R_EMPTY: cfg.refine_max_empty = number("refine-max-empty", optarg, 0, 1); break;
+        case O_R_THREADS:
+            cfg.refine_threads = (uint32_t)integer("refine-threads", optarg, 0, VOXEL_MAX_THREADS);
+            break;
         case O_STATS_INT: cfg.stats_interval_ms = (uint32_t)(number("stats-interval", optarg, 0.1, 86400) * 1000); break;
         case O_LOG: {
             int level = log_parse_level(optarg);

@@ -1131,6 +1131,7 @@ int objects__start(server *s, char *err, size_t errlen)
     rcfg.ecm.depth = c->refine_depth;
     rcfg.ecm.max_boxes = c->refine_max_boxes;
     rcfg.ecm.max_empty = c->refine_max_empty;
+    rcfg.ecm.threads = c->refine_threads;
     s->refiner = refiner_start(&rcfg, err, errlen);
     if (!s->refiner)
         return -EIO; /* refiner_start said why in err */

@@ -74,6 +74,7 @@ void server_config_defaults(server_config *cfg)
         .refine_depth = ECM_DEPTH_DEFAULT,
         .refine_max_boxes = ECM_MAX_BOXES_DEFAULT,
         .refine_max_empty = ECM_MAX_EMPTY_DEFAULT,
+        .refine_threads = 0,
     };
 }
 

@@ -51,6 +51,7 @@ typedef struct server_config {
     uint32_t refine_depth;     /* grid 2^depth per axis */
     uint32_t refine_max_boxes; /* per object */
     double refine_max_empty;   /* share of a merged box that may be new empty space */
+    uint32_t refine_threads;   /* most threads a refinement runs on; 0: one per CPU */
 } server_config;
 
 typedef struct server server;

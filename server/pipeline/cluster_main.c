@@ -59,6 +59,8 @@ static const char usage[] =
     "  --max-boxes N      with --apply: most boxes per object, 1..1024 (default 64)\n"
     "  --max-empty F      with --apply: share of a merged box that may be empty, 0..1\n"
     "                     (default 0.25)\n"
+    "  --threads N        most threads the clustering and each refinement run on,\n"
+    "                     0..16; 0: one per CPU (default 0)\n"
     "  --json             print the result as one JSON object\n"
     "  --help, --version\n"
     "\n"
@@ -120,7 +122,7 @@ static int fail_usage(const char *fmt, ...)
 int main(int argc, char **argv)
 {
     enum { O_DB = 256, O_EPS, O_MINP, O_MINU, O_OBJ, O_SINCE, O_UNTIL, O_JSON, O_HELP, O_VERSION, O_APPLY, O_DEPTH,
-           O_BOXES, O_EMPTY };
+           O_BOXES, O_EMPTY, O_THREADS };
     static const struct option opts[] = {
         {"db", required_argument, 0, O_DB},         {"eps", required_argument, 0, O_EPS},
         {"min-points", required_argument, 0, O_MINP}, {"min-users", required_argument, 0, O_MINU},
@@ -129,7 +131,7 @@ int main(int argc, char **argv)
         {"help", no_argument, 0, O_HELP},           {"version", no_argument, 0, O_VERSION},
         {"apply", no_argument, 0, O_APPLY},         {"depth", required_argument, 0, O_DEPTH},
         {"max-boxes", required_argument, 0, O_BOXES}, {"max-empty", required_argument, 0, O_EMPTY},
-        {0, 0, 0, 0}};
+        {"threads", required_argument, 0, O_THREADS}, {0, 0, 0, 0}};
     const char *path = "cvre.db";
     dbscan_params prm = {.eps = CLUSTER_EPS_DEFAULT, .min_points = CLUSTER_MIN_POINTS_DEFAULT,
                          .min_users = CLUSTER_MIN_USERS_DEFAULT, .threads = 0};
@@ -189,6 +191,13 @@ int main(int argc, char **argv)
             if (num_parse_real(optarg, 0, 1, &ep.max_empty) < 0)
                 return fail_usage("--max-empty wants a share from 0 to 1, not \"%s\"", optarg);
             break;
+        case O_THREADS: {
+            long long v;
+            if (num_parse_int(optarg, 0, VOXEL_MAX_THREADS, &v) < 0)
+                return fail_usage("--threads wants a whole number from 0 to %u, not \"%s\"", VOXEL_MAX_THREADS, optarg);
+            prm.threads = ep.threads = (unsigned)v;
+            break;
+        }
         case O_HELP: fputs(usage, stdout); return EXIT_OK;
         case O_VERSION: printf("cvre-cluster %s\n", CVRE_VERSION); return EXIT_OK;
         default: fputs("cvre-cluster: try --help\n", stderr); return EXIT_USAGE;

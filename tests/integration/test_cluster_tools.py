@@ -41,7 +41,8 @@ def test_cluster_windows_objects_and_apply():
     assert out.startswith('{"run":') and '"objects":1,"points":0,"clusters":[]' in out, out
     rc, out, err = cluster(db, "--object", "99")  # names only an absent object: none clustered
     assert rc == 0 and "0 objects, 0 collisions" in out, (out, err)
-    rc, out, err = cluster(db, "--apply", "--depth", "5", "--max-boxes", "16", "--max-empty", "0.5", "--json")
+    rc, out, err = cluster(db, "--apply", "--depth", "5", "--max-boxes", "16", "--max-empty", "0.5", "--threads", "1",
+                           "--json")
     assert rc == 0 and '"refined":[]' in out, (out, err)  # no clusters: nothing refined
 
 
@@ -100,6 +101,7 @@ def test_cluster_refusals():
                          (["--depth", "9"], "--depth wants a whole number from 2 to 8"),
                          (["--max-boxes", "0"], "--max-boxes wants a whole number from 1 to 1024"),
                          (["--max-empty", "2"], "--max-empty wants a share from 0 to 1"),
+                         (["--threads", "17"], "--threads wants a whole number from 0 to 16"),
                          (["--eps", "0"], "--eps wants a distance in metres above 0"),
                          (["--no-such-flag"], "try --help")):
         rc, out, err = cluster(db, *flags)

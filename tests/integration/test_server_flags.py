@@ -46,7 +46,7 @@ def test_numbers_out_of_range():
              ("import-memory", "255"), ("import-cpu", "0"), ("refine-interval", "86401"),
              ("refine-eps", "0"), ("refine-min-points", "0"), ("refine-min-users", "0"),
              ("refine-depth", "1"), ("refine-depth", "9"), ("refine-max-boxes", "1025"),
-             ("refine-max-empty", "1.5"), ("stats-interval", "0.01")]
+             ("refine-max-empty", "1.5"), ("refine-threads", "17"), ("stats-interval", "0.01")]
     for flag, value in cases:
         refused([f"--{flag}", value], f"--{flag} wants a number from")
     for value in ("", "abc", "12abc", "nan", "inf", "1e999"):  # not numbers at all
@@ -100,6 +100,7 @@ def test_every_flag_in_range_serves():
                  "--import-memory", "1024", "--import-cpu", "10", "--refine-interval", "0",
                  "--refine-eps", "0.25", "--refine-min-points", "5", "--refine-min-users", "2",
                  "--refine-depth", "6", "--refine-max-boxes", "32", "--refine-max-empty", "0.5",
+                 "--refine-threads", "1",
                  "--stats-file", stats, "--stats-interval", "0.5", "--log-level", "debug",
                  "--importer", IMPORT)
     c = Raw(srv.port)
