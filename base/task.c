@@ -8,7 +8,7 @@
 #include <time.h>
 #include <unistd.h>
 
-static double cpu_now_ms(void)
+double task_cpu_ms(void)
 {
     struct timespec t;
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
@@ -18,9 +18,9 @@ static double cpu_now_ms(void)
 static void *task_main(void *arg)
 {
     task *t = arg;
-    double t0 = cpu_now_ms();
+    double t0 = task_cpu_ms();
     t->fn(t->arg);
-    t->cpu_ms = cpu_now_ms() - t0;
+    t->cpu_ms = task_cpu_ms() - t0;
     return NULL;
 }
 

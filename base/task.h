@@ -31,6 +31,9 @@ void task_start(task *t, void (*fn)(void *arg), void *arg, int on_thread);
  * it took on a thread of its own, ms, or 0 when it ran on this one (or was
  * waited for already). */
 double task_wait(task *t);
+/* This thread's CPU time, ms (CLOCK_THREAD_CPUTIME_ID, its page faults
+ * included): a stage's cost whatever else the machine runs. */
+double task_cpu_ms(void);
 /* How many threads `threads` stands for: itself, or for 0 the CPUs this
  * thread may run on (its affinity: a container's or taskset's limit), at
  * least 1. */

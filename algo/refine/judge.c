@@ -6,7 +6,6 @@
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "alloc.h"
 #include "err.h"
@@ -536,13 +535,6 @@ struct judge {
     place_list at;    /* the last new map's phantom blocks */
 };
 
-static double cpu_ms_since(const struct timespec *t0)
-{
-    struct timespec t1;
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t1);
-    return (double)(t1.tv_sec - t0->tv_sec) * 1e3 + (double)(t1.tv_nsec - t0->tv_nsec) / 1e6;
-}
-
 /* Walks every sample's trials against map k (0: from where it was logged;
  * 1: as start_new puts it on the new map), counting into *t. */
 static void walk_map(judge *j, int k, tally *t)
@@ -585,8 +577,7 @@ void judge_close(judge *j)
 int judge_open(judge **out, const judge_params *p, const judge_input *in, judge_result *old, char *err,
                size_t errlen)
 {
-    struct timespec t0; /* this thread's CPU time: see judge_result */
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
+    double t0 = task_cpu_ms(); /* this thread's CPU time: see judge_result */
     *out = NULL;
     memset(old, 0, sizeof *old);
     int rc = check(p, in, err, errlen);
@@ -629,7 +620,7 @@ int judge_open(judge **out, const judge_params *p, const judge_input *in, judge_
     j->old.moves = t.moves;
     j->old.phantom_old = t.phantom;
     j->old.opened_old = t.opened;
-    j->old.ms = cpu_ms_since(&t0) + j->g.beside_ms;
+    j->old.ms = task_cpu_ms() - t0 + j->g.beside_ms;
     *old = j->old;
     *out = j;
     return 0;
@@ -642,8 +633,7 @@ int judge_can_gain(const judge_result *old) { return old->phantom_old >= JUDGE_G
 
 int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, char *err, size_t errlen)
 {
-    struct timespec t0;
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
+    double t0 = task_cpu_ms();
     memset(out, 0, sizeof *out);
     j->at.n = 0;
     int rc = check_map("new", boxes, n, err, errlen);
@@ -658,7 +648,7 @@ int judge_new(judge *j, const float (*boxes)[6], uint32_t n, judge_result *out, 
     out->phantom_new = t.phantom;
     out->opened_new = t.opened;
     out->better = judge_better(out);
-    out->ms = j->old.ms + cpu_ms_since(&t0);
+    out->ms = j->old.ms + task_cpu_ms() - t0;
     return 0;
 }
 

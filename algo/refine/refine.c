@@ -14,7 +14,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "alloc.h"
 #include "avatar.h"
@@ -138,18 +137,6 @@ void ecm_result_free(ecm_result *r)
 {
     free(r->boxes);
     memset(r, 0, sizeof *r);
-}
-
-/* Stage times are the refining thread's CPU time (its page faults
- * included), and that of the threads it starts (task.h, voxel_mark_threads):
- * what the work costs, not how long a loaded machine made it wait. */
-#define STAGE_CLOCK CLOCK_THREAD_CPUTIME_ID
-
-static double ms_since(const struct timespec *t0)
-{
-    struct timespec t1;
-    clock_gettime(STAGE_CLOCK, &t1);
-    return (double)(t1.tv_sec - t0->tv_sec) * 1e3 + (double)(t1.tv_nsec - t0->tv_nsec) / 1e6;
 }
 
 static uint64_t volume(const ibox *b)
@@ -2312,12 +2299,16 @@ static void press_span(const ecm_cluster *c, const float (*boxes)[6], uint32_t n
             widen(span, boxes[b]);
 }
 
+/* Entries of one summed-volume table over n^3 cells (w->tables holds three:
+ * cells to cover, pressure, cells outside). */
+static size_t table_entries(uint32_t n) { return (size_t)(n + 1) * (n + 1) * (n + 1); }
+
 /* The tables of cells to cover and of cells outside the problem boxes:
  * classify settles both, so they are built beside step 3 (build_grid). */
 static void build_must_tables(void *arg)
 {
     work *w = arg;
-    size_t table = (size_t)(w->n + 1) * (w->n + 1) * (w->n + 1);
+    size_t table = table_entries(w->n);
     voxel_svt_build(&w->must, w->tables, w->n, w->cls, CELL_MUST);
     if (w->any_outside)
         voxel_svt_build(&w->outside, w->tables + 2 * table, w->n, w->cls, CELL_OUT);
@@ -2329,18 +2320,20 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
                       uint32_t nboxes, const uint8_t *problem, const float hb[6], const ecm_cluster *cl,
                       uint32_t ncl, ecm_result *r)
 {
-    struct timespec t0;
-    clock_gettime(STAGE_CLOCK, &t0);
+    /* Stage times are the refining thread's CPU time (task_cpu_ms), and
+     * that of the threads it starts: what the work costs, not how long a
+     * loaded machine made it wait. */
+    double t0 = task_cpu_ms();
     int rc = voxel_grid_init(&w->g, p->depth, hb, hb + 3);
     if (rc < 0 || (rc = voxel_mark_boxed(&w->g, m->tris, (const float(*)[6])m->box, m->ntris, 0, p->threads)) < 0)
         return rc;
-    r->voxel_ms += ms_since(&t0) + w->g.helper_ms;
-    clock_gettime(STAGE_CLOCK, &t0);
+    r->voxel_ms += task_cpu_ms() - t0 + w->g.helper_ms;
+    t0 = task_cpu_ms();
     uint32_t n = w->n = w->g.n;
     /* The ground: rows whose top is at or under the floor. */
     double below = w->g.cell[1] > 0 ? floor(((double)p->floor - w->g.min[1]) / w->g.cell[1] + 1e-6) : -INFINITY;
     w->floor_row = (int64_t)fmin(fmax(below, INT32_MIN), INT32_MAX); /* any float floor, no overflow */
-    size_t cells = (size_t)n * n * n, table = (size_t)(n + 1) * (n + 1) * (n + 1);
+    size_t cells = (size_t)n * n * n, table = table_entries(n);
     w->bw = (n + 63) / 64;
     /* The tables in one block: separate blocks of 8.6 MiB each at 2^7
      * were handed back to the system after each round and faulted in
@@ -2387,7 +2380,7 @@ static int build_grid(work *w, const ecm_params *p, const trimesh *m, const floa
     r->wanted += w->wanted;
     r->cells += cells;
     r->occupied += w->g.occupied;
-    r->divide_ms += ms_since(&t0) + beside;
+    r->divide_ms += task_cpu_ms() - t0 + beside;
     return 0;
 }
 
@@ -2895,8 +2888,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
         }
         if ((rc = build_grid(&w, &gp, m, boxes, nboxes, problem, hb, clusters, nclusters, out)) < 0)
             goto done;
-        struct timespec t0;
-        clock_gettime(STAGE_CLOCK, &t0);
+        double t0 = task_cpu_ms();
         double scale = 0;
         for (int a = 0; a < 6; a++)
             scale = fmax(scale, fabs((double)hall[a]));
@@ -3013,7 +3005,7 @@ static int refine_group(const ecm_params *p, const double objcell[3], uint32_t s
                               objcell)) < 0)
             goto done;
         out->count = (uint32_t)rc;
-        out->divide_ms += ms_since(&t0);
+        out->divide_ms += task_cpu_ms() - t0;
     } else {
         out->boxes = cvre_malloc((size_t)nboxes * sizeof *out->boxes);
         if (!out->boxes)

@@ -43,10 +43,10 @@
  * same set, so the range is collapsed to index 0 and marking a cell marks
  * its n copies (the invariant: copies are always set together). *
  * voxel_mark_threads and voxel_mark_boxed give each thread a slab of whole
- * z layers (n^2 bits,
- * a multiple of 64 from n = 8 up, so no word is shared) holding about as
- * many triangles as the others; every thread reads every triangle, skips
- * those outside its slab, and clips the others' ranges to it. No locks, no
+ * z layers (n^2 bits, a multiple of 64 from n = 8 up, so no word is shared)
+ * holding about as many triangles as the others; every thread reads every
+ * triangle, skips those outside its slab, and clips the others' ranges to
+ * it. No locks, no
  * atomics: the threads write disjoint words and only read the input.
  */
 #include "voxel.h"

@@ -60,13 +60,28 @@ static void test_on_this_thread(void **state)
     assert_int_equal(j.runs, 1);
 }
 
-static void test_spare(void **state)
+/* A count given stands; 0 is the CPUs this thread may run on, at least
+ * one; a second thread is spare from two on. */
+static void test_threads_and_spare(void **state)
 {
     (void)state;
+    assert_int_equal(task_threads(3), 3);
+    unsigned cpus = task_threads(0);
+    assert_true(cpus >= 1);
+    assert_int_equal(task_spare(0), cpus > 1);
     assert_false(task_spare(1));
     assert_true(task_spare(2));
     assert_true(task_spare(16));
-    (void)task_spare(0); /* one per CPU: either, by the machine */
+}
+
+/* This thread's CPU clock moves with its own work. */
+static void test_cpu_clock(void **state)
+{
+    (void)state;
+    job j = {0};
+    double t0 = task_cpu_ms();
+    busy(&j);
+    assert_true(task_cpu_ms() > t0);
 }
 
 int main(void)
@@ -74,7 +89,8 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_on_a_thread),
         cmocka_unit_test(test_on_this_thread),
-        cmocka_unit_test(test_spare),
+        cmocka_unit_test(test_threads_and_spare),
+        cmocka_unit_test(test_cpu_clock),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
