@@ -188,6 +188,39 @@ static step step_up(const ctx *c, double p[3], double m[3], const move_box *b)
 }
 
 /*
+ * The avatar at p, moving by m, is blocked by the side of box b across axis
+ * a (x or z). If its footprint overlaps b along the other horizontal axis t
+ * by no more than MOVE_SLIP_FRACTION of its width there (it clips b's
+ * corner), it slips sideways past b's edge (MOVE_SKIN beyond it), the way
+ * that is not against the move's requested motion along t (asked), nearer
+ * edge first, when nothing blocks the slip. The slip takes its length from
+ * the motion left along a. Returns whether it slipped (p and m updated).
+ */
+static bool slip(const ctx *c, double p[3], double m[3], const move_box *b, int a, double asked)
+{
+    const int t = 2 - a;
+    const double most = c->half[t] * 2 * MOVE_SLIP_FRACTION;
+    /* Towards -t past b's min, towards +t past b's max. */
+    const double need[2] = {p[t] + c->half[t] - b->min[t] + MOVE_SKIN, b->max[t] - (p[t] - c->half[t]) + MOVE_SKIN};
+    const int first = need[1] < need[0];
+    for (int k = 0; k < 2; k++) {
+        int side = first ^ k; /* 0: -t, 1: +t */
+        double dir = side ? 1 : -1, len = need[side];
+        if (!(len > MOVE_SKIN) || len > most + MOVE_SKIN || len > fabs(m[a]) || asked * dir < 0)
+            continue;
+        double s[3] = {0, 0, 0};
+        s[t] = dir * len;
+        hit h;
+        if (sweep(c, p, s, &h))
+            continue;
+        p[t] += s[t];
+        m[a] -= m[a] > 0 ? len : -len;
+        return true;
+    }
+    return false;
+}
+
+/*
  * Adds a contact for box i, or counts it if there is no room. A box never
  * gets two: once a box blocks along an axis, the motion left has nothing
  * along that axis, so the avatar can never enter that box again in this
@@ -410,8 +443,10 @@ void move_bounds(const move_params *p, const move_state *st, const float disp[3]
     begin(&c, p, st, disp, dt, m, &vy_end);
     for (int a = 0; a < 3; a++) {
         double from = c.start[a], to = from + m[a];
-        double lo = fmin(from, to) - (a == 1 ? GROUND_PROBE : c.half[a]);
-        double hi = fmax(from, to) + c.half[a] + (a == 1 ? (MOVE_MAX_STEPS + 1) * c.step : 0);
+        /* Slips sideways take at most the width's share each (slip). */
+        double side = a == 1 ? 0 : MOVE_MAX_SLIDES * (2 * c.half[a] * MOVE_SLIP_FRACTION + MOVE_SKIN);
+        double lo = fmin(from, to) - (a == 1 ? GROUND_PROBE : c.half[a] + side);
+        double hi = fmax(from, to) + c.half[a] + (a == 1 ? (MOVE_MAX_STEPS + 1) * c.step : side);
         min[a] = (float)lo - BOUNDS_MARGIN;
         max[a] = (float)hi + BOUNDS_MARGIN;
     }
@@ -481,6 +516,8 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
             slides--; /* a step is not a slide */
             continue;
         }
+        if (st_up == STEP_BLOCKED && a != 1 && slip(&c, pos, m, &boxes[h.box], a, disp[2 - a]))
+            continue;
         if (st_up == STEP_BLOCKED)
             add_blocking(&c, out, h.box, at, &h);
         if (a == 1 && vy > 0)

@@ -45,6 +45,19 @@
  *     Nothing is reported. At most MOVE_MAX_STEPS steps per move. If less
  *     than MOVE_SKIN of motion is left to get onto it, the avatar waits at
  *     the step until the next move, and that is not reported either.
+ *   - Slipping past a corner: when the side of a box it cannot step onto
+ *     blocks it, and its footprint overlaps that box sideways (along the
+ *     other horizontal axis) by at most MOVE_SLIP_FRACTION of its width, it
+ *     slips sideways past the box's edge instead (MOVE_SKIN beyond it), the
+ *     way that is not against its sideways motion, the nearer edge first,
+ *     if nothing blocks the slip and the motion left towards the face is
+ *     at least as long as the slip, which takes its length from it. Nothing
+ *     is reported. A box-shaped avatar would otherwise stop at a corner it
+ *     clips by a centimetre, where a body glides past; and a slanted wall
+ *     that a collision map follows with a staircase of boxes would stop it
+ *     at the corner of every step, where the wall turns it aside (a spiral
+ *     stair's treads: users stopped at box corners one or two cells proud
+ *     of the geometry, phantom collisions on a map that was good).
  *   - Every other blocking face (a wall, a step too high, a ceiling hit
  *     while moving up) is a contact. The motion along its normal is then
  *     gone for the rest of the move, so a move reports at most one blocking
@@ -80,9 +93,13 @@
 #ifndef MOVE_MAX_CONTACTS
 #define MOVE_MAX_CONTACTS 16
 #endif
-/* Faces one move slides along: landing, two walls of a corner, and one more
- * for a ceiling or a wall met after stepping; any motion left is dropped. */
+/* Faces one move slides along or slips past: landing, two walls of a corner,
+ * and one more for a ceiling or a wall met after stepping or slipping; any
+ * motion left is dropped. */
 #define MOVE_MAX_SLIDES 4
+/* Most an avatar's footprint may overlap a box sideways, as a share of its
+ * width, for it to slip past the box's corner rather than stop at it. */
+#define MOVE_SLIP_FRACTION 0.125
 /* Steps one move climbs: a tick moves at most a few decimetres, so two steps
  * (a stair whose treads are shorter than the move) are plenty. */
 #define MOVE_MAX_STEPS 2

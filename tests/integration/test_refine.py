@@ -373,8 +373,8 @@ def test_bad_parameters_and_an_object_without_triangles():
 
 def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     """Users walking into the room's doorway, which the MBR blocks, refined
-    on a grid of 2^4 cells a side (--depth 4): cells of two thirds of a
-    metre are too coarse to open a door of 0.9, so the refined map blocks
+    into two boxes at most (--max-boxes 2): the wall with the door alone
+    takes three (either side and the lintel), so the refined map blocks
     them as much. The judge turns it down: no new version, a candidate with
     its figures, and the same clusters are not refined again."""
     srv = Server(A.bin, "--world", ROOM_WORLD)
@@ -382,7 +382,8 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     room = object_id(srv.db, "openfoam_room_with_doorway.stl")
     db = sqlite3.connect(srv.db)
     insert_collisions(db, time.time(), [(room, (0.21757, 0.9, DOOR_Z), (10.519, 0, DOOR_Z), (-3, 0, 0))])
-    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json", "--depth", "4")
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--json", "--depth", "4",
+                       "--max-boxes", "2")
     assert rc == 0, (rc, out, err)
     got = json.loads(out)["refined"]
     assert len(got) == 1 and got[0]["outcome"] == "rejected" and got[0]["version"] == 0, got
@@ -404,7 +405,8 @@ def test_a_map_no_better_is_kept_as_a_rejected_candidate():
     assert db.execute("SELECT run_id, cluster_id FROM ecm_candidate_clusters WHERE object_id = ?",
                       (room,)).fetchall() == [(1, 0)]
     # The same clusters again (a new run of the same log): not refined.
-    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--depth", "4")
+    rc, out, err = cmd("cvre-cluster", "--db", srv.db, "--min-points", "5", "--apply", "--depth", "4",
+                       "--max-boxes", "2")
     assert rc == 0 and "those of candidate 1, rejected before" in out, (rc, out, err)
     assert db.execute("SELECT count(*) FROM ecm_candidates").fetchone() == (1,)
     # cvre-admin versions shows it after the version it was judged against.
