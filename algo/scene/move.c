@@ -193,10 +193,13 @@ static step step_up(const ctx *c, double p[3], double m[3], const move_box *b)
  * by no more than MOVE_SLIP_FRACTION of its width there (it clips b's
  * corner), it slips sideways past b's edge (MOVE_SKIN beyond it), the way
  * that is not against the move's requested motion along t (asked), nearer
- * edge first, when nothing blocks the slip. The slip takes its length from
- * the motion left along a. Returns whether it slipped (p and m updated).
+ * edge first, when nothing blocks the slip and the way on along a is open
+ * there: no other side within two MOVE_SKIN of it (it stopped one short of
+ * the face), unless it could step onto that one (ground: it may step). The
+ * slip takes its length from the motion left along a. Returns whether it
+ * slipped (p and m updated).
  */
-static bool slip(const ctx *c, double p[3], double m[3], const move_box *b, int a, double asked)
+static bool slip(const ctx *c, double p[3], double m[3], const move_box *b, int a, double asked, bool ground)
 {
     const int t = 2 - a;
     const double most = c->half[t] * 2 * MOVE_SLIP_FRACTION;
@@ -213,8 +216,16 @@ static bool slip(const ctx *c, double p[3], double m[3], const move_box *b, int 
         hit h;
         if (sweep(c, p, s, &h))
             continue;
-        p[t] += s[t];
-        m[a] -= m[a] > 0 ? len : -len;
+        /* A slip onto another face of the same wall gains nothing. */
+        double q[3] = {p[0], p[1], p[2]}, on[3] = {0, 0, 0};
+        q[t] += s[t];
+        on[a] = m[a] - (m[a] > 0 ? len : -len);
+        if (on[a] != 0 && sweep(c, q, on, &h) && h.axis == a && h.t * fabs(on[a]) <= 2 * MOVE_SKIN &&
+            !(ground && step_up(c, (double[3]){q[0], q[1], q[2]}, (double[3]){on[0], on[1], on[2]},
+                                &c->boxes[h.box]) == STEP_UP))
+            continue;
+        p[t] = q[t];
+        m[a] = on[a];
         return true;
     }
     return false;
@@ -516,7 +527,8 @@ int move_step(const move_params *p, const move_state *st, const float disp[3], f
             slides--; /* a step is not a slide */
             continue;
         }
-        if (st_up == STEP_BLOCKED && a != 1 && slip(&c, pos, m, &boxes[h.box], a, disp[2 - a]))
+        if (st_up == STEP_BLOCKED && a != 1 &&
+            slip(&c, pos, m, &boxes[h.box], a, disp[2 - a], on_ground && steps < MOVE_MAX_STEPS))
             continue;
         if (st_up == STEP_BLOCKED)
             add_blocking(&c, out, h.box, at, &h);

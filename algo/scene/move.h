@@ -50,9 +50,12 @@
  *     other horizontal axis) by at most MOVE_SLIP_FRACTION of its width, it
  *     slips sideways past the box's edge instead (MOVE_SKIN beyond it), the
  *     way that is not against its sideways motion, the nearer edge first,
- *     if nothing blocks the slip and the motion left towards the face is
- *     at least as long as the slip, which takes its length from it. Nothing
- *     is reported. A box-shaped avatar would otherwise stop at a corner it
+ *     if nothing blocks the slip, the way on is open there (no other box's
+ *     side on the same plane, unless it can step onto it: a slip that only
+ *     meets the rest of the wall would shake a user pushing into a pocket
+ *     back and forth) and the motion left towards the face is at least as
+ *     long as the slip, which takes its length from it. Nothing is
+ *     reported. A box-shaped avatar would otherwise stop at a corner it
  *     clips by a centimetre, where a body glides past; and a slanted wall
  *     that a collision map follows with a staircase of boxes would stop it
  *     at the corner of every step, where the wall turns it aside (a spiral

@@ -9,7 +9,6 @@
 #include <errno.h>
 #include <math.h>
 #include <string.h>
-#include <stdio.h>
 
 #include "move.h"
 
@@ -147,7 +146,8 @@ static void test_corner_stops_both(void **state)
  * the width: the avatar slips past the corner, unreported, the slip taken
  * from the walk. By more, or when something stands where it would slip to,
  * or when it walks sideways the other way, or when the walk left is shorter
- * than the slip, the box stops it as any wall. */
+ * than the slip, or when a wall on the same plane stands where the slip
+ * leads (unless it is a step), the box stops it as any wall. */
 static void test_clipped_corner_slips(void **state)
 {
     (void)state;
@@ -193,6 +193,21 @@ static void test_clipped_corner_slips(void **state)
     assert_int_equal(r.ncontacts, 0);
     assert_float_equal(r.state.pos[0], -slid, EPS);
     assert_float_equal(r.state.pos[2], 0.9f - SKIN - slid, EPS);
+    /* A wall on the same plane where the slip would go: the slip gains
+     * nothing, so the post stops it where it is. */
+    const move_box wall[2] = {post, box(-1, 0, 1, 0.25f, 3, 1.5f, 6)};
+    s = at(0, 0, 0.6f);
+    r = step(&s, 0, 0, 0.2f, wall, 2);
+    assert_int_equal(r.ncontacts, 1);
+    assert_int_equal(r.contacts[0].handle, 1);
+    assert_true(r.state.pos[0] == 0);
+    /* A step there instead: it slips and steps up onto it. */
+    const move_box step_there[2] = {post, box(-1, 0, 1, 0.25f, 0.2f, 1.5f, 7)};
+    r = step(&s, 0, 0, 0.2f, step_there, 2);
+    assert_int_equal(r.ncontacts, 0);
+    assert_float_equal(r.state.pos[0], -slid, EPS);
+    assert_float_equal(r.state.pos[1], 0.2f, EPS);
+    assert_float_equal(r.state.pos[2], 0.8f - slid, EPS);
     /* In a corner: stopped by a wall across z, it slides along x into a
      * post that clips its footprint by 5 cm along z. Slipping would take it
      * back along z, the way the first wall stopped: it stays in the corner. */
@@ -757,7 +772,6 @@ static void test_random_walk_never_enters(void **state)
         falls += !r.state.grounded;
         s = r.state;
     }
-    fprintf(stderr, "XX %d %d %d %d\n", contacts, steps_up, falls, stood);
     /* The walk did meet walls, climb, fall and stand up out of a floor. */
     assert_true(contacts > 1000 && steps_up > 50 && falls > 50 && stood > 50);
 }
