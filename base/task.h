@@ -34,6 +34,9 @@ double task_wait(task *t);
 /* This thread's CPU time, ms (CLOCK_THREAD_CPUTIME_ID, its page faults
  * included): a stage's cost whatever else the machine runs. */
 double task_cpu_ms(void);
+/* The monotonic clock, ms: a stage's wall time, where task_cpu_ms is its
+ * CPU time (the store's reads and writes wait on the disk). */
+double task_wall_ms(void);
 /* How many threads `threads` stands for: itself, or for 0 the CPUs this
  * thread may run on (its affinity: a container's or taskset's limit), at
  * least 1. */

@@ -13,13 +13,7 @@
 
 #include "dbInt.h"
 #include "dblog.h"
-
-static double mono_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec * 1e3 + (double)t.tv_nsec * 1e-6;
-}
+#include "task.h"
 
 static void sleep_ms(double ms)
 {
@@ -152,7 +146,7 @@ done:
 
 int db_backup(db *d, const char *dest, int vacuum, db_backup_stats *out)
 {
-    double t0 = mono_ms();
+    double t0 = task_wall_ms();
     db_backup_stats st = {0};
     char tmp[PATH_MAX], dir[PATH_MAX];
     struct stat sb;
@@ -187,7 +181,7 @@ int db_backup(db *d, const char *dest, int vacuum, db_backup_stats *out)
         *slash = 0;
     if ((rc = sync_path(slash ? dir : ".")) < 0)
         return db__fail(d, rc, "the copy is %s, but its directory could not be synced: %s", dest, strerror(-rc));
-    st.seconds = (mono_ms() - t0) / 1e3;
+    st.seconds = (task_wall_ms() - t0) / 1e3;
     if (out)
         *out = st;
     return 0;
@@ -269,7 +263,7 @@ static int remove_some(struct retention *r, double t0, int *more)
     int64_t left = r->cfg->units_max;
     double deadline = t0 + r->cfg->txn_ms;
     *more = 1;
-    while (left > 0 && mono_ms() < deadline) {
+    while (left > 0 && task_wall_ms() < deadline) {
         int64_t first, last;
         uint64_t n;
         int rc = step(r, RS_SEGMENT, r->cut, 0, &first, &last, NULL);
@@ -292,7 +286,7 @@ static int remove_some(struct retention *r, double t0, int *more)
     }
     return SQLITE_OK;
 groups:
-    while (left > 0 && mono_ms() < deadline) {
+    while (left > 0 && task_wall_ms() < deadline) {
         int64_t g;
         uint64_t users, cells, groups;
         int rc = step(r, RS_GROUP, r->cut, 0, &g, NULL, NULL);
@@ -322,7 +316,7 @@ groups:
 static int on_commit(void *arg, sqlite3 *conn, const char *name, int pages)
 {
     struct retention *r = arg;
-    r->released_ms = mono_ms();
+    r->released_ms = task_wall_ms();
     if (pages >= DB_RETENTION_CHECKPOINT_PAGES)
         sqlite3_wal_checkpoint_v2(conn, name, SQLITE_CHECKPOINT_PASSIVE, NULL, NULL);
     return SQLITE_OK;
@@ -336,7 +330,7 @@ static int retention_txn(struct retention *r, int *more, double *held)
     int rc = db_begin(r->d);
     if (rc < 0)
         return rc;
-    double t0 = mono_ms(); /* the write lock is ours from here */
+    double t0 = task_wall_ms(); /* the write lock is ours from here */
     if (remove_some(r, t0, more) != SQLITE_OK) {
         rc = db__sql_fail(r->d, NULL);
         db_rollback(r->d);
@@ -348,7 +342,7 @@ static int retention_txn(struct retention *r, int *more, double *held)
         return rc;
     }
     if (r->released_ms == 0) /* the hook is not called when nothing was written */
-        r->released_ms = mono_ms();
+        r->released_ms = task_wall_ms();
     *held = r->released_ms - t0;
     db_retention_stats *o = r->out;
     o->collisions += r->txn.collisions;
@@ -389,7 +383,7 @@ int db_retention(db *d, double before, const db_retention_config *cfg, db_retent
         if ((rc = retention_txn(&r, &more, &held)) < 0)
             break;
         if (more) /* the checkpoint after the commit counts towards the pause */
-            sleep_ms((held > c->pause_ms ? held : c->pause_ms) - (mono_ms() - r.released_ms));
+            sleep_ms((held > c->pause_ms ? held : c->pause_ms) - (task_wall_ms() - r.released_ms));
     }
     sqlite3_wal_autocheckpoint(r.sql, DB_RETENTION_CHECKPOINT_PAGES); /* the default hook again */
 done:

@@ -46,8 +46,8 @@
  * z layers (n^2 bits, a multiple of 64 from n = 8 up, so no word is shared)
  * holding about as many triangles as the others; every thread reads every
  * triangle, skips those outside its slab, and clips the others' ranges to
- * it. No locks, no
- * atomics: the threads write disjoint words and only read the input.
+ * it. No locks, no atomics: the threads write disjoint words and only read
+ * the input.
  */
 #include "voxel.h"
 

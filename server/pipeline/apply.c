@@ -4,13 +4,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "alloc.h"
 #include "ecm.h"
 #include "err.h"
 #include "scene.h"
 #include "second.h"
+#include "task.h"
 
 /* Where the object stands: *at gets its position and yaw with scale 1 (the
  * transform from world to its metric frame), *scale its scale. 0, or a
@@ -170,13 +170,6 @@ static int load_samples(db *d, const cluster_found *f, uint32_t nf, const cluste
     return rc;
 }
 
-static double wall_ms_since(const struct timespec *t0)
-{
-    struct timespec t1;
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    return (double)(t1.tv_sec - t0->tv_sec) * 1e3 + (double)(t1.tv_nsec - t0->tv_nsec) / 1e6;
-}
-
 int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id, const cluster_found *f,
               uint32_t n, ecm_applied *out, char *err, size_t errlen)
 {
@@ -193,8 +186,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
         clusters[i].held = false;
         cluster_ids[i] = f[i].cluster_id;
     }
-    struct timespec t0, ts;
-    clock_gettime(CLOCK_MONOTONIC, &t0);
+    const double t0 = task_wall_ms();
     memset(out, 0, sizeof *out);
     db_ecm_object o = {0};
     trimesh mesh = {0};
@@ -230,7 +222,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
     char why[256];
     if ((rc = load_samples(d, f, n, run, &at, &samples, &hit, &nsamples, err, errlen)) < 0)
         goto done;
-    out->store_ms = wall_ms_since(&t0);
+    out->store_ms = task_wall_ms() - t0;
     /* The avatars at the samples, in local units, and the boxes they met
      * (refine.h, steps 6 and 8). */
     stood = cvre_xmalloc((nsamples ? nsamples : 1) * sizeof *stood);
@@ -309,7 +301,7 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
              "the cap%s; %s%s",
              p->depth, p->max_boxes, p->max_empty, o.box_count, r.count, r.problem_boxes, r.capped, first, figures,
              out->judge.better ? "" : ": not better, not published");
-    clock_gettime(CLOCK_MONOTONIC, &ts);
+    const double ts = task_wall_ms();
     if (out->judge.better) {
         db_ecm_change c = {.object_id = object_id, .parent_version = version, .reason = "refine", .run_id = run_id,
                            .ncluster_ids = run_id ? n : 0, .cluster_ids = cluster_ids, .detail = detail,
@@ -325,12 +317,12 @@ int ecm_apply(db *d, const ecm_params *p, const cluster_run *run, int64_t run_id
                               .opened_new = j->opened_new};
         rc = db_ecm_reject(d, &c, db_now(), &out->candidate);
     }
-    out->store_ms += wall_ms_since(&ts);
+    out->store_ms += task_wall_ms() - ts;
     if (rc < 0 && rc != -ESTALE)
         cvre_fail(err, errlen, rc, "object %lld: writing the new %s: %s", (long long)object_id,
                   out->judge.better ? "version" : "candidate", db_error(d));
 done:
-    out->total_ms = wall_ms_since(&t0);
+    out->total_ms = task_wall_ms() - t0;
     judge_close(jg);
     ecm_result_free(&r);
     trimesh_free(&mesh);

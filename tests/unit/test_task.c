@@ -4,6 +4,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <time.h>
 
 #include <cmocka.h>
 
@@ -74,7 +75,8 @@ static void test_threads_and_spare(void **state)
     assert_true(task_spare(16));
 }
 
-/* This thread's CPU clock moves with its own work. */
+/* This thread's CPU clock moves with its own work; the wall clock moves
+ * while it sleeps too. */
 static void test_cpu_clock(void **state)
 {
     (void)state;
@@ -82,6 +84,11 @@ static void test_cpu_clock(void **state)
     double t0 = task_cpu_ms();
     busy(&j);
     assert_true(task_cpu_ms() > t0);
+    double w0 = task_wall_ms();
+    struct timespec nap = {0, 5000000};
+    while (nanosleep(&nap, &nap) != 0)
+        ;
+    assert_true(task_wall_ms() - w0 >= 4.9);
 }
 
 int main(void)
