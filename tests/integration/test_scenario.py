@@ -5,13 +5,16 @@ cvre-admin. Phantom collisions must fall by at least 95%, no move may ever
 put an avatar into a triangle, the bumpers' real wall must still stop them,
 the pictures and the report must be written, and a second run with the same
 seed must see exactly the same collisions."""
+import importlib.util
 import json
 import os
 import subprocess
 import sys
 import tempfile
+import types
 import xml.etree.ElementTree as ET
 
+import numpy as np
 from harness import TEMP_DIRS, args, run
 
 A = args()
@@ -80,6 +83,41 @@ def test_same_seed_same_run():
         assert a["bumpers"] == b["bumpers"], (a, b)
 
 
+def test_phantom_is_judged_where_the_move_met_the_box():
+    """A collision counts as phantom by where the avatar's box was when its
+    move met the box: at the face along the contact's normal, and anywhere
+    the move went across it."""
+    spec = importlib.util.spec_from_file_location("scenario", RUNNER)
+    sc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sc)
+    # A wall piece in the plane x = 0.35, z from 0.3 to 0.8, up to 2 m.
+    wall = np.array([[[0.35, 0, 0.3], [0.35, 2, 0.3], [0.35, 0, 0.8]],
+                     [[0.35, 2, 0.3], [0.35, 2, 0.8], [0.35, 0, 0.8]]])
+    scene = types.SimpleNamespace(id=1, name="s", g=sc.Geometry(wall), cells=np.array([0.05, 0.05, 0.05]))
+
+    def judged(start, end, normal):
+        stats, bumped = {"s": dict(collisions=0, phantom=0, leaks=0)}, dict(collisions=0, leaks=0)
+        user = types.SimpleNamespace(pos=end, sent_from=start, scene=scene, bumper=False, name="u",
+                                     pending=[dict(object=1, normal=normal, point=(0, 0, 0), box=0, inside=0,
+                                                   ecm_version=2)])
+        sc.check(user, stats, bumped)
+        assert stats["s"]["collisions"] == 1 and user.pending == [], (stats, user.pending)
+        return stats["s"]["phantom"]
+
+    # Held back towards +x at the wall's end, then 30 cm on along -z in the
+    # same tick: where it ended, its box is clear of the wall, but the
+    # contact was at the start, against the wall.
+    assert judged((0, 0, 0.2), (0, 0, -0.1), (-1, 0, 0)) == 0
+    # Stopped face-on by a box a metre from anything: a phantom, and
+    # across the normal the move had not moved it.
+    assert judged((0, 0, -2.0), (0, 0, -1.8), (0, 0, -1)) == 1
+    # Along the normal only the end counts: walking away from the wall
+    # along x into a box there is a phantom even though the move began
+    # beside the wall.
+    assert judged((0, 0, 0.5), (-0.3, 0, 0.5), (1, 0, 0)) == 1
+
+
 if __name__ == "__main__":
     run([test_phantom_collisions_fall_by_95_percent, test_no_leak_and_the_wall_still_stops_the_bumpers,
-         test_boxes_and_tightness, test_pictures_and_report, test_same_seed_same_run])
+         test_boxes_and_tightness, test_pictures_and_report, test_same_seed_same_run,
+         test_phantom_is_judged_where_the_move_met_the_box])
