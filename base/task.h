@@ -35,7 +35,9 @@ double task_wait(task *t);
  * included): a stage's cost whatever else the machine runs. */
 double task_cpu_ms(void);
 /* The monotonic clock, ms: a stage's wall time, where task_cpu_ms is its
- * CPU time (the store's reads and writes wait on the disk). */
+ * CPU time (the store's reads and writes wait on the disk); the one
+ * reading of it for deadlines and periods too (workers, the collision
+ * log's writer, the import helper's time limit). */
 double task_wall_ms(void);
 /* How many threads `threads` stands for: itself, or for 0 the CPUs this
  * thread may run on (its affinity: a container's or taskset's limit), at

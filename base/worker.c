@@ -9,11 +9,11 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/eventfd.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "alloc.h"
 #include "mailbox.h"
+#include "task.h"
 
 /*
  * The thread sleeps in poll() on an eventfd, not on a condition variable:
@@ -35,13 +35,6 @@ struct worker {
     unsigned next_ms;   /* the worker's thread only: the delay after this call of every */
 };
 
-static uint64_t now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (uint64_t)t.tv_sec * 1000u + (uint64_t)t.tv_nsec / 1000000u;
-}
-
 static void wake(worker *w)
 {
     uint64_t one = 1;
@@ -51,12 +44,12 @@ static void wake(worker *w)
 
 /* Sleeps (the lock not held) until the fd is written or the time is due
  * (ms on the monotonic clock; 0: no time), then drains the fd. */
-static void sleep_until(worker *w, uint64_t due)
+static void sleep_until(worker *w, double due)
 {
     int timeout = -1;
-    if (due) {
-        uint64_t now = now_ms();
-        timeout = due <= now ? 0 : due - now > 60000u ? 60000 : (int)(due - now);
+    if (due > 0) {
+        double now = task_wall_ms();
+        timeout = due <= now ? 0 : due - now > 60000 ? 60000 : (int)(due - now) + 1; /* never early */
     }
     struct pollfd p = {.fd = w->wake_fd, .events = POLLIN};
     (void)poll(&p, 1, timeout); /* EINTR: the caller looks again */
@@ -69,7 +62,7 @@ static void *run(void *arg)
 {
     worker *w = arg;
     void *job = cvre_xmalloc(w->ops.job_size ? w->ops.job_size : 1);
-    uint64_t due = w->ops.every ? now_ms() + w->ops.period_ms : 0;
+    double due = w->ops.every ? task_wall_ms() + w->ops.period_ms : 0;
 
     pthread_mutex_lock(&w->lock);
     for (;;) {
@@ -77,7 +70,7 @@ static void *run(void *arg)
             break;
         if (w->count == 0) {
             int woken = atomic_exchange(&w->woken, 0);
-            if (!due || (!woken && now_ms() < due)) {
+            if (due <= 0 || (!woken && task_wall_ms() < due)) {
                 pthread_mutex_unlock(&w->lock);
                 sleep_until(w, due);
                 pthread_mutex_lock(&w->lock);
@@ -86,7 +79,7 @@ static void *run(void *arg)
             pthread_mutex_unlock(&w->lock);
             w->next_ms = w->ops.period_ms;
             w->ops.every(w->ops.ctx, w);
-            due = now_ms() + w->next_ms;
+            due = task_wall_ms() + w->next_ms;
             pthread_mutex_lock(&w->lock);
             continue;
         }

@@ -14,6 +14,7 @@
 #include "db.h"
 #include "err.h"
 #include "log.h"
+#include "task.h"
 #include "worker.h"
 
 /* Page cache of the writer's connection. The hot set is one leaf per object
@@ -150,12 +151,9 @@ struct dblog {
     char errmsg[256];
 };
 
-static uint64_t now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (uint64_t)ts.tv_sec * 1000u + (uint64_t)ts.tv_nsec / 1000000u;
-}
+/* Whole ms of the monotonic clock: the writer's sums and shares are in
+ * integers. */
+static uint64_t now_ms(void) { return (uint64_t)task_wall_ms(); }
 
 static void sleep_ms(uint32_t ms)
 {

@@ -5,7 +5,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "alloc.h"
 #include "apply.h"
@@ -14,6 +13,7 @@
 #include "find.h"
 #include "log.h"
 #include "record.h"
+#include "task.h"
 #include "worker.h"
 
 /* How often the change feed is read: a rollback or an offline refinement
@@ -47,19 +47,12 @@ struct refiner {
     refiner_config cfg;
     worker *worker; /* the thread: refiner_update * to the loop */
     db *db;
-    uint64_t next_examine; /* ms, monotonic; the worker's own */
+    double next_examine; /* ms, task_wall_ms; the worker's own */
     int64_t feed_after, collisions_after;
     tracked *objs; /* sorted by id */
     uint32_t nobjs, cap;
     _Atomic uint64_t rounds, versions_written; /* refiner_stats, read by the loop's thread */
 };
-
-static uint64_t now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (uint64_t)t.tv_sec * 1000u + (uint64_t)t.tv_nsec / 1000000u;
-}
 
 static void tracked_reset(tracked *t, uint32_t version)
 {
@@ -318,11 +311,10 @@ static void every(void *ctx, worker *w)
 {
     refiner *r = ctx;
     follow_feed(r, w);
-    uint64_t interval_ms = (uint64_t)(r->cfg.interval_s * 1000.0);
-    if (interval_ms && now_ms() >= r->next_examine) {
+    if (r->cfg.interval_s > 0 && task_wall_ms() >= r->next_examine) {
         examine(r);
         follow_feed(r, w); /* publish what this round wrote now */
-        r->next_examine = now_ms() + interval_ms;
+        r->next_examine = task_wall_ms() + r->cfg.interval_s * 1000.0;
     }
 }
 
@@ -337,7 +329,7 @@ refiner *refiner_start(const refiner_config *cfg, char *err, size_t errlen)
     refiner *r = cvre_xcalloc(1, sizeof *r);
     r->cfg = *cfg;
     r->feed_after = cfg->feed_after;
-    r->next_examine = now_ms() + (uint64_t)(cfg->interval_s * 1000.0);
+    r->next_examine = task_wall_ms() + cfg->interval_s * 1000.0;
     r->db = db_open(cfg->db_path, DB_READWRITE, err, errlen);
     if (!r->db) {
         free(r);

@@ -2,12 +2,12 @@
 
 #include <errno.h>
 #include <string.h>
-#include <time.h>
 
 #include "err.h"
 #include "maint.h"
 #include "out.h"
 #include "query.h"
+#include "task.h"
 
 #define LEN(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -79,13 +79,6 @@ int maintain_verb(const char *command)
     return -ENOENT;
 }
 
-static double mono_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + (double)t.tv_nsec * 1e-9;
-}
-
 static int backup(db *ro, const maintain_request *r, int format, char *err, size_t errlen)
 {
     static const out_column cols[] = {{"file", OUT_TEXT, 0},  {"method", OUT_TEXT, 0},    {"bytes", OUT_INT, 0},
@@ -120,7 +113,7 @@ static int retention(const char *path, const maintain_request *r, int format, ch
     db *d = db_open(path, DB_READWRITE, why, sizeof why);
     if (!d)
         return cvre_fail(err, errlen, -EIO, "cannot open for writing: %s", why);
-    double t0 = mono_s();
+    double t0 = task_wall_ms();
     db_retention_stats st;
     int rc = db_retention(d, db_now() - (double)r->days * 86400.0, NULL, &st);
     if (rc != 0) {
@@ -141,7 +134,7 @@ static int retention(const char *path, const maintain_request *r, int format, ch
         for (int i = 0; i < LEN(n); i++)
             sqlite3_bind_int64(q, 2 + i, (sqlite3_int64)n[i]);
         sqlite3_bind_double(q, 8, st.longest_ms);
-        sqlite3_bind_double(q, 9, mono_s() - t0);
+        sqlite3_bind_double(q, 9, (task_wall_ms() - t0) / 1e3);
         rc = query_print(s, q, cols, LEN(cols), OUT_RECORD, format, err, errlen);
     }
     db_close(d);

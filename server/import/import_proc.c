@@ -19,6 +19,7 @@
 #include "import_pipe.h"
 #include "importInt.h"
 #include "le.h"
+#include "task.h"
 
 const char *import_proc_default_helper(void)
 {
@@ -35,13 +36,6 @@ const char *import_proc_default_helper(void)
         return name;
     memcpy(slash + 1, name, sizeof name);
     return path;
-}
-
-static double now_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + (double)t.tv_nsec * 1e-9;
 }
 
 /* The sanitizer of this build whose allocator would abort at the helper's
@@ -147,14 +141,14 @@ static int talk(pid_t pid, int *fd_in, int fd_out, const uint8_t *head, size_t h
     fcntl(fd_out, F_SETFL, O_NONBLOCK);
     for (;;) {
         struct pollfd pf[2] = {{fd_out, POLLIN, 0}, {*fd_in, POLLOUT, 0}};
-        double left = deadline - now_s();
+        double left = deadline - task_wall_ms();
         int n;
         if (left <= 0) {
             x->timed_out = 1;
             kill(pid, SIGKILL);
             return 0;
         }
-        n = poll(pf, 2, (int)(left * 1000) + 1);
+        n = poll(pf, 2, (int)left + 1);
         if (n < 0 && errno != EINTR)
             return -errno;
         if (n <= 0)
@@ -203,7 +197,7 @@ static void reap(pid_t pid, double deadline, exchange *x)
         pid_t r = waitpid(pid, &x->status, WNOHANG);
         if (r == pid || (r < 0 && errno != EINTR))
             return;
-        if (r == 0 && now_s() > deadline) {
+        if (r == 0 && task_wall_ms() > deadline) {
             x->timed_out = 1;
             kill(pid, SIGKILL);
             waitpid(pid, &x->status, 0);
@@ -227,7 +221,7 @@ int import_isolated(const import_proc *p, const void *data, size_t len, const ch
     exchange x = {.max_triangles = opt ? opt->max_triangles : IMPORT_MAX_TRIANGLES};
     posix_spawn_file_actions_t fa;
     pid_t pid;
-    double deadline = now_s() + IMPORT_PROC_WALL_SECONDS(p->cpu_seconds);
+    double deadline = task_wall_ms() + IMPORT_PROC_WALL_SECONDS(p->cpu_seconds) * 1e3; /* task_wall_ms */
     size_t head_len;
 
     memset(out, 0, sizeof *out);
